@@ -1,0 +1,98 @@
+# prt_relight: build / test / packaging entry points (GNU make, bash).
+#
+#   make setup   apt runtime libs for headless bpy + .venv from requirements.txt
+#   make wheels  download the embreex wheels named in blender_manifest.toml
+#   make build   validate + build per-platform extension zips into dist/
+#   make test    run the test suite (PYTEST_ARGS="-k foo -x" to pass options)
+#   make demo    render the demo into out/demo
+#   make bench   run the precompute benchmark
+#   make clean   remove dist/, out/, caches   (make distclean: also .venv, wheels/)
+
+SHELL := bash
+.SHELLFLAGS := -euo pipefail -c
+.DEFAULT_GOAL := test
+.DELETE_ON_ERROR:
+MAKEFLAGS += --no-builtin-rules
+
+VENV        := .venv
+VENV_PY     := $(VENV)/bin/python
+SETUP_STAMP := $(VENV)/.setup-stamp
+DIST        := dist
+PYTEST_ARGS ?=
+
+# Blender's extension command line tool ships inside the bpy wheel.
+BLENDER_EXT = $(firstword $(wildcard $(VENV)/lib/python3.11/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
+
+# Shared libraries the bpy wheel links against / dlopens (X11 client libs,
+# libGL/GLVND) plus Mesa EGL + GBM for headless GPU-module use.
+APT_PACKAGES := \
+	libx11-6 libxext6 libxrender1 libxfixes3 libxi6 libxxf86vm1 libxkbcommon0 \
+	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
+	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
+
+.PHONY: setup apt venv wheels validate build test demo bench clean distclean
+
+setup: apt venv
+
+# Idempotent: only calls apt-get when a package is actually missing.
+apt:
+	@if ! command -v dpkg >/dev/null 2>&1; then \
+	  echo "apt: no dpkg (not Debian/Ubuntu); make sure these are installed: $(APT_PACKAGES)"; exit 0; \
+	fi; \
+	missing=(); \
+	for p in $(APT_PACKAGES); do \
+	  [ "$$(dpkg-query -W -f='$${Status}' "$$p" 2>/dev/null || true)" = "install ok installed" ] || missing+=("$$p"); \
+	done; \
+	if [ $${#missing[@]} -eq 0 ]; then exit 0; fi; \
+	echo "apt: installing $${missing[*]}"; \
+	SUDO=; if [ "$$(id -u)" -ne 0 ]; then SUDO=sudo; fi; \
+	$$SUDO apt-get update -qq; \
+	$$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$${missing[@]}"
+
+venv: $(SETUP_STAMP)
+
+$(SETUP_STAMP): requirements.txt
+	@if command -v python3.11 >/dev/null 2>&1 && python3.11 -c '' >/dev/null 2>&1; then \
+	  py=python3.11; \
+	elif python3 -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then \
+	  py=python3; \
+	else \
+	  echo "setup: Python 3.11 is required (bpy==5.0.1 is cp311 only)" >&2; exit 1; \
+	fi; \
+	if [ ! -x $(VENV_PY) ] || ! $(VENV_PY) -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then \
+	  rm -rf $(VENV); \
+	  echo "setup: creating $(VENV) with $$py"; \
+	  $$py -m venv $(VENV); \
+	fi
+	$(VENV_PY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	touch $@
+
+wheels: $(SETUP_STAMP)
+	$(VENV_PY) tools/fetch_wheels.py
+
+validate: $(SETUP_STAMP)
+	$(if $(BLENDER_EXT),,$(error blender_ext.py not found in the bpy wheel under $(VENV)))
+	$(VENV_PY) $(BLENDER_EXT) validate .
+
+build: setup wheels validate
+	mkdir -p $(DIST)
+	rm -f $(DIST)/*.zip
+	$(if $(BLENDER_EXT),,$(error blender_ext.py not found in the bpy wheel under $(VENV)))
+	$(VENV_PY) $(BLENDER_EXT) build --source-dir . --output-dir $(DIST) --split-platforms
+	@echo "Built packages:"; ls -1 $(DIST)/*.zip
+
+test: setup wheels
+	$(VENV_PY) -m pytest tests -q $(PYTEST_ARGS)
+
+demo: setup
+	$(VENV_PY) bench/demo.py --out out/demo
+
+bench: setup
+	$(VENV_PY) bench/bench_precompute.py
+
+clean:
+	rm -rf $(DIST) out .pytest_cache
+	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +
+
+distclean: clean
+	rm -rf $(VENV) wheels

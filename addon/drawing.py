@@ -1,0 +1,129 @@
+"""GPU drawing shared by the viewport and final renders.
+
+:func:`draw_frame` draws one frame into the bound framebuffer: the world as
+background (unless the film is transparent), then every object's triangles
+with per-vertex linear radiance.  The viewport and F12 call the same function;
+only the matrices and the target differ.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import gpu
+import numpy as np
+from gpu_extras.batch import batch_for_shader
+
+SHADER_DIR = Path(__file__).resolve().parent.parent / "shaders"
+_SHADERS = {}
+
+
+def _source(name):
+    return (SHADER_DIR / name).read_text()
+
+
+def surface_shader():
+    if "surface" not in _SHADERS:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.push_constant("MAT4", "viewProjection")
+        info.vertex_in(0, "VEC3", "pos")
+        info.vertex_in(1, "VEC4", "radiance")
+        iface = gpu.types.GPUStageInterfaceInfo("prt_surface_iface")
+        iface.smooth("VEC4", "vRadiance")
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source(_source("surface_vert.glsl"))
+        info.fragment_source(_source("surface_frag.glsl"))
+        _SHADERS["surface"] = gpu.shader.create_from_info(info)
+    return _SHADERS["surface"]
+
+
+def background_shader():
+    if "background" not in _SHADERS:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.push_constant("MAT4", "invViewProjection")
+        info.push_constant("MAT3", "texRotation")
+        info.push_constant("FLOAT", "strength")
+        info.sampler(0, "FLOAT_2D", "envMap")
+        info.vertex_in(0, "VEC2", "ndc")
+        iface = gpu.types.GPUStageInterfaceInfo("prt_background_iface")
+        iface.smooth("VEC2", "vNdc")
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source(_source("background_vert.glsl"))
+        info.fragment_source(_source("background_frag.glsl"))
+        _SHADERS["background"] = gpu.shader.create_from_info(info)
+    return _SHADERS["background"]
+
+
+def float_texture(rgba: np.ndarray):
+    """A RGBA32F GPU texture from (H, W, 4) float32 (row 0 = texture t = 0)."""
+    h, w, _ = rgba.shape
+    flat = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+    buf = gpu.types.Buffer("FLOAT", flat.size, flat)
+    return gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
+
+
+def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles: np.ndarray):
+    """Batch of one object's corners: positions (C, 3), radiance (C, 3), triangles (T, 3)."""
+    rgba = np.empty((len(radiance), 4), dtype=np.float32)
+    rgba[:, :3] = radiance
+    rgba[:, 3] = 1.0
+    return batch_for_shader(surface_shader(), "TRIS",
+                            {"pos": np.ascontiguousarray(positions, dtype=np.float32),
+                             "radiance": rgba},
+                            indices=np.ascontiguousarray(triangles, dtype=np.int32))
+
+
+_QUAD = None
+
+
+def _quad_batch():
+    global _QUAD
+    if _QUAD is None:
+        _QUAD = batch_for_shader(background_shader(), "TRIS",
+                                 {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+                                 indices=[(0, 1, 2), (0, 2, 3)])
+    return _QUAD
+
+
+def draw_frame(batches, background, view_projection, transparent: bool):
+    """Draw into the bound framebuffer.  ``background`` = (texture, rotation 4x4, strength)."""
+    fb = gpu.state.active_framebuffer_get()
+    fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+    gpu.state.blend_set("NONE")
+    gpu.state.face_culling_set("NONE")
+    if not transparent and background is not None:
+        texture, rotation, strength = background
+        gpu.state.depth_test_set("NONE")
+        gpu.state.depth_mask_set(False)
+        sh = background_shader()
+        sh.bind()
+        sh.uniform_float("invViewProjection", view_projection.inverted())
+        sh.uniform_float("texRotation", rotation)
+        sh.uniform_float("strength", float(strength))
+        sh.uniform_sampler("envMap", texture)
+        _quad_batch().draw(sh)
+    gpu.state.depth_test_set("LESS_EQUAL")
+    gpu.state.depth_mask_set(True)
+    sh = surface_shader()
+    sh.bind()
+    sh.uniform_float("viewProjection", view_projection)
+    for batch in batches:
+        batch.draw(sh)
+    gpu.state.depth_test_set("NONE")
+    gpu.state.depth_mask_set(False)
+
+
+def render_offscreen(batches, background, view_projection, width, height, transparent):
+    """Draw a frame offscreen; return linear RGBA (height, width, 4), bottom row first."""
+    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            draw_frame(batches, background, view_projection, transparent)
+            fb = gpu.state.active_framebuffer_get()
+            buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
+        buf.dimensions = width * height * 4
+        return np.array(buf, dtype=np.float32).reshape(height, width, 4)
+    finally:
+        offscreen.free()

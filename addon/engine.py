@@ -1,0 +1,153 @@
+"""The ``PRT_RELIGHT`` render engine: Rendered viewport and F12 from one drawing routine."""
+
+from __future__ import annotations
+
+import bpy
+import gpu
+import numpy as np
+from gpu_extras.presets import draw_texture_2d
+from mathutils import Matrix
+
+from . import drawing
+from .runtime import FrameState
+
+
+def _background(state: FrameState):
+    """(texture, rotation, strength) for drawing the world, cached on the state."""
+    world = state.world
+    key = (id(world.image) if world.image is not None else tuple(world.color),)
+    cached = getattr(state, "_bg", None)
+    if cached is not None and cached[0] == key:
+        tex = cached[1]
+    else:
+        if world.image is not None:
+            img = world.image
+            rgba = np.ones(img.shape[:2] + (4,), dtype=np.float32)
+            rgba[:, :, :3] = img
+        else:
+            rgba = np.ones((1, 1, 4), dtype=np.float32)
+            rgba[0, 0, :3] = world.color
+        tex = drawing.float_texture(rgba)
+        state._bg = (key, tex)
+    R = Matrix([[float(v) for v in row] for row in world.rotation])
+    return tex, R, world.strength
+
+
+def _batches(state: FrameState, radiance_per_object):
+    return [drawing.surface_batch(st.arrays.positions[st.arrays.corner_verts], rad,
+                                  st.arrays.triangles)
+            for st, rad in zip(state.objects, radiance_per_object)]
+
+
+def _eye(view_matrix: Matrix, is_perspective: bool):
+    inv = view_matrix.inverted()
+    if is_perspective:
+        return np.array(inv.translation), None
+    forward = inv.to_3x3() @ np.array([0.0, 0.0, 1.0])      # toward the viewer
+    return None, np.asarray(forward, dtype=np.float64) / max(np.linalg.norm(forward), 1e-30)
+
+
+def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: int, height: int,
+                  transparent: bool, is_perspective: bool, supersampling: int = 1) -> np.ndarray:
+    """Linear RGBA (height, width, 4), bottom row first: the engine's one drawing path."""
+    eye, view_dir = _eye(view, is_perspective)
+    radiance = state.shade(eye, view_dirs_for=view_dir)
+    batches = _batches(state, radiance)
+    s = max(1, int(supersampling))
+    big = drawing.render_offscreen(batches, _background(state), projection @ view,
+                                   width * s, height * s, transparent)
+    if s > 1:
+        big = big.reshape(height, s, width, s, 4).mean(axis=(1, 3))
+    return big
+
+
+class PRTRenderEngine(bpy.types.RenderEngine):
+    bl_idname = "PRT_RELIGHT"
+    bl_label = "PRT Relight"
+    bl_use_gpu_context = True
+    bl_use_preview = False
+    bl_use_shading_nodes_custom = False
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._state = None
+        self._view_texture = None
+        self._view_key = None
+
+    # ------------------------------------------------------------- final render
+    def render(self, depsgraph):
+        scene = depsgraph.scene
+        r = scene.render
+        width = max(1, int(r.resolution_x * r.resolution_percentage / 100))
+        height = max(1, int(r.resolution_y * r.resolution_percentage / 100))
+        camera = scene.camera
+        if camera is None:
+            self.report({"ERROR"}, "PRT Relight: the scene has no camera")
+            return
+        state = FrameState()
+        state.sync(depsgraph)
+        if state.error:
+            self.report({"ERROR"}, "PRT Relight: " + state.error)
+        for w in state.warnings:
+            self.report({"WARNING"}, "PRT Relight: " + w)
+        cam_eval = camera.evaluated_get(depsgraph)
+        projection = cam_eval.calc_matrix_camera(depsgraph, x=width, y=height,
+                                                 scale_x=r.pixel_aspect_x, scale_y=r.pixel_aspect_y)
+        view = cam_eval.matrix_world.inverted()
+        persp = cam_eval.data.type != "ORTHO"
+        pixels = render_pixels(state, view, projection, width, height, r.film_transparent, persp,
+                               scene.prt.supersampling)
+        result = self.begin_result(0, 0, width, height)
+        result.layers[0].passes["Combined"].rect.foreach_set(
+            np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1))
+        self.end_result(result)
+
+    # ------------------------------------------------------------- viewport
+    def view_update(self, context, depsgraph):
+        if self._state is None:
+            self._state = FrameState()
+        self._state.sync(depsgraph)
+        self._view_key = None
+
+    def view_draw(self, context, depsgraph):
+        if self._state is None:
+            self.view_update(context, depsgraph)
+        state = self._state
+        region, rv3d = context.region, context.region_data
+        scene = depsgraph.scene
+        width, height = region.width, region.height
+        key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)),
+               width, height, scene.render.film_transparent, scene.prt.method)
+        if key != self._view_key or self._view_texture is None:
+            pixels = render_pixels(state, rv3d.view_matrix, rv3d.window_matrix, width, height,
+                                   scene.render.film_transparent, rv3d.is_perspective)
+            self._view_texture = drawing.float_texture(pixels)
+            self._view_key = key
+        gpu.state.blend_set("ALPHA_PREMULT")
+        self.bind_display_space_shader(scene)
+        draw_texture_2d(self._view_texture, (0, 0), width, height)
+        self.unbind_display_space_shader()
+        gpu.state.blend_set("NONE")
+
+
+def get_panels():
+    """Built-in panels that make sense with our engine (world, object, material, output)."""
+    exclude = {"VIEWLAYER_PT_filter", "VIEWLAYER_PT_layer_passes"}
+    panels = []
+    for panel in bpy.types.Panel.__subclasses__():
+        engines = getattr(panel, "COMPAT_ENGINES", None)
+        if engines is not None and "BLENDER_RENDER" in engines and panel.__name__ not in exclude:
+            panels.append(panel)
+    return panels
+
+
+def register():
+    bpy.utils.register_class(PRTRenderEngine)
+    for panel in get_panels():
+        panel.COMPAT_ENGINES.add("PRT_RELIGHT")
+
+
+def unregister():
+    for panel in get_panels():
+        panel.COMPAT_ENGINES.discard("PRT_RELIGHT")
+    bpy.utils.unregister_class(PRTRenderEngine)

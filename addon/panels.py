@@ -1,0 +1,72 @@
+"""Panels: Render properties and the 3D viewport sidebar tab."""
+
+import bpy
+
+
+def draw_settings(layout, context):
+    scene = context.scene
+    prt = scene.prt
+    col = layout.column()
+    col.prop(prt, "method")
+    col.prop(prt, "resolution")
+    col.prop(prt, "ray_offset")
+    col.prop(prt, "supersampling")
+    row = layout.row(align=True)
+    row.enabled = not prt.is_running
+    row.operator("prt.precompute", icon="LIGHT_SUN")
+    row.operator("prt.clear", text="", icon="TRASH")
+    if prt.last_report:
+        layout.label(text=prt.last_report, icon="INFO")
+    if prt.precomputed_resolution and str(prt.precomputed_resolution) != prt.resolution:
+        layout.label(text=f"Stored data uses 6×{prt.precomputed_resolution}²: precompute again",
+                     icon="ERROR")
+    if scene.world is None:
+        layout.label(text="No World: add one with an Environment Texture", icon="ERROR")
+    ob = context.active_object
+    if ob is not None and ob.type == "MESH":
+        box = layout.box()
+        data = ob.prt
+        if data.visibility is None:
+            box.label(text=f"'{ob.name}': not precomputed", icon="MESH_DATA")
+        else:
+            box.label(text=f"'{ob.name}': {data.point_count} shading points", icon="MESH_DATA")
+            if data.coarse_warning:
+                box.label(text="Too coarse for its shadows: subdivide", icon="ERROR")
+
+
+class PRT_PT_render(bpy.types.Panel):
+    bl_label = "PRT Relight"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+    COMPAT_ENGINES = {"PRT_RELIGHT"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        draw_settings(self.layout, context)
+
+
+class PRT_PT_sidebar(bpy.types.Panel):
+    bl_label = "PRT Relight"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "PRT"
+
+    def draw(self, context):
+        draw_settings(self.layout, context)
+
+
+CLASSES = (PRT_PT_render, PRT_PT_sidebar)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

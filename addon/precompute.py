@@ -1,0 +1,157 @@
+"""Precompute in three steps: gather (main thread, reads bpy), run (pure core, any
+thread, cancellable), commit (main thread, writes bpy).  Nothing in the scene
+changes before commit, so an error or ESC leaves it as it was."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core import directions, mesh as core_mesh, visibility
+from . import scene_export, storage
+
+
+@dataclass
+class ObjectJob:
+    name: str
+    arrays: core_mesh.MeshArrays
+    points: core_mesh.ShadingPoints
+    fingerprint: str
+    bits: np.ndarray | None = None
+    coarse_warning: str = ""
+
+
+@dataclass
+class PrecomputeJob:
+    resolution: int
+    offset: float
+    objects: list
+    occluders: np.ndarray
+    warnings: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    progress_done: int = 0
+    progress_total: int = 0
+    cancel_requested: bool = False
+
+    @property
+    def point_count(self):
+        return sum(o.points.count for o in self.objects)
+
+    # -------------------------------------------------------------- run (no bpy)
+    def run(self, threads=None):
+        t0 = time.perf_counter()
+        scene = visibility.build_occluder_scene(self.occluders)
+        t1 = time.perf_counter()
+        cube = directions.cubemap(self.resolution)
+        pts = np.concatenate([o.points.positions for o in self.objects])
+        nrm = np.concatenate([o.points.normals for o in self.objects])
+        self.progress_total = len(pts)
+
+        def progress(done, total):
+            self.progress_done = done
+
+        bits = visibility.trace_visibility(scene, pts, nrm, cube, self.offset, threads=threads,
+                                           progress=progress, cancel=lambda: self.cancel_requested)
+        t2 = time.perf_counter()
+        start = 0
+        for o in self.objects:
+            o.bits = bits[start:start + o.points.count]
+            start += o.points.count
+            o.coarse_warning = coarse_receiver_warning(o, cube)
+        hemi = int(((nrm @ cube.directions.T) > 0).sum())
+        self.timings.update(build_bvh=t1 - t0, rays=t2 - t1, ray_count=hemi,
+                            rays_per_second=hemi / max(t2 - t1, 1e-9))
+
+
+def coarse_receiver_warning(job: ObjectJob, cube) -> str:
+    """A note when shadows change faster than the tessellation can show.
+
+    For each mesh edge we compare the endpoints' sky visibility (cosine-weighted
+    fraction of the hemisphere that is open).  If more than 5 % of the edges
+    jump by over 0.25, per-vertex shading will blur or alias the shadows.
+    """
+    vis = visibility.unpack_visibility(job.bits, cube.size).astype(np.float32)
+    cos = np.maximum(job.points.normals @ cube.directions.T, 0.0).astype(np.float32)
+    w = cos * cube.solid_angles.astype(np.float32)
+    sky = (vis * w).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-12)
+    tri_points = job.points.point_of_corner[job.arrays.triangles]
+    edges = np.concatenate([tri_points[:, [0, 1]], tri_points[:, [1, 2]], tri_points[:, [2, 0]]])
+    if len(edges) == 0:
+        return ""
+    jump = np.abs(sky[edges[:, 0]] - sky[edges[:, 1]])
+    frac = float((jump > 0.25).mean())
+    if frac > 0.05:
+        return (f"'{job.name}' is too coarse for its shadows ({frac:.0%} of edges jump by more "
+                "than a quarter of the sky): subdivide it for sharper per-vertex shadows")
+    return ""
+
+
+def gather(depsgraph, settings) -> PrecomputeJob:
+    """Read the scene into a job (raises scene_export.ExportError for bad input)."""
+    scene = depsgraph.scene
+    warnings = []
+    scene_export.export_world(scene, warnings)       # validate lighting early
+    objects = []
+    tri_blocks = []
+    empty = []
+    for ob in scene_export.visible_mesh_objects(depsgraph):
+        arrays = scene_export.mesh_arrays(ob)
+        if not np.isfinite(arrays.positions).all():
+            raise scene_export.ExportError(f"Object '{ob.name}' has non-finite vertex positions")
+        if len(arrays.triangles) == 0:
+            empty.append(ob.original.name)
+            continue
+        fixed = core_mesh.repair_normals(arrays)
+        degenerate = int(core_mesh.degenerate_triangles(arrays).sum())
+        if degenerate:
+            warnings.append(f"'{ob.original.name}': {degenerate} zero-area face(s) ignored as "
+                            "occluders")
+        elif fixed:
+            warnings.append(f"'{ob.original.name}': {fixed} corner normal(s) repaired")
+        points = core_mesh.shading_points(arrays)
+        objects.append(ObjectJob(ob.original.name, arrays, points, core_mesh.fingerprint(arrays)))
+        tri_blocks.append(arrays.triangle_positions)
+    if empty:
+        warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
+    if not objects:
+        raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")
+    occluders = np.concatenate(tri_blocks)
+    diag = core_mesh.bounding_diagonal(occluders.reshape(-1, 3))
+    offset = float(settings.ray_offset) * max(diag, 1e-6)
+    return PrecomputeJob(int(settings.resolution), offset, objects, occluders, warnings)
+
+
+def commit(scene, job: PrecomputeJob):
+    """Store the job's results in the .blend (main thread)."""
+    import bpy
+
+    t0 = time.perf_counter()
+    # Create every image first; only then swap them in, so a failure leaves old data.
+    new_images = {}
+    try:
+        for o in job.objects:
+            new_images[o.name] = storage.create_visibility_image(o.name, o.bits)
+    except Exception:
+        for img in new_images.values():
+            bpy.data.images.remove(img)
+        raise
+    for o in job.objects:
+        ob = bpy.data.objects[o.name]
+        old = ob.prt.visibility
+        ob.prt.visibility = new_images[o.name]
+        ob.prt.resolution = job.resolution
+        ob.prt.point_count = o.points.count
+        ob.prt.fingerprint = o.fingerprint
+        ob.prt.coarse_warning = o.coarse_warning
+        if old is not None and old != new_images[o.name]:
+            old.use_fake_user = False
+            storage.remove_image(old)
+        new_images[o.name].name = storage.IMAGE_PREFIX + o.name
+    scene.prt.precomputed_resolution = job.resolution
+    job.timings["storage"] = time.perf_counter() - t0
+    t = job.timings
+    scene.prt.last_report = (f"{job.point_count} points, {t.get('ray_count', 0) / 1e6:.1f} M rays "
+                             f"in {t.get('rays', 0):.1f} s "
+                             f"({t.get('rays_per_second', 0) / 1e6:.2f} M rays/s)")

@@ -1,0 +1,171 @@
+"""What the render engine needs per frame, derived from the scene and stored results.
+
+``FrameState.sync(depsgraph)`` exports the world and every visible mesh,
+attaches the stored visibility (decoded once and cached), and caches the
+view-independent diffuse sums per lighting.  ``FrameState.shade(eye)``
+returns per-corner radiance for each object with the active method.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core import directions, envmap, mesh as core_mesh, reference
+from . import scene_export, storage
+
+# Decoded visibility per (image name, fingerprint, point count); small LRU.
+_VIS_CACHE: dict = {}
+_VIS_CACHE_MAX = 16
+# View-independent diffuse sums per (object, visibility, lighting).
+_IRRADIANCE_CACHE: dict = {}
+# Area-resampled environment per (world key, resolution).
+_ENV_CACHE: dict = {}
+
+
+def _env_key(world: envmap.WorldLighting, resolution: int):
+    img = world.image
+    ident = (id(img), img.shape) if img is not None else tuple(world.color)
+    return (ident, float(world.strength), world.rotation.round(9).tobytes(), resolution)
+
+
+def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> np.ndarray:
+    key = _env_key(world, resolution)
+    cube = _ENV_CACHE.get(key)
+    if cube is None:
+        cube = world.to_cubemap(resolution)
+        _ENV_CACHE.clear()
+        _ENV_CACHE[key] = cube
+    return cube
+
+
+def stored_visibility(ob_orig, points: int, nbytes: int):
+    """Decoded visibility bits of an object, or None if missing/unusable."""
+    data = ob_orig.prt
+    img = data.visibility
+    if img is None or data.point_count != points:
+        return None
+    key = (img.name_full, data.fingerprint, points, nbytes)
+    bits = _VIS_CACHE.get(key)
+    if bits is None:
+        try:
+            bits = storage.read_visibility_image(img, points, nbytes)
+        except (ValueError, RuntimeError):
+            return None
+        if len(_VIS_CACHE) >= _VIS_CACHE_MAX:
+            _VIS_CACHE.pop(next(iter(_VIS_CACHE)))
+        _VIS_CACHE[key] = bits
+    return bits
+
+
+def open_visibility(count: int, nbytes: int, normals: np.ndarray, cube) -> np.ndarray:
+    """Unshadowed visibility (every upper-hemisphere texel visible), for fallbacks."""
+    vis = (np.asarray(normals) @ cube.directions.T) > 0.0
+    return np.packbits(vis, axis=1)
+
+
+class ObjectState:
+    __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "irradiance",
+                 "irradiance_key")
+
+    def __init__(self, name, arrays, points, materials, bits, status):
+        self.name = name
+        self.arrays = arrays
+        self.points = points
+        self.materials = materials
+        self.bits = bits
+        self.status = status
+        self.irradiance = None
+        self.irradiance_key = None
+
+
+class FrameState:
+    """Scene data for drawing one or more frames."""
+
+    def __init__(self):
+        self.objects: list[ObjectState] = []
+        self.world: envmap.WorldLighting | None = None
+        self.warnings: list[str] = []
+        self.error: str | None = None
+        self.resolution = 32
+
+    # ------------------------------------------------------------------ sync
+    def sync(self, depsgraph):
+        scene = depsgraph.scene
+        self.warnings = []
+        self.error = None
+        try:
+            self.world = scene_export.export_world(scene, self.warnings)
+        except scene_export.ExportError as exc:
+            self.error = str(exc)
+            self.world = envmap.WorldLighting(color=(0.0, 0.0, 0.0))
+        self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
+        cube = directions.cubemap(self.resolution)
+        nbytes = cube.size // 8
+        objects = []
+        missing, stale = [], []
+        for ob in scene_export.visible_mesh_objects(depsgraph):
+            arrays = scene_export.mesh_arrays(ob)
+            if len(arrays.triangles) == 0:
+                continue
+            core_mesh.repair_normals(arrays)
+            points = core_mesh.shading_points(arrays)
+            mats = scene_export.object_materials(ob, self.warnings)
+            orig = ob.original
+            data = orig.prt
+            bits = None
+            status = "ok"
+            if data.visibility is not None and data.resolution == self.resolution:
+                bits = stored_visibility(orig, points.count, nbytes)
+                if bits is None:
+                    status = "stale"
+                elif data.fingerprint != core_mesh.fingerprint(arrays):
+                    status = "stale"   # same topology: old data, correctly indexed
+            else:
+                status = "missing"
+            if bits is None:
+                bits = open_visibility(points.count, nbytes, points.normals, cube)
+            (stale if status == "stale" else missing if status == "missing" else []).append(
+                orig.name)
+            if data.coarse_warning and status == "ok":
+                self.warnings.append(data.coarse_warning)
+            objects.append(ObjectState(orig.name, arrays, points, mats, bits, status))
+        if missing:
+            self.warnings.append("Not precomputed (drawn without shadows): " + ", ".join(missing))
+        if stale:
+            self.warnings.append("Changed since precompute (stale, press Precompute): "
+                                 + ", ".join(stale))
+        self.objects = objects
+
+    # ------------------------------------------------------------------ shade
+    def shade(self, eye, view_dirs_for=None):
+        """Per-corner radiance (C, 3) float32 for each object.
+
+        ``eye``: camera position for perspective views; ``view_dirs_for`` a unit
+        direction toward an orthographic camera (then ``eye`` is ignored).
+        """
+        cube = directions.cubemap(self.resolution)
+        L = environment_cubemap(self.world, self.resolution)
+        env_key = _env_key(self.world, self.resolution)
+        out = []
+        for st in self.objects:
+            pts = st.points
+            key = (st.name, id(st.bits), env_key)
+            if st.irradiance is None or st.irradiance_key != key:
+                # The entry keeps ``bits`` alive, so its id cannot be reused meanwhile.
+                cached = _IRRADIANCE_CACHE.get(key)
+                if cached is None or cached[0] is not st.bits:
+                    irr = reference.diffuse_irradiance(st.bits, pts.normals, cube, L)
+                    if len(_IRRADIANCE_CACHE) >= 64:
+                        _IRRADIANCE_CACHE.pop(next(iter(_IRRADIANCE_CACHE)))
+                    cached = _IRRADIANCE_CACHE[key] = (st.bits, irr)
+                st.irradiance, st.irradiance_key = cached[1], key
+            view_dirs = None
+            if view_dirs_for is not None:
+                view_dirs = np.broadcast_to(np.asarray(view_dirs_for, dtype=np.float64),
+                                            pts.normals.shape)
+            radiance = reference.shade_points(st.bits, pts.positions, pts.normals, pts.materials,
+                                              st.materials, eye, cube, L,
+                                              irradiance=st.irradiance, view_dirs=view_dirs)
+            radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
+            out.append(radiance[pts.point_of_corner])
+        return out

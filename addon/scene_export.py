@@ -1,0 +1,286 @@
+"""Blender scene -> core arrays: meshes, materials, world lighting.
+
+Everything here reads Blender data and returns plain numpy/core objects; it
+never writes to the scene.  Problems a user can fix are raised as
+:class:`ExportError` with a message meant for the UI; things we can render
+approximately are collected as warnings.
+"""
+
+from __future__ import annotations
+
+import os
+
+import bpy
+import numpy as np
+
+from ..core import envmap
+from ..core.brdf import Material
+from ..core.mesh import MeshArrays
+
+#: what Cycles uses for a surface without a material (grey Diffuse BSDF 0.8).
+DEFAULT_MATERIAL = Material(diffuse_albedo=(0.8, 0.8, 0.8))
+
+
+class ExportError(RuntimeError):
+    """The scene cannot be exported; the message is shown to the user."""
+
+
+# --------------------------------------------------------------------------- meshes
+
+def visible_mesh_objects(depsgraph):
+    """Evaluated mesh objects visible in the render, in a stable (name) order."""
+    found = []
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        if inst.is_instance or ob.type != "MESH":
+            continue
+        if depsgraph.mode == "RENDER" and ob.original.hide_render:
+            continue
+        found.append(ob)
+    found.sort(key=lambda o: o.name)
+    return found
+
+
+def mesh_arrays(ob_eval) -> MeshArrays:
+    """World-space arrays of an evaluated mesh object (modifiers applied)."""
+    mesh = ob_eval.to_mesh()
+    try:
+        mesh.calc_loop_triangles()
+        nv, nc, nt = len(mesh.vertices), len(mesh.loops), len(mesh.loop_triangles)
+        co = np.empty(nv * 3, dtype=np.float32)
+        mesh.vertices.foreach_get("co", co)
+        corner_verts = np.empty(nc, dtype=np.int32)
+        mesh.loops.foreach_get("vertex_index", corner_verts)
+        normals = np.empty(nc * 3, dtype=np.float32)
+        if nc:
+            mesh.corner_normals.foreach_get("vector", normals)
+        tris = np.empty(nt * 3, dtype=np.int32)
+        mesh.loop_triangles.foreach_get("loops", tris)
+        poly_mat = np.empty(len(mesh.polygons), dtype=np.int32)
+        mesh.polygons.foreach_get("material_index", poly_mat)
+        loop_start = np.empty(len(mesh.polygons), dtype=np.int32)
+        mesh.polygons.foreach_get("loop_start", loop_start)
+        loop_total = np.empty(len(mesh.polygons), dtype=np.int32)
+        mesh.polygons.foreach_get("loop_total", loop_total)
+    finally:
+        ob_eval.to_mesh_clear()
+    corner_mat = np.repeat(poly_mat, loop_total) if len(poly_mat) else np.zeros(nc, np.int32)
+    M = np.array(ob_eval.matrix_world, dtype=np.float64)
+    pos = co.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+    N = np.linalg.inv(M[:3, :3]).T if abs(np.linalg.det(M[:3, :3])) > 1e-30 else M[:3, :3]
+    nrm = normals.reshape(-1, 3).astype(np.float64) @ N.T
+    length = np.linalg.norm(nrm, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nrm = nrm / length
+    return MeshArrays(pos, corner_verts, nrm, tris.reshape(-1, 3), corner_mat)
+
+
+# --------------------------------------------------------------------------- materials
+
+def _input_value(node, name, warnings, label):
+    sock = node.inputs.get(name)
+    if sock is None:
+        return None
+    if sock.is_linked:
+        warnings.append(f"{label}: '{name}' is driven by a node link; using its default value")
+    v = sock.default_value
+    try:
+        return tuple(v)[:3]
+    except TypeError:
+        return float(v)
+
+
+def _surface_node(material):
+    if material is None or not material.use_nodes or material.node_tree is None:
+        return None
+    out = None
+    for node in material.node_tree.nodes:
+        if node.type == "OUTPUT_MATERIAL" and node.target in {"ALL", "CYCLES"}:
+            if out is None or node.is_active_output:
+                out = node
+    if out is None:
+        return None
+    surf = out.inputs.get("Surface")
+    if surf is None or not surf.is_linked:
+        return None
+    return surf.links[0].from_node
+
+
+def export_material(material, warnings: list) -> Material:
+    """Translate a Blender material into a core :class:`Material`.
+
+    Supported: Diffuse BSDF (Lambert), Glossy BSDF (Beckmann, GGX; Multiscatter
+    GGX is drawn as GGX), Principled BSDF (base colour, roughness, metallic;
+    an approximation of Cycles' layered model).  Anything else falls back to
+    the material's viewport colour as a Lambert surface, with a warning.
+    """
+    if material is None:
+        return DEFAULT_MATERIAL
+    label = f"Material '{material.name}'"
+    node = _surface_node(material)
+    if node is None:
+        if material.use_nodes:
+            return DEFAULT_MATERIAL
+        c = tuple(material.diffuse_color)[:3]
+        return Material(diffuse_albedo=c)
+    if node.type == "BSDF_DIFFUSE":
+        color = _input_value(node, "Color", warnings, label)
+        return Material(diffuse_albedo=color)
+    if node.type in {"BSDF_GLOSSY", "BSDF_ANISOTROPIC"}:
+        color = _input_value(node, "Color", warnings, label)
+        rough = _input_value(node, "Roughness", warnings, label)
+        dist = getattr(node, "distribution", "GGX")
+        if dist == "MULTI_GGX":
+            warnings.append(f"{label}: Multiscatter GGX is drawn as single-scatter GGX")
+        if dist not in {"BECKMANN", "GGX", "MULTI_GGX"}:
+            warnings.append(f"{label}: glossy distribution {dist} is drawn as GGX")
+        aniso = node.inputs.get("Anisotropy")
+        if aniso is not None and (aniso.is_linked or abs(aniso.default_value) > 1e-6):
+            warnings.append(f"{label}: anisotropy is not supported yet; drawn isotropic")
+        return Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=color,
+                        roughness=float(rough),
+                        distribution="BECKMANN" if dist == "BECKMANN" else "GGX",
+                        fresnel="NONE")
+    if node.type == "BSDF_PRINCIPLED":
+        base = np.asarray(_input_value(node, "Base Color", warnings, label), dtype=np.float64)
+        rough = float(_input_value(node, "Roughness", warnings, label))
+        metal = float(np.clip(_input_value(node, "Metallic", warnings, label), 0.0, 1.0))
+        ior = _input_value(node, "IOR", warnings, label) or 1.5
+        f0_dielectric = ((ior - 1.0) / (ior + 1.0)) ** 2
+        f0 = (1.0 - metal) * f0_dielectric + metal * base
+        # Energy taken by the dielectric specular layer, hemispherical average of Schlick.
+        diffuse = (1.0 - metal) * base * (1.0 - (f0_dielectric + (1.0 - f0_dielectric) / 21.0))
+        return Material(diffuse_albedo=tuple(diffuse), specular_color=tuple(f0),
+                        roughness=rough, distribution="GGX", fresnel="SCHLICK")
+    if node.type == "EMISSION":
+        warnings.append(f"{label}: Emission is not a reflectance; drawn as black diffuse")
+        return Material(diffuse_albedo=(0.0, 0.0, 0.0))
+    warnings.append(f"{label}: '{node.bl_label}' is not supported; drawn as Lambert with the "
+                    "material's viewport colour")
+    return Material(diffuse_albedo=tuple(material.diffuse_color)[:3])
+
+
+def object_materials(ob_eval, warnings: list) -> list:
+    """Core materials per material slot of an evaluated object (at least one)."""
+    mats = [export_material(slot.material, warnings) for slot in ob_eval.material_slots]
+    return mats or [DEFAULT_MATERIAL]
+
+
+# --------------------------------------------------------------------------- world
+
+def _find_world_output(tree):
+    out = None
+    for node in tree.nodes:
+        if node.type == "OUTPUT_WORLD" and node.target in {"ALL", "CYCLES"}:
+            if out is None or node.is_active_output:
+                out = node
+    return out
+
+
+_PIXEL_CACHE = {}
+
+
+def _image_pixels(image) -> np.ndarray:
+    """(H, W, 3) float32 of a Blender image, top row first, scene-linear (cached)."""
+    path = bpy.path.abspath(image.filepath_raw or image.filepath, library=image.library)
+    stamp = os.path.getmtime(path) if path and os.path.isfile(path) else None
+    key = (image.name_full, path, stamp, image.packed_file is not None, tuple(image.size))
+    cached = _PIXEL_CACHE.get(key)
+    if cached is None:
+        cached = _read_image_pixels(image, path)
+        _PIXEL_CACHE.clear()
+        _PIXEL_CACHE[key] = cached
+    return cached
+
+
+def _read_image_pixels(image, path) -> np.ndarray:
+    if image.packed_file is None and image.source == "FILE":
+        if not path or not os.path.isfile(path):
+            raise ExportError(f"Environment image '{image.name}' is missing: {path or '(no path)'}")
+        if envmap.have_openimageio():
+            return envmap.load_equirect(path)
+    # Packed, generated or no OpenImageIO: Blender's own pixels (bottom row first).
+    w, h = image.size
+    if w == 0 or h == 0 or not image.has_data and not _try_load(image):
+        raise ExportError(f"Environment image '{image.name}' has no pixels")
+    buf = np.empty(w * h * image.channels, dtype=np.float32)
+    image.pixels.foreach_get(buf)
+    buf = buf.reshape(h, w, image.channels)[::-1]
+    if not image.is_float:
+        raise ExportError(f"Environment image '{image.name}' is 8-bit and packed; "
+                          "use an HDR/EXR file for lighting")
+    return envmap.as_rgb(buf)
+
+
+def _try_load(image):
+    try:
+        image.reload()
+        return image.has_data or image.size[0] > 0
+    except RuntimeError:
+        return False
+
+
+def _mapping_rotation(node, warnings) -> np.ndarray:
+    """World -> texture rotation of a Mapping node feeding the Environment Texture."""
+    rot_sock = node.inputs.get("Rotation")
+    if rot_sock is None:
+        return np.eye(3)
+    if rot_sock.is_linked:
+        warnings.append("World: Mapping rotation is driven by a link; using its default value")
+    R = envmap.euler_xyz_matrix(*rot_sock.default_value)
+    vtype = getattr(node, "vector_type", "POINT")
+    scale = node.inputs.get("Scale")
+    if scale is not None and not np.allclose(tuple(scale.default_value), 1.0):
+        warnings.append("World: Mapping scale is ignored for directions")
+    if vtype == "TEXTURE":
+        return R.T
+    if vtype == "NORMAL":
+        return R
+    return R
+
+
+def export_world(scene, warnings: list) -> envmap.WorldLighting:
+    """The scene's world as :class:`WorldLighting` (raises :class:`ExportError`)."""
+    world = scene.world
+    if world is None:
+        raise ExportError("The scene has no World: add one with an Environment Texture")
+    if not world.use_nodes or world.node_tree is None:
+        return envmap.WorldLighting(color=tuple(world.color)[:3], strength=1.0)
+    out = _find_world_output(world.node_tree)
+    if out is None or not out.inputs["Surface"].is_linked:
+        raise ExportError(f"World '{world.name}' has no World Output with a Surface link")
+    bg = out.inputs["Surface"].links[0].from_node
+    if bg.type != "BACKGROUND":
+        raise ExportError(f"World '{world.name}': the surface must be a Background node "
+                          f"(found '{bg.bl_label}')")
+    strength_sock = bg.inputs["Strength"]
+    if strength_sock.is_linked:
+        warnings.append("World: Background strength is linked; using its default value")
+    strength = float(strength_sock.default_value)
+    color_sock = bg.inputs["Color"]
+    if not color_sock.is_linked:
+        return envmap.WorldLighting(color=tuple(color_sock.default_value)[:3], strength=strength)
+    tex = color_sock.links[0].from_node
+    if tex.type != "TEX_ENVIRONMENT":
+        raise ExportError(f"World '{world.name}': Background colour must come from an "
+                          f"Environment Texture (found '{tex.bl_label}')")
+    if tex.projection != "EQUIRECTANGULAR":
+        raise ExportError("World: only Equirectangular environment projection is supported")
+    if tex.image is None:
+        raise ExportError(f"World '{world.name}': the Environment Texture has no image")
+    rotation = np.eye(3)
+    vec = tex.inputs.get("Vector")
+    if vec is not None and vec.is_linked:
+        src = vec.links[0].from_node
+        if src.type == "MAPPING":
+            rotation = _mapping_rotation(src, warnings)
+        elif src.type != "TEX_COORD":
+            warnings.append(f"World: '{src.bl_label}' before the Environment Texture is ignored")
+    pixels = _image_pixels(tex.image)
+    bad = envmap.count_non_finite(pixels)
+    if bad:
+        raise ExportError(f"Environment image '{tex.image.name}' has {bad} NaN/Inf pixel(s)")
+    try:
+        return envmap.WorldLighting(image=pixels, strength=strength, rotation=rotation)
+    except envmap.EnvironmentError_ as exc:
+        raise ExportError(str(exc)) from exc

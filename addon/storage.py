@@ -1,0 +1,62 @@
+"""Precompute results stored in the .blend as packed float images.
+
+Visibility is bit-packed per shading point (``core.visibility``), three bytes
+per float32 (exact integers below 2**24), four floats per RGBA pixel.  Each
+point owns a run of pixels; several points share an image row.  The image is
+a packed, fake-user, Non-Color float buffer, so it round-trips exactly
+through save/reload.
+"""
+
+import bpy
+import numpy as np
+
+from ..core.visibility import bytes_to_float24, float24_to_bytes
+
+MAX_WIDTH = 4096
+IMAGE_PREFIX = "PRT Visibility "
+
+
+def _layout(point_count: int, floats_per_point: int):
+    ppp = floats_per_point // 4
+    per_row = max(1, MAX_WIDTH // ppp)
+    width = ppp * per_row
+    height = max(1, -(-point_count // per_row))
+    return width, height
+
+
+def create_visibility_image(name: str, bits: np.ndarray):
+    """A new packed image holding ``bits`` (P, nbytes); the caller assigns it."""
+    floats = bytes_to_float24(bits)                         # (P, F)
+    P, F = floats.shape
+    if F % 4:
+        raise ValueError("floats per point must be a multiple of 4")
+    width, height = _layout(P, F)
+    flat = np.zeros(width * height * 4, dtype=np.float32)
+    flat[: P * F] = floats.reshape(-1)
+    img = bpy.data.images.new(IMAGE_PREFIX + name, width, height, alpha=True,
+                              float_buffer=True, is_data=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    img.use_fake_user = True
+    img.use_half_precision = False
+    img.pixels.foreach_set(flat)
+    img.update()
+    img.pack()
+    return img
+
+
+def read_visibility_image(image, point_count: int, nbytes: int) -> np.ndarray:
+    """(P, nbytes) uint8 from an image made by :func:`create_visibility_image`."""
+    F = nbytes // 3
+    width, height = _layout(point_count, F)
+    if tuple(image.size) != (width, height):
+        raise ValueError(f"image '{image.name}' has size {tuple(image.size)}, "
+                         f"expected {(width, height)}")
+    flat = np.empty(width * height * 4, dtype=np.float32)
+    image.pixels.foreach_get(flat)
+    return float24_to_bytes(flat[: point_count * F].reshape(point_count, F))
+
+
+def remove_image(image):
+    if image is not None and image.users <= 1:
+        bpy.data.images.remove(image)

@@ -1,0 +1,1 @@
+"""Pure-numpy core of prt_relight (never imports bpy)."""

@@ -1,0 +1,239 @@
+"""Environment lighting in Blender's world convention, resampled to cubemaps.
+
+Convention (verified by baking a one-pixel sun in Cycles): a world direction
+``d`` (Z up) reads an equirectangular Environment Texture at
+
+    u = 0.5 - atan2(d.y, d.x) / (2*pi)          (column, left to right)
+    v = acos(d.z) / pi                          (row, counted from the top row)
+
+where the "top row" is the first row OpenImageIO returns (zenith on top).
+A Mapping node of type POINT/VECTOR between the Texture Coordinate and the
+Environment Texture turns ``d`` into ``R @ d`` before the lookup (TEXTURE type
+applies the inverse), so the world radiance is ``L(d) = strength * E(R @ d)``.
+
+Resampling to a cubemap is *by area*: every equirectangular pixel (split into
+``s x s`` sub-pixels when the cubemap is finer than about 8 pixels per texel)
+deposits ``radiance * solid_angle`` into the texel its centre falls in, and the
+texel's radiance is the deposited energy over its own solid angle.  Total
+energy ``sum L * dw`` is preserved to rounding, and a one-pixel sun stays in
+the texel that contains its direction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .directions import Cubemap, cubemap, direction_to_texel
+
+try:  # OpenImageIO ships inside Blender 4.5/5.0, not 4.2.
+    import OpenImageIO as _oiio
+except ImportError:  # pragma: no cover - depends on the host
+    _oiio = None
+
+
+class EnvironmentError_(ValueError):
+    """The environment cannot be used as lighting (message is for the user)."""
+
+
+def have_openimageio() -> bool:
+    return _oiio is not None
+
+
+def load_equirect(path: str) -> np.ndarray:
+    """Read an equirectangular image as float32 (H, W, 3), top row first."""
+    if _oiio is None:
+        raise EnvironmentError_("OpenImageIO is not available in this Blender; "
+                                "pack the image or use Blender 4.5+")
+    inp = _oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise EnvironmentError_(f"cannot open environment image {path!r}: {_oiio.geterror()}")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+    finally:
+        inp.close()
+    if pixels is None or getattr(pixels, "size", 0) == 0:
+        raise EnvironmentError_(f"cannot read pixels of {path!r}")
+    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    return as_rgb(pixels)
+
+
+def as_rgb(pixels: np.ndarray) -> np.ndarray:
+    """(H, W, C) -> (H, W, 3) float32 (grey repeated, alpha dropped)."""
+    p = np.asarray(pixels, dtype=np.float32)
+    if p.ndim == 2:
+        p = p[:, :, None]
+    if p.shape[2] == 1:
+        p = np.repeat(p, 3, axis=2)
+    elif p.shape[2] == 2:
+        p = np.repeat(p[:, :, :1], 3, axis=2)
+    return np.ascontiguousarray(p[:, :, :3])
+
+
+def count_non_finite(pixels: np.ndarray) -> int:
+    """Number of pixels with a NaN or infinite channel."""
+    return int(np.count_nonzero(~np.isfinite(pixels).all(axis=-1)))
+
+
+def euler_xyz_matrix(rx: float, ry: float, rz: float) -> np.ndarray:
+    """Blender's Euler XYZ rotation matrix (``Rz @ Ry @ Rx``)."""
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def direction_to_equirect_uv(dirs: np.ndarray):
+    """(u, v) in [0, 1) of texture-space directions; v counted from the top row."""
+    d = np.asarray(dirs, dtype=np.float64)
+    u = np.mod(0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2.0 * np.pi), 1.0)
+    v = np.arccos(np.clip(d[..., 2], -1.0, 1.0)) / np.pi
+    return u, v
+
+
+def equirect_directions(height: int, width: int, supersample: int = 1):
+    """Texture-space directions and solid angles of (sub-)pixel centres.
+
+    Returns ``(dirs (H*s, W*s, 3), solid_angles (H*s, W*s))``; the solid
+    angles of all sub-pixels sum to 4*pi.
+    """
+    return _band_directions(height, width, int(supersample), 0, height)
+
+
+@dataclass
+class WorldLighting:
+    """The world's radiance: ``strength * E(rotation @ d)`` or a constant colour.
+
+    ``image`` is (H, W, 3) float32 top row first, or ``None`` for a uniform
+    world of ``color``.  ``rotation`` maps world directions to texture space.
+    """
+
+    image: np.ndarray | None = None
+    color: tuple = (0.05, 0.05, 0.05)
+    strength: float = 1.0
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+
+    def __post_init__(self):
+        if self.image is not None:
+            img = as_rgb(self.image)
+            bad = count_non_finite(img)
+            if bad:
+                raise EnvironmentError_(
+                    f"environment image has {bad} NaN/Inf pixel(s); fix or replace the image")
+            if (img < 0).any():
+                img = np.maximum(img, 0.0)
+            self.image = img
+        self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
+        if not np.isfinite(self.strength):
+            raise EnvironmentError_("world Background strength is not finite")
+
+    def radiance(self, dirs: np.ndarray) -> np.ndarray:
+        """Point-sampled (nearest pixel) radiance for world directions (..., 3)."""
+        d = np.asarray(dirs, dtype=np.float64)
+        if self.image is None:
+            out = np.broadcast_to(np.asarray(self.color, dtype=np.float64), d.shape)
+            return (self.strength * out).astype(np.float32)
+        tex = d @ self.rotation.T
+        u, v = direction_to_equirect_uv(tex)
+        h, w, _ = self.image.shape
+        col = np.clip((u * w).astype(np.int64), 0, w - 1)
+        row = np.clip((v * h).astype(np.int64), 0, h - 1)
+        return (self.strength * self.image[row, col]).astype(np.float32)
+
+    def to_cubemap(self, resolution: int = 32) -> "CubeLighting":
+        """Area-resampled lighting per cubemap texel."""
+        cube = cubemap(resolution)
+        if self.image is None:
+            rad = np.broadcast_to(self.strength * np.asarray(self.color, np.float32),
+                                  (cube.size, 3)).astype(np.float32)
+            return CubeLighting(rad, np.array(cube.mean_directions))
+        lighting = resample_equirect_to_cubemap(self.image, cube, self.rotation)
+        lighting.radiance *= np.float32(self.strength)
+        return lighting
+
+    def total_power(self) -> np.ndarray:
+        """Integral of radiance over the sphere (RGB), by exact pixel solid angles."""
+        if self.image is None:
+            return 4.0 * np.pi * self.strength * np.asarray(self.color, dtype=np.float64)
+        h, w, _ = self.image.shape
+        _, sa = equirect_directions(h, w, 1)
+        return self.strength * np.einsum("hw,hwc->c", sa, self.image.astype(np.float64))
+
+
+@dataclass
+class CubeLighting:
+    """Lighting on cubemap texels.
+
+    ``radiance`` (D, 3) float32: mean radiance of each texel (energy / solid angle).
+    ``directions`` (D, 3): luminance-weighted mean direction *vector* of the light
+    inside each texel (length <= 1).  ``max(0, n . directions[k])`` is the texel's
+    exact mean cosine when the texel lies above the horizon of ``n``, and a
+    one-pixel sun keeps its true direction instead of the texel centre's.
+    """
+
+    radiance: np.ndarray
+    directions: np.ndarray
+
+    @property
+    def unit_directions(self) -> np.ndarray:
+        d = self.directions
+        return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
+
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def _supersample_for(height: int, resolution: int) -> int:
+    pixel_angle = np.pi / height
+    texel_angle = (np.pi / 2.0) / resolution
+    return int(max(1, np.ceil(8.0 * pixel_angle / texel_angle)))
+
+
+def resample_equirect_to_cubemap(image: np.ndarray, cube: Cubemap, rotation=None,
+                                 supersample: int | None = None) -> CubeLighting:
+    """Energy-preserving resampling of an equirect image to ``cube`` texels."""
+    img = np.asarray(image, dtype=np.float32)
+    h, w, _ = img.shape
+    s = _supersample_for(h, cube.resolution) if supersample is None else int(supersample)
+    R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
+    energy = np.zeros((cube.size, 3))
+    moment = np.zeros((cube.size, 3))       # sum of Y * w * dw
+    lum_energy = np.zeros(cube.size)        # sum of Y * dw
+    # Process in bands of rows so memory stays bounded for large images.
+    rows_per_band = max(1, 2_000_000 // (w * s * s))
+    for r0 in range(0, h, rows_per_band):
+        r1 = min(h, r0 + rows_per_band)
+        dirs, sa = _band_directions(h, w, s, r0, r1)
+        world = dirs @ R            # tex = R @ world  <=>  world = R.T @ tex
+        texel = direction_to_texel(world, cube.resolution).reshape(-1)
+        px = np.repeat(np.repeat(img[r0:r1], s, axis=0), s, axis=1).reshape(-1, 3)
+        wts = sa.reshape(-1)
+        for c in range(3):
+            energy[:, c] += np.bincount(texel, weights=px[:, c] * wts, minlength=cube.size)
+        yw = (px.astype(np.float64) @ LUMINANCE) * wts
+        lum_energy += np.bincount(texel, weights=yw, minlength=cube.size)
+        w3 = world.reshape(-1, 3)
+        for c in range(3):
+            moment[:, c] += np.bincount(texel, weights=yw * w3[:, c], minlength=cube.size)
+    lit = lum_energy > 0
+    dirs = np.array(cube.mean_directions)
+    dirs[lit] = moment[lit] / lum_energy[lit, None]
+    return CubeLighting((energy / cube.solid_angles[:, None]).astype(np.float32), dirs)
+
+
+def _band_directions(h, w, s, r0, r1):
+    theta_edges = np.linspace(r0 * np.pi / h, r1 * np.pi / h, (r1 - r0) * s + 1)
+    theta = 0.5 * (theta_edges[:-1] + theta_edges[1:])
+    ws = w * s
+    u = (np.arange(ws) + 0.5) / ws
+    phi = (0.5 - u) * 2.0 * np.pi
+    band = (np.cos(theta_edges[:-1]) - np.cos(theta_edges[1:])) * (2.0 * np.pi / ws)
+    st, ct = np.sin(theta), np.cos(theta)
+    dirs = np.empty((len(theta), ws, 3))
+    dirs[..., 0] = st[:, None] * np.cos(phi)[None, :]
+    dirs[..., 1] = st[:, None] * np.sin(phi)[None, :]
+    dirs[..., 2] = ct[:, None]
+    return dirs, np.broadcast_to(band[:, None], dirs.shape[:2])

@@ -1,0 +1,153 @@
+"""Triangle meshes as numpy arrays, and the shading points PRT is computed at.
+
+A mesh arrives as world-space arrays exported from Blender's evaluated
+depsgraph (or built by tests):
+
+* ``positions``  (V, 3) vertex positions,
+* ``corner_verts`` (C,) vertex index of each face corner,
+* ``corner_normals`` (C, 3) shading normal of each corner (split normals),
+* ``triangles`` (T, 3) corner indices of each triangle,
+* ``corner_materials`` (C,) material slot of each corner's face.
+
+Transfer is computed per *shading point*: a distinct (vertex, normal,
+material) triple.  A smooth mesh has one point per vertex; a flat-shaded
+cube has three per corner vertex.  Points are derived deterministically from
+the arrays, so stored per-point results can be re-attached to an unchanged
+mesh without storing the mapping, and a changed mesh is detected by its
+fingerprint.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class MeshArrays:
+    positions: np.ndarray
+    corner_verts: np.ndarray
+    corner_normals: np.ndarray
+    triangles: np.ndarray
+    corner_materials: np.ndarray | None = None
+
+    def __post_init__(self):
+        self.positions = np.ascontiguousarray(self.positions, dtype=np.float64).reshape(-1, 3)
+        self.corner_verts = np.ascontiguousarray(self.corner_verts, dtype=np.int64).reshape(-1)
+        self.corner_normals = np.ascontiguousarray(self.corner_normals, dtype=np.float64).reshape(-1, 3)
+        self.triangles = np.ascontiguousarray(self.triangles, dtype=np.int64).reshape(-1, 3)
+        if self.corner_materials is None:
+            self.corner_materials = np.zeros(len(self.corner_verts), dtype=np.int64)
+        self.corner_materials = np.ascontiguousarray(self.corner_materials, dtype=np.int64).reshape(-1)
+
+    @property
+    def triangle_positions(self) -> np.ndarray:
+        """(T, 3, 3) world positions of every triangle's corners."""
+        return self.positions[self.corner_verts[self.triangles]]
+
+
+def triangle_areas(tri_positions: np.ndarray) -> np.ndarray:
+    a, b, c = tri_positions[:, 0], tri_positions[:, 1], tri_positions[:, 2]
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+
+
+def degenerate_triangles(mesh: MeshArrays, scale: float | None = None) -> np.ndarray:
+    """Mask of zero-area (or non-finite) triangles, relative to the mesh scale."""
+    tp = mesh.triangle_positions
+    if scale is None:
+        scale = bounding_diagonal(mesh.positions)
+    area = triangle_areas(tp)
+    return ~np.isfinite(area) | (area <= (1e-12 * max(scale, 1e-30) ** 2))
+
+
+def bounding_diagonal(positions: np.ndarray) -> float:
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    if len(p) == 0:
+        return 0.0
+    return float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
+
+
+def repair_normals(mesh: MeshArrays) -> int:
+    """Replace zero/NaN corner normals (zero-area faces) in place; return how many.
+
+    A bad corner takes the mean of the valid normals of its vertex, or +Z when
+    the vertex has none.
+    """
+    n = mesh.corner_normals
+    length = np.linalg.norm(n, axis=1)
+    bad = ~np.isfinite(length) | (length < 1e-8)
+    count = int(bad.sum())
+    if count:
+        good = ~bad
+        acc = np.zeros_like(mesh.positions)
+        np.add.at(acc, mesh.corner_verts[good], n[good] / length[good, None])
+        fill = acc[mesh.corner_verts[bad]]
+        fl = np.linalg.norm(fill, axis=1)
+        fill = np.where(fl[:, None] > 1e-8, fill / np.maximum(fl, 1e-30)[:, None], [0.0, 0.0, 1.0])
+        n[bad] = fill
+    good = ~bad
+    n[good] /= length[good, None]
+    return count
+
+
+@dataclass
+class ShadingPoints:
+    """Distinct (vertex, normal, material) triples of a mesh."""
+
+    point_of_corner: np.ndarray   # (C,) int
+    positions: np.ndarray         # (P, 3)
+    normals: np.ndarray           # (P, 3) unit
+    materials: np.ndarray         # (P,) material slot
+
+    @property
+    def count(self) -> int:
+        return len(self.positions)
+
+
+def shading_points(mesh: MeshArrays) -> ShadingPoints:
+    """Group corners into shading points (deterministic order)."""
+    q = np.round(mesh.corner_normals * 4096.0).astype(np.int64)
+    key = np.column_stack([mesh.corner_verts, q, mesh.corner_materials])
+    if len(key) == 0:
+        empty = np.zeros((0, 3))
+        return ShadingPoints(np.zeros(0, np.int64), empty, empty, np.zeros(0, np.int64))
+    uniq, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    normals = np.zeros((len(uniq), 3))
+    np.add.at(normals, inverse, mesh.corner_normals)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-30), [0.0, 0.0, 1.0])
+    return ShadingPoints(
+        point_of_corner=inverse,
+        positions=mesh.positions[uniq[:, 0]],
+        normals=normals,
+        materials=uniq[:, 4].copy(),
+    )
+
+
+def fingerprint(mesh: MeshArrays) -> str:
+    """Hash of the world-space geometry the precompute depends on."""
+    h = hashlib.sha1()
+    h.update(np.round(mesh.positions, 5).astype(np.float32).tobytes())
+    h.update(mesh.corner_verts.astype(np.int32).tobytes())
+    h.update(mesh.triangles.astype(np.int32).tobytes())
+    h.update(np.round(mesh.corner_normals, 3).astype(np.float32).tobytes())
+    h.update(mesh.corner_materials.astype(np.int32).tobytes())
+    return h.hexdigest()
+
+
+def grid(size: float = 2.0, cuts: int = 8, z: float = 0.0) -> MeshArrays:
+    """A flat square grid of ``cuts`` x ``cuts`` quads (two triangles each), normal +Z."""
+    n = cuts + 1
+    xs = np.linspace(-size / 2, size / 2, n)
+    X, Y = np.meshgrid(xs, xs, indexing="xy")
+    pos = np.column_stack([X.ravel(), Y.ravel(), np.full(n * n, z)])
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    tris = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    corner_verts = tris.reshape(-1)
+    return MeshArrays(pos, corner_verts, np.tile([0.0, 0.0, 1.0], (len(corner_verts), 1)),
+                      np.arange(len(corner_verts)).reshape(-1, 3))

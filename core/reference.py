@@ -1,0 +1,108 @@
+"""REFERENCE: the pixel-basis triple product per shading point (seed 004 §3, eq. 1).
+
+    B(x, wo) = sum_k  L(w_k) V(x, w_k) rho(x, w_k, wo) max(0, n . w_k) dw_k
+
+over every cubemap texel k, with ``dw_k`` the texel's exact solid angle.  This
+is the "baseline" every faster method is measured against; it is exact for
+the cubemap discretisation of lighting and visibility.
+
+Lambert is view independent, so its part is split off:
+
+    B = albedo/pi * sum_k L_k V_k cos_k dw_k  +  sum_k L_k V_k f_spec(w_k, wo) cos_k dw_k
+
+The first sum (``diffuse_irradiance``) only changes with the lighting and is
+cached by callers; the second needs the view and is evaluated per frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .brdf import Material, specular_cosine
+from .directions import Cubemap
+from .envmap import CubeLighting
+from .visibility import unpack_visibility
+
+#: points per vectorised block; (block, 6*N*N) float32 temporaries.
+BLOCK_POINTS = 256
+
+
+def _blocks(count, block):
+    for start in range(0, count, block):
+        yield start, min(count, start + block)
+
+
+def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
+                       lighting: CubeLighting) -> np.ndarray:
+    """E(x) = sum_k L_k V_k max(0, n.w_k) dw_k per point, (P, 3) float32.
+
+    ``w_k`` is the lighting's mean direction vector in texel k, so the cosine is
+    the texel's mean cosine (exact for texels above the horizon).
+    """
+    normals = np.asarray(normals, dtype=np.float32)
+    dirs = np.asarray(lighting.directions, dtype=np.float32)
+    dw = cube.solid_angles.astype(np.float32)
+    L = np.asarray(lighting.radiance, dtype=np.float32)
+    out = np.zeros((len(normals), 3), dtype=np.float32)
+    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    for a, b in _blocks(len(normals), block):
+        vis = unpack_visibility(vis_bits[a:b], cube.size)
+        cos = normals[a:b] @ dirs.T
+        np.maximum(cos, 0.0, out=cos)
+        cos *= vis
+        cos *= dw
+        out[a:b] = cos @ L
+    return out
+
+
+def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.ndarray,
+                      eye, cube: Cubemap, lighting: CubeLighting, material: Material,
+                      view_dirs: np.ndarray | None = None) -> np.ndarray:
+    """Glossy part of B toward the eye, (P, 3) float32.
+
+    ``eye`` is the camera position (perspective) or, with ``view_dirs`` given,
+    ignored in favour of per-point unit directions toward the viewer.
+    """
+    P = len(normals)
+    out = np.zeros((P, 3), dtype=np.float32)
+    if material.is_diffuse_only or P == 0:
+        return out
+    if view_dirs is None:
+        v = np.asarray(eye, dtype=np.float64)[None, :] - np.asarray(positions, dtype=np.float64)
+        view_dirs = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
+    dirs = lighting.unit_directions
+    dw = cube.solid_angles.astype(np.float32)
+    L = np.asarray(lighting.radiance, dtype=np.float32)
+    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    for a, b in _blocks(P, block):
+        vis = unpack_visibility(vis_bits[a:b], cube.size)
+        f = np.asarray(specular_cosine(material, normals[a:b], view_dirs[a:b], dirs), dtype=np.float32)
+        if f.ndim == 2:       # scalar lobe; colour applied after the sum
+            f = f * vis * dw
+            out[a:b] = (f @ L) * np.asarray(material.specular_color, dtype=np.float32)
+        else:                 # (p, D, 3) lobe with Fresnel and colour inside
+            f = f * (vis * dw)[:, :, None]
+            out[a:b] = np.einsum("pdc,dc->pc", f, L)
+    return out
+
+
+def shade_points(vis_bits, positions, normals, materials, material_table, eye, cube, lighting,
+                 irradiance=None, view_dirs=None) -> np.ndarray:
+    """Outgoing radiance (P, 3) of every point, each with ``material_table[materials[p]]``.
+
+    ``irradiance`` (from :func:`diffuse_irradiance`) may be passed in when cached.
+    """
+    if irradiance is None:
+        irradiance = diffuse_irradiance(vis_bits, normals, cube, lighting)
+    out = np.zeros((len(normals), 3), dtype=np.float32)
+    materials = np.asarray(materials)
+    for slot in np.unique(materials):
+        sel = np.nonzero(materials == slot)[0]
+        mat = material_table[int(slot)] if 0 <= int(slot) < len(material_table) else Material()
+        albedo = np.asarray(mat.diffuse_albedo, dtype=np.float32) / np.float32(np.pi)
+        out[sel] = irradiance[sel] * albedo
+        if not mat.is_diffuse_only:
+            vd = None if view_dirs is None else view_dirs[sel]
+            out[sel] += specular_radiance(vis_bits[sel], positions[sel], normals[sel], eye, cube,
+                                          lighting, mat, view_dirs=vd)
+    return out

@@ -1,0 +1,4 @@
+void main()
+{
+  fragColor = vec4(vRadiance.rgb, 1.0);
+}
