@@ -90,8 +90,13 @@ def _input_value(node, name, warnings, label):
         return float(v)
 
 
+def _uses_nodes(idblock) -> bool:
+    """Blender 5.0 always uses node trees (``use_nodes`` is deprecated there)."""
+    return idblock.node_tree is not None and (bpy.app.version >= (5, 0, 0) or idblock.use_nodes)
+
+
 def _surface_node(material):
-    if material is None or not material.use_nodes or material.node_tree is None:
+    if material is None or not _uses_nodes(material):
         return None
     out = None
     for node in material.node_tree.nodes:
@@ -119,7 +124,7 @@ def export_material(material, warnings: list) -> Material:
     label = f"Material '{material.name}'"
     node = _surface_node(material)
     if node is None:
-        if material.use_nodes:
+        if _uses_nodes(material):
             return DEFAULT_MATERIAL
         c = tuple(material.diffuse_color)[:3]
         return Material(diffuse_albedo=c)
@@ -183,8 +188,11 @@ _PIXEL_CACHE = {}
 def _image_pixels(image) -> np.ndarray:
     """(H, W, 3) float32 of a Blender image, top row first, scene-linear (cached)."""
     path = bpy.path.abspath(image.filepath_raw or image.filepath, library=image.library)
-    stamp = os.path.getmtime(path) if path and os.path.isfile(path) else None
-    key = (image.name_full, path, stamp, image.packed_file is not None, tuple(image.size))
+    from_file = (image.source == "FILE" and image.packed_file is None and not image.is_dirty
+                 and path and os.path.isfile(path))
+    if not from_file:          # packed/generated/edited pixels: no cheap way to tell a change
+        return _read_image_pixels(image, path)
+    key = (image.name_full, path, os.path.getmtime(path), os.path.getsize(path))
     cached = _PIXEL_CACHE.get(key)
     if cached is None:
         cached = _read_image_pixels(image, path)
@@ -244,7 +252,7 @@ def export_world(scene, warnings: list) -> envmap.WorldLighting:
     world = scene.world
     if world is None:
         raise ExportError("The scene has no World: add one with an Environment Texture")
-    if not world.use_nodes or world.node_tree is None:
+    if not _uses_nodes(world):
         return envmap.WorldLighting(color=tuple(world.color)[:3], strength=1.0)
     out = _find_world_output(world.node_tree)
     if out is None or not out.inputs["Surface"].is_linked:

@@ -1,0 +1,210 @@
+"""The add-on in headless Blender: precompute, F12, storage in the .blend, bad input."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+import prt_relight
+from prt_relight.addon import precompute, runtime
+from prt_relight.core.visibility import Cancelled
+
+from . import blender_scene as bs
+
+
+@pytest.fixture(scope="module", autouse=True)
+def addon():
+    prt_relight.register()
+    yield
+    prt_relight.unregister()
+
+
+def _prt_images():
+    return sorted(i.name for i in bpy.data.images if i.name.startswith("PRT Visibility"))
+
+
+def _small_scene(hdri="sunset", cuts=16, subdiv=1):
+    bs.reset()
+    bs.add_world(path=bs.hdri_path(hdri))
+    bs.add_ground(size=6.0, cuts=cuts)
+    bs.add_suzanne(subdiv=subdiv)
+    bs.add_camera()
+    bs.set_resolution(64, 48)
+    bpy.context.scene.prt.supersampling = 2
+
+
+def _frame_warnings():
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    return state
+
+
+def test_precompute_render_save_reopen_same_pixels(tmp_path):
+    _small_scene()
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    suzanne = bpy.data.objects["Suzanne"]
+    assert suzanne.prt.visibility is not None and suzanne.prt.visibility.packed_file is not None
+    before = bs.render_exr(tmp_path / "a.exr")
+    assert np.isfinite(before).all()
+    assert before[..., 3].max() == 1.0 and before[..., :3].max() > 0.05
+    blend = tmp_path / "scene.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bs.reset()
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    state = _frame_warnings()
+    assert all(o.status == "ok" for o in state.objects), [(o.name, o.status) for o in state.objects]
+    after = bs.render_exr(tmp_path / "b.exr")
+    np.testing.assert_array_equal(before, after)
+
+
+def test_shadows_differ_from_unshadowed(tmp_path):
+    """Stored visibility is really used: clearing it brightens the contact region."""
+    _small_scene()
+    bpy.ops.prt.precompute()
+    shadowed = bs.render_exr(tmp_path / "s.exr")
+    bpy.ops.prt.clear()
+    assert _prt_images() == []
+    state = _frame_warnings()
+    assert any("Not precomputed" in w for w in state.warnings)
+    open_sky = bs.render_exr(tmp_path / "o.exr")
+    assert open_sky[..., :3].mean() > shadowed[..., :3].mean() * 1.02
+
+
+def test_mesh_edited_after_precompute_is_stale_not_broken(tmp_path):
+    _small_scene()
+    bpy.ops.prt.precompute()
+    suzanne = bpy.data.objects["Suzanne"]
+    suzanne.data.vertices[0].co.z += 0.3                 # same topology: stale
+    suzanne.data.update()
+    state = _frame_warnings()
+    assert any("stale" in w for w in state.warnings)
+    assert np.isfinite(bs.render_exr(tmp_path / "a.exr")).all()
+    ground = bpy.data.objects["Grid"]
+    ground.modifiers.new("more", "SUBSURF").levels = 1     # new topology: point count differs
+    state = _frame_warnings()
+    statuses = {o.name: o.status for o in state.objects}
+    assert statuses["Grid"] == "stale"
+    img = bs.render_exr(tmp_path / "b.exr")
+    assert np.isfinite(img).all() and img[..., :3].max() > 0
+
+
+def _assert_precompute_error(match):
+    images = _prt_images()
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.prt.precompute()
+    assert _prt_images() == images
+    assert all(o.prt.visibility is None for o in bpy.data.objects)
+
+
+def test_no_world_is_a_clear_error():
+    _small_scene()
+    bpy.context.scene.world = None
+    _assert_precompute_error("no World")
+
+
+def test_environment_without_image_is_a_clear_error():
+    _small_scene()
+    bpy.context.scene.world.node_tree.nodes["Environment Texture"].image = None
+    _assert_precompute_error("has no image")
+
+
+def test_missing_image_file_is_a_clear_error(tmp_path):
+    _small_scene()
+    env = bpy.context.scene.world.node_tree.nodes["Environment Texture"]
+    env.image = bpy.data.images.load(bs.hdri_path("forest"))
+    env.image.filepath = str(tmp_path / "gone.exr")
+    _assert_precompute_error("missing")
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_environment_pixels_are_a_clear_error(tmp_path, bad):
+    _small_scene()
+    px = np.full((16, 32, 3), 0.5, dtype=np.float32)
+    px[3, 7, 1] = bad
+    env = bpy.context.scene.world.node_tree.nodes["Environment Texture"]
+    env.image = bs.float_image("bad", px)
+    _assert_precompute_error("NaN/Inf")
+    # The engine reports the same error for F12 instead of drawing garbage.
+    state = _frame_warnings()
+    assert state.error and "NaN/Inf" in state.error
+    with pytest.raises(RuntimeError, match="NaN/Inf"):
+        bs.render_exr(tmp_path / "x.exr")
+
+
+def test_zero_area_faces_warn_and_stay_finite(tmp_path):
+    _small_scene()
+    mesh = bpy.data.meshes.new("degenerate")
+    verts = [(0, 0, 2.5), (1, 0, 2.5), (2, 0, 2.5), (0, 1, 2.5), (1, 1, 2.5)]
+    mesh.from_pydata(verts, [], [(0, 1, 2), (0, 3, 4)])    # first face has zero area
+    ob = bpy.data.objects.new("Degenerate", mesh)
+    bpy.context.scene.collection.objects.link(ob)
+    bpy.ops.prt.precompute()
+    state = _frame_warnings()
+    assert state.objects and all(o.status == "ok" for o in state.objects)
+    img = bs.render_exr(tmp_path / "a.exr")
+    assert np.isfinite(img).all()
+
+
+def test_empty_mesh_is_skipped_and_only_empty_is_an_error():
+    _small_scene()
+    ob = bpy.data.objects.new("Empty Mesh", bpy.data.meshes.new("nothing"))
+    bpy.context.scene.collection.objects.link(ob)
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    assert ob.prt.visibility is None
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    ob = bpy.data.objects.new("Empty Mesh", bpy.data.meshes.new("nothing"))
+    bpy.context.scene.collection.objects.link(ob)
+    _assert_precompute_error("Nothing to precompute")
+
+
+def test_cancel_leaves_scene_unchanged():
+    """ESC sets ``cancel_requested``; the worker stops and nothing is committed."""
+    _small_scene()
+    job = precompute.gather(bpy.context.evaluated_depsgraph_get(), bpy.context.scene.prt)
+    job.cancel_requested = True
+    with pytest.raises(Cancelled):
+        job.run()
+    assert _prt_images() == []
+    assert all(o.prt.visibility is None for o in bpy.data.objects)
+
+
+def test_world_rotation_redraws_without_recompute(tmp_path):
+    _small_scene()
+    bpy.ops.prt.precompute()
+    a = bs.render_exr(tmp_path / "a.exr")
+    images = _prt_images()
+    world = bpy.context.scene.world
+    nt = world.node_tree
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value[2] = 2.0
+    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], nt.nodes["Environment Texture"].inputs["Vector"])
+    b = bs.render_exr(tmp_path / "b.exr")
+    assert _prt_images() == images
+    assert np.abs(a - b)[..., :3].mean() > 0.01 * a[..., :3].mean()
+
+
+def test_materials_export():
+    from prt_relight.addon import scene_export
+
+    warnings = []
+    mat = bpy.data.materials.new("glossy")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.remove(nt.nodes["Principled BSDF"])
+    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.distribution = "BECKMANN"
+    glossy.inputs["Roughness"].default_value = 0.3
+    nt.links.new(glossy.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    m = scene_export.export_material(mat, warnings)
+    assert m.distribution == "BECKMANN" and m.roughness == pytest.approx(0.3)
+    assert m.is_diffuse_only is False and m.diffuse_albedo == (0.0, 0.0, 0.0)
+    nt.nodes.remove(glossy)
+    emission = nt.nodes.new("ShaderNodeHoldout")
+    nt.links.new(emission.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    scene_export.export_material(mat, warnings)
+    assert any("not supported" in w for w in warnings)
