@@ -15,9 +15,8 @@ from .runtime import FrameState
 def _background(state: FrameState):
     """(texture, rotation, strength) for drawing the world, cached on the state."""
     world = state.world
-    key = (id(world.image) if world.image is not None else tuple(world.color),)
     cached = getattr(state, "_bg", None)
-    if cached is not None and cached[0] == key:
+    if cached is not None and cached[0] is world:
         tex = cached[1]
     else:
         if world.image is not None:
@@ -28,7 +27,7 @@ def _background(state: FrameState):
             rgba = np.ones((1, 1, 4), dtype=np.float32)
             rgba[0, 0, :3] = world.color
         tex = drawing.float_texture(rgba)
-        state._bg = (key, tex)
+        state._bg = (world, tex)
     R = Matrix([[float(v) for v in row] for row in world.rotation])
     return tex, R, world.strength
 

@@ -8,6 +8,8 @@ returns per-corner radiance for each object with the active method.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from ..core import directions, envmap, mesh as core_mesh, reference
@@ -23,8 +25,15 @@ _ENV_CACHE: dict = {}
 
 
 def _env_key(world: envmap.WorldLighting, resolution: int):
-    img = world.image
-    ident = (id(img), img.shape) if img is not None else tuple(world.color)
+    """Content key of the lighting (pixels hashed once per WorldLighting object)."""
+    ident = getattr(world, "_content_key", None)
+    if ident is None:
+        img = world.image
+        if img is None:
+            ident = ("color",) + tuple(float(c) for c in world.color)
+        else:
+            ident = (img.shape, hashlib.sha1(np.ascontiguousarray(img).view(np.uint8)).hexdigest())
+        world._content_key = ident
     return (ident, float(world.strength), world.rotation.round(9).tobytes(), resolution)
 
 

@@ -15,8 +15,11 @@ Resampling to a cubemap is *by area*: every equirectangular pixel (split into
 ``s x s`` sub-pixels when the cubemap is finer than about 8 pixels per texel)
 deposits ``radiance * solid_angle`` into the texel its centre falls in, and the
 texel's radiance is the deposited energy over its own solid angle.  Total
-energy ``sum L * dw`` is preserved to rounding, and a one-pixel sun stays in
-the texel that contains its direction.
+energy ``sum L * dw`` is preserved to rounding; a one-pixel sun's energy goes
+to the texel(s) its area overlaps, and every texel keeps the luminance-weighted
+mean direction of the light it received, so the sun keeps its direction.
+Binning by sub-pixel centre aliases: a constant image resamples to a constant
+only within about 10 % per texel (8 sub-pixels across a texel edge).
 """
 
 from __future__ import annotations

@@ -6,9 +6,10 @@ light because of the cosine).  Results are bit-packed along the texel axis:
 ``(P, 6*N*N/8)`` uint8, bit order of ``numpy.packbits`` (big-endian in a byte).
 
 Rays start at ``p + offset * n`` with ``offset`` relative to the scene's
-bounding diagonal (default 1e-4 of it) and ignore hits closer than another
-``offset``: enough to step off the tessellated surface of the shading
-point without skipping real contact occluders.
+bounding diagonal (default 1e-4 of it), and at least 16 float32 ulps of the
+point's coordinates so scenes far from the origin do not shadow themselves.
+The origin is not moved along the ray, so occluders in contact (a wall
+meeting a floor) still block.
 
 Work is split in chunks of points handed to a thread pool; Embree releases
 the GIL during ``run``, so both cores trace.  Memory stays bounded by the
@@ -88,11 +89,13 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
         n = nrm[start:stop]
         cosines = n @ dirs64.T                                  # (p, D)
         pi, di = np.nonzero(cosines > 0.0)
-        origins = (pts[start:stop] + offset * n).astype(np.float32)[pi]
+        # Step off the surface along the normal by the larger of the scene-relative
+        # offset and a few float32 ulps of the coordinates (rays are traced in float32).
+        p = pts[start:stop]
+        step = np.maximum(offset, 16.0 * np.finfo(np.float32).eps * np.abs(p).max(axis=1))
+        origins = (p + step[:, None] * n).astype(np.float32)[pi]
         rays = dirs32[di]
         if len(pi):
-            # tnear is 0 in embreex; step the origin along the ray instead.
-            origins += offset * rays
             hit = scene.run(origins, rays, query="OCCLUDED")
             visible = np.zeros(cosines.shape, dtype=bool)
             visible[pi, di] = hit == -1

@@ -148,11 +148,6 @@ def test_point_outside_box_sees_past_it():
     np.testing.assert_array_equal(vis, np.tile(cube.directions[:, 2] > 0, (2, 1)))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG in visibility.trace_visibility: the origin is stepped by offset*n + offset*ray, so "
-    "at a concave contact (room corner / wall foot) rays heading into the adjacent wall start "
-    "*behind* it and escape.  Shading points of a closed, inward-facing flat-shaded cube "
-    "(all at corners) see 75% of their hemisphere instead of 0%: light leaks into a closed room"))
 def test_closed_room_corner_points_fully_blocked():
     room = flat_cube()
     room.corner_normals *= -1.0                          # normals point into the room
@@ -175,11 +170,6 @@ def test_closed_room_interior_points_fully_blocked():
     assert vis.sum() == 0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "BUG in visibility.trace_visibility: origins are rounded to float32 and the offset is "
-    "only relative to the scene diagonal, not to |p|.  A 0.2 m ground grid at z = 1000 "
-    "(offset 2.8e-5 < float32 ulp 6.1e-5) self-occludes: only 21% of the upper hemisphere "
-    "is reported visible (100% at z = 500)"))
 def test_small_scene_far_from_origin_not_self_occluded():
     g = mesh.grid(size=0.2, cuts=8, z=1000.0)
     sp = mesh.shading_points(g)
