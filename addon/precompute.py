@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import directions, mesh as core_mesh, visibility
+from ..core import directions, mesh as core_mesh, reference, visibility
 from . import scene_export, storage
 
 
@@ -52,17 +52,20 @@ class PrecomputeJob:
         def progress(done, total):
             self.progress_done = done
 
+        stats = {}
         bits = visibility.trace_visibility(scene, pts, nrm, cube, self.offset, threads=threads,
-                                           progress=progress, cancel=lambda: self.cancel_requested)
+                                           progress=progress, cancel=lambda: self.cancel_requested,
+                                           stats=stats)
         t2 = time.perf_counter()
         start = 0
         for o in self.objects:
             o.bits = bits[start:start + o.points.count]
             start += o.points.count
             o.coarse_warning = coarse_receiver_warning(o, cube)
-        hemi = int(((nrm @ cube.directions.T) > 0).sum())
-        self.timings.update(build_bvh=t1 - t0, rays=t2 - t1, ray_count=hemi,
-                            rays_per_second=hemi / max(t2 - t1, 1e-9))
+        t3 = time.perf_counter()
+        self.timings.update(build_bvh=t1 - t0, rays=t2 - t1, ray_count=stats["rays"],
+                            rays_per_second=stats["rays"] / max(t2 - t1, 1e-9),
+                            tessellation_check=t3 - t2)
 
 
 def coarse_receiver_warning(job: ObjectJob, cube) -> str:
@@ -72,10 +75,7 @@ def coarse_receiver_warning(job: ObjectJob, cube) -> str:
     fraction of the hemisphere that is open).  If more than 5 % of the edges
     jump by over 0.25, per-vertex shading will blur or alias the shadows.
     """
-    vis = visibility.unpack_visibility(job.bits, cube.size).astype(np.float32)
-    cos = np.maximum(job.points.normals @ cube.directions.T, 0.0).astype(np.float32)
-    w = cos * cube.solid_angles.astype(np.float32)
-    sky = (vis * w).sum(axis=1) / np.maximum(w.sum(axis=1), 1e-12)
+    sky = reference.sky_visibility(job.bits, job.points.normals, cube)
     tri_points = job.points.point_of_corner[job.arrays.triangles]
     edges = np.concatenate([tri_points[:, [0, 1]], tri_points[:, [1, 2]], tri_points[:, [2, 0]]])
     if len(edges) == 0:

@@ -55,6 +55,23 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
     return out
 
 
+def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> np.ndarray:
+    """Cosine-weighted open fraction of each point's hemisphere, (P,) in [0, 1]."""
+    normals = np.asarray(normals, dtype=np.float32)
+    dirs = cube.directions.astype(np.float32)
+    dw = cube.solid_angles.astype(np.float32)
+    out = np.zeros(len(normals), dtype=np.float32)
+    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    for a, b in _blocks(len(normals), block):
+        w = normals[a:b] @ dirs.T
+        np.maximum(w, 0.0, out=w)
+        w *= dw
+        total = w.sum(axis=1)
+        w *= unpack_visibility(vis_bits[a:b], cube.size)
+        out[a:b] = w.sum(axis=1) / np.maximum(total, 1e-12)
+    return out
+
+
 def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                       eye, cube: Cubemap, lighting: CubeLighting, material: Material,
                       view_dirs: np.ndarray | None = None) -> np.ndarray:
