@@ -22,38 +22,36 @@ def _source(name):
     return (SHADER_DIR / name).read_text()
 
 
-def surface_shader():
-    if "surface" not in _SHADERS:
+def _shader(name, push_constants, vertex_inputs, varyings, samplers=()):
+    """Build (once) the shader ``shaders/<name>_vert.glsl`` + ``<name>_frag.glsl``."""
+    if name not in _SHADERS:
         info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant("MAT4", "viewProjection")
-        info.vertex_in(0, "VEC3", "pos")
-        info.vertex_in(1, "VEC4", "radiance")
-        iface = gpu.types.GPUStageInterfaceInfo("prt_surface_iface")
-        iface.smooth("VEC4", "vRadiance")
+        for kind, ident in push_constants:
+            info.push_constant(kind, ident)
+        for slot, (kind, ident) in enumerate(samplers):
+            info.sampler(slot, kind, ident)
+        for slot, (kind, ident) in enumerate(vertex_inputs):
+            info.vertex_in(slot, kind, ident)
+        iface = gpu.types.GPUStageInterfaceInfo(f"prt_{name}_iface")
+        for kind, ident in varyings:
+            iface.smooth(kind, ident)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(_source("surface_vert.glsl"))
-        info.fragment_source(_source("surface_frag.glsl"))
-        _SHADERS["surface"] = gpu.shader.create_from_info(info)
-    return _SHADERS["surface"]
+        info.vertex_source(_source(f"{name}_vert.glsl"))
+        info.fragment_source(_source(f"{name}_frag.glsl"))
+        _SHADERS[name] = gpu.shader.create_from_info(info)
+    return _SHADERS[name]
+
+
+def surface_shader():
+    return _shader("surface", [("MAT4", "viewProjection")],
+                   [("VEC3", "pos"), ("VEC4", "radiance")], [("VEC4", "vRadiance")])
 
 
 def background_shader():
-    if "background" not in _SHADERS:
-        info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant("MAT4", "invViewProjection")
-        info.push_constant("MAT3", "texRotation")
-        info.push_constant("FLOAT", "strength")
-        info.sampler(0, "FLOAT_2D", "envMap")
-        info.vertex_in(0, "VEC2", "ndc")
-        iface = gpu.types.GPUStageInterfaceInfo("prt_background_iface")
-        iface.smooth("VEC2", "vNdc")
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(_source("background_vert.glsl"))
-        info.fragment_source(_source("background_frag.glsl"))
-        _SHADERS["background"] = gpu.shader.create_from_info(info)
-    return _SHADERS["background"]
+    return _shader("background",
+                   [("MAT4", "invViewProjection"), ("MAT3", "texRotation"), ("FLOAT", "strength")],
+                   [("VEC2", "ndc")], [("VEC2", "vNdc")], samplers=[("FLOAT_2D", "envMap")])
 
 
 def float_texture(rgba: np.ndarray):

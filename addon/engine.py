@@ -107,6 +107,8 @@ class PRTRenderEngine(bpy.types.RenderEngine):
             self._state = FrameState()
         self._state.sync(depsgraph)
         self._view_key = None
+        messages = ([self._state.error] if self._state.error else []) + self._state.warnings
+        self.update_stats("PRT Relight", " | ".join(messages) if messages else "")
 
     def view_draw(self, context, depsgraph):
         if self._state is None:

@@ -146,11 +146,4 @@ class PRT_OT_clear(bpy.types.Operator):
 CLASSES = (PRT_OT_precompute, PRT_OT_clear)
 
 
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

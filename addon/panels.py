@@ -2,6 +2,8 @@
 
 import bpy
 
+from .runtime import LAST_MESSAGES
+
 
 def draw_settings(layout, context):
     scene = context.scene
@@ -22,6 +24,8 @@ def draw_settings(layout, context):
                      icon="ERROR")
     if scene.world is None:
         layout.label(text="No World: add one with an Environment Texture", icon="ERROR")
+    for message in LAST_MESSAGES[:6]:
+        layout.label(text=message, icon="ERROR")
     ob = context.active_object
     if ob is not None and ob.type == "MESH":
         box = layout.box()
@@ -62,11 +66,4 @@ class PRT_PT_sidebar(bpy.types.Panel):
 CLASSES = (PRT_PT_render, PRT_PT_sidebar)
 
 
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -15,6 +15,8 @@ import numpy as np
 from ..core import directions, envmap, mesh as core_mesh, reference
 from . import scene_export, storage
 
+#: What the last sync found wrong (shown in the panels; cheap to read in draw()).
+LAST_MESSAGES: list = []
 # Decoded visibility per (image name, fingerprint, point count); small LRU.
 _VIS_CACHE: dict = {}
 _VIS_CACHE_MAX = 16
@@ -144,6 +146,7 @@ class FrameState:
             self.warnings.append("Changed since precompute (stale, press Precompute): "
                                  + ", ".join(stale))
         self.objects = objects
+        LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
 
     # ------------------------------------------------------------------ shade
     def shade(self, eye, view_dirs_for=None):

@@ -14,11 +14,28 @@ import bpy
 import numpy as np
 
 from ..core import envmap
-from ..core.brdf import Material
+from ..core.brdf import Material, principled_material
 from ..core.mesh import MeshArrays
 
-#: what Cycles uses for a surface without a material (grey Diffuse BSDF 0.8).
-DEFAULT_MATERIAL = Material(diffuse_albedo=(0.8, 0.8, 0.8))
+#: what Cycles uses for a surface without a material: a Principled BSDF with the
+#: node defaults (``ShaderManager::add_default`` in ``intern/cycles/scene/shader.cpp``;
+#: base 0.8, metallic 0, roughness 0.5, IOR 1.5, specular IOR level 0.5, specular
+#: tint 1, Multiscatter GGX) -- not a Lambert 0.8, which is ~1-4 % off depending on
+#: the view (the specular layer takes energy from the base at grazing angles).
+DEFAULT_MATERIAL = principled_material()
+
+#: Principled inputs we do not model: (socket, "is non-zero" test, what it is).
+_PRINCIPLED_UNMODELLED = (
+    ("Transmission Weight", lambda v: v > 0.0, "transmission"),
+    ("Coat Weight", lambda v: v > 0.0, "coat"),
+    ("Sheen Weight", lambda v: v > 0.0, "sheen"),
+    ("Subsurface Weight", lambda v: v > 0.0, "subsurface"),
+    ("Emission Strength", lambda v: v > 0.0, "emission"),
+    ("Thin Film Thickness", lambda v: v > 0.0, "thin film"),
+    ("Anisotropic", lambda v: v > 0.0, "anisotropy"),
+    ("Diffuse Roughness", lambda v: v > 0.0, "diffuse roughness (Oren-Nayar)"),
+    ("Alpha", lambda v: v < 1.0, "alpha"),
+)
 
 
 class ExportError(RuntimeError):
@@ -111,13 +128,47 @@ def _surface_node(material):
     return surf.links[0].from_node
 
 
+def _export_principled(node, warnings, label) -> Material:
+    base = _input_value(node, "Base Color", warnings, label) or (0.8, 0.8, 0.8)
+    rough = _input_value(node, "Roughness", warnings, label)
+    metal = _input_value(node, "Metallic", warnings, label)
+    ior = _input_value(node, "IOR", warnings, label)
+    level = _input_value(node, "Specular IOR Level", warnings, label)
+    tint = _input_value(node, "Specular Tint", warnings, label)
+    for name, active, what in _PRINCIPLED_UNMODELLED:
+        sock = node.inputs.get(name)
+        if sock is None:
+            continue
+        if not sock.is_linked and not active(float(sock.default_value)):
+            continue
+        if name == "Emission Strength":
+            col = node.inputs.get("Emission Color")
+            if col is not None and not col.is_linked and max(tuple(col.default_value)[:3]) <= 0.0:
+                continue
+        warnings.append(f"{label}: Principled {what} ('{name}') is not modelled; ignored")
+    dist = getattr(node, "distribution", "MULTI_GGX")
+    return principled_material(
+        base_color=base,
+        metallic=0.0 if metal is None else metal,
+        roughness=0.5 if rough is None else rough,
+        ior=1.5 if ior is None else ior,
+        specular_ior_level=0.5 if level is None else level,
+        specular_tint=(1.0, 1.0, 1.0) if tint is None else tint,
+        distribution=dist)
+
+
 def export_material(material, warnings: list) -> Material:
     """Translate a Blender material into a core :class:`Material`.
 
-    Supported: Diffuse BSDF (Lambert), Glossy BSDF (Beckmann, GGX; Multiscatter
-    GGX is drawn as GGX), Principled BSDF (base colour, roughness, metallic;
-    an approximation of Cycles' layered model).  Anything else falls back to
-    the material's viewport colour as a Lambert surface, with a warning.
+    Supported: Diffuse BSDF (Lambert), Glossy BSDF (Beckmann, GGX, Multiscatter
+    GGX with Cycles' energy compensation), Principled BSDF (base colour,
+    metallic, roughness, IOR, specular IOR level, specular tint, GGX or
+    Multiscatter GGX: Cycles' dielectric layer with its view-dependent
+    attenuation of the base, and the F82-tint metal lobe; sheen, coat,
+    transmission, subsurface, emission, thin film, alpha, anisotropy and
+    diffuse roughness are reported as not modelled).  ``None`` (no material)
+    is Cycles' default surface :data:`DEFAULT_MATERIAL`.  Anything else falls
+    back to the material's viewport colour as a Lambert surface, with a warning.
     """
     if material is None:
         return DEFAULT_MATERIAL
@@ -130,33 +181,26 @@ def export_material(material, warnings: list) -> Material:
         return Material(diffuse_albedo=c)
     if node.type == "BSDF_DIFFUSE":
         color = _input_value(node, "Color", warnings, label)
+        rough = node.inputs.get("Roughness")
+        if rough is not None and (rough.is_linked or float(rough.default_value) >= 1e-5):
+            warnings.append(f"{label}: Diffuse roughness (Oren-Nayar) is not modelled; "
+                            "drawn as Lambert")
         return Material(diffuse_albedo=color)
     if node.type in {"BSDF_GLOSSY", "BSDF_ANISOTROPIC"}:
         color = _input_value(node, "Color", warnings, label)
         rough = _input_value(node, "Roughness", warnings, label)
         dist = getattr(node, "distribution", "GGX")
-        if dist == "MULTI_GGX":
-            warnings.append(f"{label}: Multiscatter GGX is drawn as single-scatter GGX")
         if dist not in {"BECKMANN", "GGX", "MULTI_GGX"}:
             warnings.append(f"{label}: glossy distribution {dist} is drawn as GGX")
+            dist = "GGX"
         aniso = node.inputs.get("Anisotropy")
         if aniso is not None and (aniso.is_linked or abs(aniso.default_value) > 1e-6):
             warnings.append(f"{label}: anisotropy is not supported yet; drawn isotropic")
+        color = tuple(max(float(c), 0.0) for c in color)
         return Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=color,
-                        roughness=float(rough),
-                        distribution="BECKMANN" if dist == "BECKMANN" else "GGX",
-                        fresnel="NONE")
+                        roughness=float(rough), distribution=dist, fresnel="NONE")
     if node.type == "BSDF_PRINCIPLED":
-        base = np.asarray(_input_value(node, "Base Color", warnings, label), dtype=np.float64)
-        rough = float(_input_value(node, "Roughness", warnings, label))
-        metal = float(np.clip(_input_value(node, "Metallic", warnings, label), 0.0, 1.0))
-        ior = _input_value(node, "IOR", warnings, label) or 1.5
-        f0_dielectric = ((ior - 1.0) / (ior + 1.0)) ** 2
-        f0 = (1.0 - metal) * f0_dielectric + metal * base
-        # Energy taken by the dielectric specular layer, hemispherical average of Schlick.
-        diffuse = (1.0 - metal) * base * (1.0 - (f0_dielectric + (1.0 - f0_dielectric) / 21.0))
-        return Material(diffuse_albedo=tuple(diffuse), specular_color=tuple(f0),
-                        roughness=rough, distribution="GGX", fresnel="SCHLICK")
+        return _export_principled(node, warnings, label)
     if node.type == "EMISSION":
         warnings.append(f"{label}: Emission is not a reflectance; drawn as black diffuse")
         return Material(diffuse_albedo=(0.0, 0.0, 0.0))

@@ -137,8 +137,9 @@ the horizon).  So the Lambert base is scaled by the *view-dependent*
 
     (1 - metallic) * saturate(1 - max_c darkening_c * mix(f0_c, 1, S(r, mu, z)))
 
-which darkens the base at grazing views (e.g. -8 % at 66 deg for the default
-grey surface).  ``S`` is again our own quadrature on Cycles' grid with
+which darkens the base at grazing views: 0.963 from straight above and 0.914
+at 66 deg from the normal for the default grey surface (the specular lobe
+gains about what the base loses, so a white furnace stays at ~0.81).  ``S`` is again our own quadrature on Cycles' grid with
 Cycles' trilinear interpolation.  The Cycles default surface (no material,
 ``scene/shader.cpp`` ``ShaderManager::add_default``) is a Principled BSDF with
 the node defaults: base 0.8, metallic 0, roughness 0.5, IOR 1.5, specular IOR
@@ -205,6 +206,7 @@ __all__ = [
     "dielectric_albedo_s",
     "multiscatter_factor",
     "specular_albedo_estimate",
+    "principled_material",
 ]
 
 #: Smallest microfacet alpha used anywhere (roughness ~ 0.0316).
@@ -301,8 +303,8 @@ class Material:
         """True when there is no glossy lobe at all.
 
         ``"NONE"``/``"SCHLICK"``: ``specular_color`` all zero.  ``"F82"``: never.
-        ``"DIELECTRIC"``: no metal lobe and no dielectric layer (``ior == 1``
-        or ``metallic == 1`` leaves nothing... see :meth:`_has_dielectric_lobe`).
+        ``"DIELECTRIC"``: ``metallic == 0`` and no dielectric layer
+        (``ior == 1``, as Cycles skips the layer for ``eta == 1``).
         """
         if self.fresnel == "F82":
             return False
@@ -958,3 +960,33 @@ def reflectance_cosine(material: Material, normals, views, dirs) -> np.ndarray:
     for lobe, w in specular_terms(material, n, v, L):
         out += lobe[:, :, None] * w[:, None, :]
     return out
+
+
+def principled_material(base_color=(0.8, 0.8, 0.8), metallic=0.0, roughness=0.5, ior=1.5,
+                        specular_ior_level=0.5, specular_tint=(1.0, 1.0, 1.0),
+                        distribution="MULTI_GGX") -> Material:
+    """:class:`Material` for Cycles' Principled BSDF inputs (sheen, coat,
+    transmission, subsurface, emission, thin film, alpha, anisotropy and
+    diffuse roughness left out).  The defaults are the node defaults, i.e.
+    Cycles' default surface.  Follows ``svm_node_closure_bsdf``: clamps,
+    the specular-IOR-level remap ``f0 *= 2 level; eta = ior_from_F0(f0)`` and
+    ``fresnel->f0 = saturate(f0 * specular_tint)``.
+    """
+    base = tuple(max(float(c), 0.0) for c in tuple(base_color)[:3])
+    metallic = min(max(float(metallic), 0.0), 1.0)
+    roughness = min(max(float(roughness), 0.0), 1.0)
+    ior_in = max(float(ior), 1e-5)
+    level = max(float(specular_ior_level), 0.0)
+    tint = np.maximum(np.asarray(tuple(specular_tint)[:3], dtype=np.float64), 0.0)
+    eta = ior_in
+    f0 = F0_from_ior(eta)
+    if level != 0.5:
+        f0 *= 2.0 * level
+        eta = ior_from_F0(f0)
+        if ior_in < 1.0:
+            eta = 1.0 / eta
+    dist = str(distribution).upper()
+    dist = "MULTI_GGX" if dist in ("MULTI_GGX", "MULTI_GGX_GLASS") else "GGX"
+    return Material(diffuse_albedo=base, specular_color=tuple(np.clip(f0 * tint, 0.0, 1.0)),
+                    roughness=roughness, distribution=dist, fresnel="DIELECTRIC", ior=eta,
+                    f82_tint=tuple(np.minimum(tint, 1.0)), metallic=metallic)

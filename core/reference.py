@@ -8,17 +8,19 @@ the cubemap discretisation of lighting and visibility.
 
 Lambert is view independent, so its part is split off:
 
-    B = albedo/pi * sum_k L_k V_k cos_k dw_k  +  sum_k L_k V_k f_spec(w_k, wo) cos_k dw_k
+    B = albedo/pi * W(n, wo) * sum_k L_k V_k cos_k dw_k  +  sum_k L_k V_k f_spec(w_k, wo) cos_k dw_k
 
 The first sum (``diffuse_irradiance``) only changes with the lighting and is
-cached by callers; the second needs the view and is evaluated per frame.
+cached by callers; ``W`` (:func:`~.brdf.diffuse_view_weight`, Cycles'
+Principled layering: 1 for a plain Diffuse BSDF) and the second sum need the
+view and are evaluated per frame.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .brdf import Material, specular_cosine
+from .brdf import Material, diffuse_view_weight, specular_cosine, specular_terms
 from .directions import Cubemap
 from .envmap import CubeLighting
 from .visibility import unpack_visibility
@@ -72,34 +74,45 @@ def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> 
     return out
 
 
+def _view_dirs(positions, eye) -> np.ndarray:
+    """Unit directions from each point toward the (perspective) eye, (P, 3) float64."""
+    v = np.asarray(eye, dtype=np.float64)[None, :] - np.asarray(positions, dtype=np.float64)
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
+
+
 def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                       eye, cube: Cubemap, lighting: CubeLighting, material: Material,
                       view_dirs: np.ndarray | None = None) -> np.ndarray:
     """Glossy part of B toward the eye, (P, 3) float32.
 
     ``eye`` is the camera position (perspective) or, with ``view_dirs`` given,
-    ignored in favour of per-point unit directions toward the viewer.
+    ignored in favour of per-point unit directions toward the viewer.  Fresnel,
+    layer weights and multiscatter compensation come from
+    :func:`~.brdf.specular_terms` (separable terms: one matrix product each).
     """
     P = len(normals)
     out = np.zeros((P, 3), dtype=np.float32)
     if material.is_diffuse_only or P == 0:
         return out
     if view_dirs is None:
-        v = np.asarray(eye, dtype=np.float64)[None, :] - np.asarray(positions, dtype=np.float64)
-        view_dirs = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
+        view_dirs = _view_dirs(positions, eye)
     dirs = lighting.unit_directions
     dw = cube.solid_angles.astype(np.float32)
     L = np.asarray(lighting.radiance, dtype=np.float32)
     block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    scalar = material.fresnel == "NONE" and material.distribution != "MULTI_GGX"
     for a, b in _blocks(P, block):
         vis = unpack_visibility(vis_bits[a:b], cube.size)
-        f = np.asarray(specular_cosine(material, normals[a:b], view_dirs[a:b], dirs), dtype=np.float32)
-        if f.ndim == 2:       # scalar lobe; colour applied after the sum
-            f = f * vis * dw
+        visdw = vis * dw
+        if scalar:            # scalar lobe; colour applied after the sum
+            f = np.asarray(specular_cosine(material, normals[a:b], view_dirs[a:b], dirs),
+                           dtype=np.float32)
+            f *= visdw
             out[a:b] = (f @ L) * np.asarray(material.specular_color, dtype=np.float32)
-        else:                 # (p, D, 3) lobe with Fresnel and colour inside
-            f = f * (vis * dw)[:, :, None]
-            out[a:b] = np.einsum("pdc,dc->pc", f, L)
+            continue
+        for lobe, weight in specular_terms(material, normals[a:b], view_dirs[a:b], dirs):
+            lobe *= visdw
+            out[a:b] += (lobe @ L) * weight
     return out
 
 
@@ -108,6 +121,9 @@ def shade_points(vis_bits, positions, normals, materials, material_table, eye, c
     """Outgoing radiance (P, 3) of every point, each with ``material_table[materials[p]]``.
 
     ``irradiance`` (from :func:`diffuse_irradiance`) may be passed in when cached.
+    The diffuse part is ``irradiance * albedo / pi * diffuse_view_weight(n, v)``
+    (the view weight is 1 except for Principled layering, where it needs the
+    per-point view ``v``: toward ``eye``, or ``view_dirs``).
     """
     if irradiance is None:
         irradiance = diffuse_irradiance(vis_bits, normals, cube, lighting)
@@ -117,9 +133,15 @@ def shade_points(vis_bits, positions, normals, materials, material_table, eye, c
         sel = np.nonzero(materials == slot)[0]
         mat = material_table[int(slot)] if 0 <= int(slot) < len(material_table) else Material()
         albedo = np.asarray(mat.diffuse_albedo, dtype=np.float32) / np.float32(np.pi)
-        out[sel] = irradiance[sel] * albedo
+        needs_view = mat.fresnel == "DIELECTRIC" or not mat.is_diffuse_only
+        vd = None
+        if needs_view:
+            vd = _view_dirs(positions[sel], eye) if view_dirs is None else view_dirs[sel]
+        diffuse = irradiance[sel] * albedo
+        if mat.fresnel == "DIELECTRIC":
+            diffuse *= diffuse_view_weight(mat, normals[sel], vd)
+        out[sel] = diffuse
         if not mat.is_diffuse_only:
-            vd = None if view_dirs is None else view_dirs[sel]
             out[sel] += specular_radiance(vis_bits[sel], positions[sel], normals[sel], eye, cube,
                                           lighting, mat, view_dirs=vd)
     return out
