@@ -96,7 +96,7 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         persp = cam_eval.data.type != "ORTHO"
         pixels = render_pixels(state, view, projection, width, height, r.film_transparent, persp,
                                scene.prt.supersampling)
-        result = self.begin_result(0, 0, width, height)
+        result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
         result.layers[0].passes["Combined"].rect.foreach_set(
             np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1))
         self.end_result(result)

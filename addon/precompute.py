@@ -5,6 +5,7 @@ changes before commit, so an error or ESC leaves it as it was."""
 from __future__ import annotations
 
 import time
+import uuid
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -137,6 +138,7 @@ def commit(scene, job: PrecomputeJob):
         for img in new_images.values():
             bpy.data.images.remove(img)
         raise
+    run_id = uuid.uuid4().hex
     for o in job.objects:
         ob = bpy.data.objects[o.name]
         old = ob.prt.visibility
@@ -144,12 +146,15 @@ def commit(scene, job: PrecomputeJob):
         ob.prt.resolution = job.resolution
         ob.prt.point_count = o.points.count
         ob.prt.fingerprint = o.fingerprint
+        ob.prt.precompute_id = run_id
         ob.prt.coarse_warning = o.coarse_warning
         if old is not None and old != new_images[o.name]:
             old.use_fake_user = False
             storage.remove_image(old)
         new_images[o.name].name = storage.IMAGE_PREFIX + o.name
     scene.prt.precomputed_resolution = job.resolution
+    scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(
+        (o.name, o.fingerprint) for o in job.objects)
     job.timings["storage"] = time.perf_counter() - t0
     t = job.timings
     scene.prt.last_report = (f"{job.point_count} points, {t.get('ray_count', 0) / 1e6:.1f} M rays "

@@ -39,6 +39,8 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
     # Written by the precompute operator (read-only in the UI).
     precomputed_resolution: IntProperty(name="Precomputed Directions", default=0)
     last_report: StringProperty(name="Last Precompute", default="")
+    scene_fingerprint: StringProperty(name="Scene Fingerprint", default="",
+                                      description="Geometry of every object at the precompute")
     is_running: BoolProperty(name="Running", default=False)
 
 
@@ -50,7 +52,8 @@ class PRTObjectData(bpy.types.PropertyGroup):
     resolution: IntProperty(name="Directions", default=0)
     point_count: IntProperty(name="Shading Points", default=0)
     fingerprint: StringProperty(name="Geometry Fingerprint", default="")
-    scene_fingerprint: StringProperty(name="Scene Fingerprint", default="")
+    precompute_id: StringProperty(name="Precompute ID", default="",
+                                  description="Unique per precompute: identifies the stored data")
     coarse_warning: StringProperty(name="Tessellation Note", default="")
 
 

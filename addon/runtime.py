@@ -17,7 +17,7 @@ from . import scene_export, storage
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
 LAST_MESSAGES: list = []
-# Decoded visibility per (image name, fingerprint, point count); small LRU.
+# Decoded visibility per (image name, precompute id, point count); small LRU.
 _VIS_CACHE: dict = {}
 _VIS_CACHE_MAX = 16
 # View-independent diffuse sums per (object, visibility, lighting).
@@ -55,7 +55,7 @@ def stored_visibility(ob_orig, points: int, nbytes: int):
     img = data.visibility
     if img is None or data.point_count != points:
         return None
-    key = (img.name_full, data.fingerprint, points, nbytes)
+    key = (img.name_full, data.precompute_id, points, nbytes)
     bits = _VIS_CACHE.get(key)
     if bits is None:
         try:
@@ -114,12 +114,15 @@ class FrameState:
         nbytes = cube.size // 8
         objects = []
         missing, stale = [], []
+        fingerprints = []
         for ob in scene_export.visible_mesh_objects(depsgraph):
             arrays = scene_export.mesh_arrays(ob)
             if len(arrays.triangles) == 0:
                 continue
             core_mesh.repair_normals(arrays)
             points = core_mesh.shading_points(arrays)
+            fingerprint = core_mesh.fingerprint(arrays)
+            fingerprints.append((ob.original.name, fingerprint))
             mats = scene_export.object_materials(ob, self.warnings)
             orig = ob.original
             data = orig.prt
@@ -129,7 +132,7 @@ class FrameState:
                 bits = stored_visibility(orig, points.count, nbytes)
                 if bits is None:
                     status = "stale"
-                elif data.fingerprint != core_mesh.fingerprint(arrays):
+                elif data.fingerprint != fingerprint:
                     status = "stale"   # same topology: old data, correctly indexed
             else:
                 status = "missing"
@@ -145,6 +148,10 @@ class FrameState:
         if stale:
             self.warnings.append("Changed since precompute (stale, press Precompute): "
                                  + ", ".join(stale))
+        elif (scene.prt.scene_fingerprint and not missing
+              and core_mesh.scene_fingerprint(fingerprints) != scene.prt.scene_fingerprint):
+            self.warnings.append("Scene geometry changed since precompute (objects added, "
+                                 "removed or moved): shadows are stale, press Precompute")
         self.objects = objects
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
 

@@ -139,8 +139,9 @@ the horizon).  So the Lambert base is scaled by the *view-dependent*
 
 which darkens the base at grazing views: 0.963 from straight above and 0.914
 at 66 deg from the normal for the default grey surface (the specular lobe
-gains about what the base loses, so a white furnace stays at ~0.81).  ``S`` is again our own quadrature on Cycles' grid with
-Cycles' trilinear interpolation.  The Cycles default surface (no material,
+gains about what the base loses, so a white furnace stays at ~0.81).  ``S``
+is again our own quadrature on Cycles' grid with Cycles' trilinear
+interpolation.  The Cycles default surface (no material,
 ``scene/shader.cpp`` ``ShaderManager::add_default``) is a Principled BSDF with
 the node defaults: base 0.8, metallic 0, roughness 0.5, IOR 1.5, specular IOR
 level 0.5, specular tint 1, Multiscatter GGX.
@@ -434,18 +435,33 @@ def fresnel_dielectric(cos_i, eta) -> np.ndarray:
     """Unpolarised dielectric Fresnel reflectance (Cycles ``fresnel_dielectric_cos``).
 
     ``eta`` is the relative IOR (transmitted over incident side); total
-    internal reflection gives 1.  Uses ``|cos_i|``.  Returns ``float64``.
+    internal reflection gives 1.  Uses ``|cos_i|``.  Returns ``float64``, or
+    ``float32`` for a ``float32`` array input (the per-direction hot path).
     """
-    c = np.abs(np.asarray(cos_i, dtype=np.float64))
+    c = np.abs(np.asarray(cos_i))
+    if c.dtype != np.float32:
+        c = c.astype(np.float64)
+    shape = c.shape
+    c = c.reshape(-1)
+    dt = c.dtype.type
     eta = float(eta)
-    g2 = eta * eta - 1.0 + c * c
-    ok = g2 > 0.0
-    g = np.sqrt(np.where(ok, g2, 1.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    g = c * c
+    g += dt(eta * eta - 1.0)
+    ok = g > 0.0
+    np.maximum(g, dt(1e-30), out=g)
+    np.sqrt(g, out=g)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         A = (g - c) / (g + c)
-        B = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-        F = 0.5 * A * A * (1.0 + B * B)
-    return np.where(ok, np.nan_to_num(F, nan=1.0), 1.0)
+        gc = g * c
+        B = (gc + c * c - 1.0) / (gc - c * c + 1.0)
+        A *= A
+        B *= B
+        B += dt(1.0)
+        A *= B
+        A *= dt(0.5)
+    A = np.nan_to_num(A, nan=1.0, copy=False)
+    A[~ok] = 1.0
+    return A.reshape(shape)
 
 
 def F0_from_ior(ior: float) -> float:
@@ -490,12 +506,16 @@ def fresnel_f82(cos_i, f0, B) -> np.ndarray:
 
 
 def _dielectric_s(cos_i, eta: float) -> np.ndarray:
-    """Principled remap factor ``saturate((F_diel(cos, eta) - F0) / (1 - F0))``."""
+    """Principled remap factor ``saturate((F_diel(cos, eta) - F0) / (1 - F0))``
+    (keeps a ``float32`` input's dtype)."""
     F0 = F0_from_ior(eta)
     F = fresnel_dielectric(cos_i, eta)
     if F0 >= 1.0 - 1e-12:
         return np.ones_like(F)
-    return np.clip((F - F0) / (1.0 - F0), 0.0, 1.0)
+    dt = F.dtype.type
+    F -= dt(F0)
+    F *= dt(1.0 / (1.0 - F0))
+    return np.clip(F, 0.0, 1.0, out=F)
 
 
 # --------------------------------------------------------------------------- #
@@ -855,16 +875,19 @@ def specular_terms(material: Material, normals, views, dirs) -> list:
     fres = material.fresnel
     need_h = fres != "NONE"
     val, h_wi, cos_o = _specular_terms(material.lobe_distribution, material.alpha, n, v, L, need_h)
+    val = val.astype(np.float32)
+    if h_wi is not None:
+        h_wi = h_wi.astype(np.float32)
     terms = []
 
     def add(lobe, weight):
-        terms.append((lobe.astype(np.float32), np.asarray(weight, dtype=np.float32)))
+        terms.append((np.asarray(lobe, dtype=np.float32), np.asarray(weight, dtype=np.float32)))
 
     def f82_lobe(f0, tint, weight):
         f0 = np.clip(np.asarray(f0, dtype=np.float64), 0.0, 1.0)
         B = _metal_B(f0, tint)
         if not np.any(B):           # plain Schlick to 1: linear, no clamp needed
-            s5 = np.clip(1.0 - h_wi, 0.0, 1.0) ** 5
+            s5 = np.clip(np.float32(1.0) - h_wi, 0.0, 1.0) ** 5
             add(val, weight * f0[None, :])
             add(val * s5, weight * (1.0 - f0)[None, :])
             return
@@ -880,7 +903,7 @@ def specular_terms(material: Material, normals, views, dirs) -> list:
     elif fres == "SCHLICK":
         k = multiscatter_factor(material, cos_o)
         add(val, k * col[None, :])
-        add(val * (1.0 - h_wi) ** 5, k * (1.0 - col)[None, :])
+        add(val * (np.float32(1.0) - h_wi) ** 5, k * (1.0 - col)[None, :])
     elif fres == "F82":
         f82_lobe(col, material.f82_tint, multiscatter_factor(material, cos_o))
     else:                           # DIELECTRIC (Principled)

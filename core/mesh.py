@@ -139,6 +139,14 @@ def fingerprint(mesh: MeshArrays) -> str:
     return h.hexdigest()
 
 
+def scene_fingerprint(named_fingerprints) -> str:
+    """One hash of several objects' (name, fingerprint) pairs, order independent."""
+    h = hashlib.sha1()
+    for name, fp in sorted(named_fingerprints):
+        h.update(name.encode("utf-8") + b"\0" + fp.encode("ascii") + b"\0")
+    return h.hexdigest()
+
+
 def grid(size: float = 2.0, cuts: int = 8, z: float = 0.0) -> MeshArrays:
     """A flat square grid of ``cuts`` x ``cuts`` quads (two triangles each), normal +Z."""
     n = cuts + 1

@@ -208,3 +208,24 @@ def test_materials_export():
     nt.links.new(emission.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
     scene_export.export_material(mat, warnings)
     assert any("not supported" in w for w in warnings)
+
+
+def test_precompute_again_replaces_cached_visibility(tmp_path):
+    """Re-precomputing after removing an occluder must not reuse the old decoded bits
+    (the ground's own geometry and image name are unchanged)."""
+    _small_scene()
+    bpy.ops.prt.precompute()
+    with_occluder = bs.render_exr(tmp_path / "a.exr")
+    bpy.data.objects.remove(bpy.data.objects["Suzanne"])
+    state = _frame_warnings()
+    assert any("Scene geometry changed" in w for w in state.warnings)
+    bpy.ops.prt.precompute()
+    state = _frame_warnings()
+    assert not any("changed" in w.lower() for w in state.warnings), state.warnings
+    without = bs.render_exr(tmp_path / "b.exr")
+    assert np.isfinite(without).all() and not np.array_equal(with_occluder, without)
+    # The ground where Suzanne stood is now lit as open sky: no dark contact shadow left.
+    grid = [o for o in state.objects if o.name == "Grid"][0]
+    open_bits = runtime.open_visibility(grid.points.count, grid.bits.shape[1], grid.points.normals,
+                                        runtime.directions.cubemap(state.resolution))
+    np.testing.assert_array_equal(grid.bits, open_bits)

@@ -1,23 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Numerical checks of core/brdf.py (quadrature on the sphere / hemisphere)."""
 
-import importlib.util
-import pathlib
-import sys
+import numpy as np
+import pytest
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
-if "prt_relight" not in sys.modules:
-    spec = importlib.util.spec_from_file_location(
-        "prt_relight", ROOT / "__init__.py", submodule_search_locations=[str(ROOT)]
-    )
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["prt_relight"] = mod
-    spec.loader.exec_module(mod)
-
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-
-from prt_relight.core import brdf  # noqa: E402
+from prt_relight.core import brdf
 
 DISTS = ("BECKMANN", "GGX")
 N_UP = np.array([[0.0, 0.0, 1.0]])
@@ -384,3 +371,267 @@ def test_material_validation_and_alpha():
         brdf.Material(distribution="PHONG")
     with pytest.raises(ValueError):
         brdf.Material(fresnel="CONDUCTOR")
+
+
+# --------------------------------------------------------------------------- #
+# Cycles 4.x/5.x Principled BSDF and Multiscatter GGX
+# --------------------------------------------------------------------------- #
+
+# Cycles' table_ggx_Eavg[32] (intern/cycles/scene/shader.tables), index = roughness * 31.
+CYCLES_TABLE_GGX_EAVG = {
+    1: 0.999992, 5: 0.997199, 8: 0.985805, 12: 0.946279, 16: 0.870874,
+    20: 0.761345, 24: 0.631068, 28: 0.499191, 31: 0.409137,
+}
+
+# Cycles' table_ggx_gen_schlick_ior_s[4096] (16^3, data[z*256 + mu*16 + rough],
+# grid value = index / 15 clamped to [1e-4, 1] (z: 0.99); IOR = ior_from_F0(z^4)),
+# the Principled layering albedo S(rough, mu, z).  Slices z = 6 (IOR 1.38) and
+# z = 7 (IOR 1.56), rows mu = 0, 3, 7, 11, columns rough = 0, 2, 4, 8, 15.
+CYCLES_TABLE_GEN_SCHLICK_IOR_S = {
+    6: {0: (0.999374, 0.736620, 0.449900, 0.162051, 0.049543),
+        3: (0.294528, 0.289595, 0.246073, 0.109290, 0.026967),
+        7: (0.055252, 0.055405, 0.055074, 0.039653, 0.011387),
+        11: (0.006749, 0.006854, 0.007597, 0.009208, 0.004302)},
+    7: {0: (0.999398, 0.744723, 0.463498, 0.173793, 0.055228),
+        3: (0.315614, 0.310403, 0.264841, 0.120619, 0.030898),
+        7: (0.066236, 0.066340, 0.065506, 0.046703, 0.013620),
+        11: (0.008907, 0.009032, 0.009899, 0.011624, 0.005396)},
+}
+
+
+def test_own_tables_match_cycles_tables():
+    """Our quadrature on Cycles' grids reproduces Cycles' Monte-Carlo tables."""
+    for (row, col), ref in CYCLES_TABLE_GGX_E.items():
+        assert brdf.ggx_E_table_column(col)[row] == pytest.approx(ref, abs=5e-4), (row, col)
+    for col, ref in CYCLES_TABLE_GGX_EAVG.items():
+        assert brdf.ggx_E_avg_node(col) == pytest.approx(ref, abs=5e-4), col
+    for iz, rows in CYCLES_TABLE_GEN_SCHLICK_IOR_S.items():
+        for row, refs in rows.items():
+            for ix, ref in zip((0, 2, 4, 8, 15), refs):
+                got = brdf.dielectric_s_table_column(ix, iz)[row]
+                assert got == pytest.approx(ref, abs=1e-3), (iz, row, ix, got, ref)
+
+
+def test_table_interpolation_is_cycles_lookup():
+    # node values are returned exactly, midpoints are linear blends (lookup_table_read)
+    col = brdf.ggx_E_table_column(10)
+    assert brdf.ggx_E(10 / 31, 7 / 31)[()] == pytest.approx(col[7], abs=1e-12)
+    mid = brdf.ggx_E(10 / 31, 7.5 / 31)[()]
+    assert mid == pytest.approx(0.5 * (col[7] + col[8]), abs=1e-12)
+    # E decreases with roughness at normal incidence, E_avg likewise
+    assert brdf.ggx_E(0.2, 1.0) > brdf.ggx_E(0.6, 1.0) > brdf.ggx_E(1.0, 1.0)
+    assert 1.0 >= brdf.ggx_E_avg(0.0) > brdf.ggx_E_avg(0.5) > brdf.ggx_E_avg(1.0) > 0.4
+
+
+def _albedo(mat, theta, n_theta=600, n_phi=720):
+    alpha = max(mat.alpha, 1e-3)
+    dirs, w = hemisphere_grid(alpha, n_theta, n_phi)
+    return lobe_integral(mat, view_at(theta, 23.0), dirs, w)[0]
+
+
+@pytest.mark.parametrize("col,row", [(6, 31), (12, 20), (19, 10), (25, 5), (31, 31), (31, 3)])
+def test_multiscatter_glossy_white_furnace(col, row):
+    # A white Multiscatter GGX lobe reflects all light: E * (1 + (1 - E) / E) = 1.
+    r, mu = col / 31.0, row / 31.0
+    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=r,
+                        distribution="MULTI_GGX")
+    got = _albedo(mat, np.degrees(np.arccos(mu)))
+    np.testing.assert_allclose(got, 1.0, atol=1.5e-3)
+    # single-scatter GGX loses exactly 1 - E
+    ss = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=r,
+                       distribution="GGX")
+    assert _albedo(ss, np.degrees(np.arccos(mu)))[0] == pytest.approx(
+        brdf.ggx_E_table_column(col)[row], abs=1e-3)
+
+
+def test_multiscatter_glossy_colour_saturates():
+    # Coloured multiscatter lobes gain less than 1/E (Fms < 1): the Kulla-Conty
+    # factor 1 + Fms (1 - E) / E, per channel.
+    r, mu = 1.0, 0.5
+    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.5, 0.2), roughness=r,
+                        distribution="MULTI_GGX")
+    k = brdf.multiscatter_factor(mat, [mu])[0]
+    E, Ea = brdf.ggx_E(r, mu)[()], brdf.ggx_E_avg(r)
+    C = np.array(mat.specular_color)
+    Fms = C * Ea / (1.0 - C * (1.0 - Ea))
+    np.testing.assert_allclose(k, 1.0 + Fms * (1.0 - E) / E, rtol=1e-12)
+    assert np.all(k < 1.0 / E) and np.all(k > 1.0)
+    got = _albedo(mat, 60.0)
+    np.testing.assert_allclose(got, C * E * k, rtol=2e-3)
+
+
+PRINCIPLED_ROUGH = (0.0, 0.05, 0.3, 0.5, 0.8, 1.0)
+
+
+@pytest.mark.parametrize("rough", PRINCIPLED_ROUGH)
+def test_principled_energy_conservation(rough):
+    # white base: Lambert weight + specular albedo <= 1 at every view, and the
+    # layering weight is Cycles' 1 - (albedo estimate of the specular layer).
+    mat = brdf.principled_material(base_color=(1, 1, 1), roughness=rough)
+    for theta in (0.0, 40.0, 66.0, 80.0, 88.0):
+        v = view_at(theta, 10.0)
+        spec = np.zeros(3)
+        quad_ok = rough >= 0.3      # hemisphere_grid resolves off-normal lobes for alpha >~ 0.1
+        if quad_ok:
+            spec = _albedo(brdf.Material(**{**mat.__dict__, "diffuse_albedo": (0, 0, 0)}), theta)
+        wd = brdf.diffuse_view_weight(mat, N_UP, v)[0]
+        est = brdf.specular_albedo_estimate(mat, [np.cos(np.radians(theta))])[0]
+        np.testing.assert_allclose(wd, 1.0 - est.max(), rtol=1e-6)
+        assert np.all(wd > 0.0) and np.all(wd <= 1.0)
+        assert np.all(wd + spec <= 1.0 + 2e-3), (theta, wd, spec)
+        if quad_ok:
+            # Cycles' albedo estimate (LUT of the VNDF-mean Fresnel) is close to the
+            # true albedo of the layer; it is what the base loses.
+            np.testing.assert_allclose(spec, est, rtol=0.08, atol=3e-3)
+
+
+def test_principled_default_darkens_base_at_grazing_views():
+    mat = brdf.principled_material()          # Cycles' default surface
+    assert mat.fresnel == "DIELECTRIC" and mat.distribution == "MULTI_GGX"
+    assert mat.specular_color == pytest.approx((0.04, 0.04, 0.04))
+    w = [brdf.diffuse_view_weight(mat, N_UP, view_at(t))[0, 0] for t in (0, 30, 66, 85)]
+    assert np.all(np.diff(w) < 0)
+    assert w[0] == pytest.approx(0.9626, abs=2e-3)
+    assert w[2] == pytest.approx(0.9144, abs=2e-3)
+    # a plain Diffuse BSDF has no layering
+    lam = brdf.Material(diffuse_albedo=(0.8, 0.8, 0.8))
+    np.testing.assert_array_equal(brdf.diffuse_view_weight(lam, N_UP, view_at(66)), 1.0)
+
+
+def test_principled_fresnel_is_remapped_real_fresnel():
+    # F = mix(f0 * tint, 1, (F_diel(h.wi) - F0) / (1 - F0)); with tint 1 that is F_diel.
+    mat = brdf.principled_material(roughness=0.4, distribution="GGX")
+    plain = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.4,
+                          distribution="GGX")
+    rng = np.random.default_rng(5)
+    dirs = rng.normal(size=(200, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    views = np.concatenate([view_at(10), view_at(75, 40)])
+    normals = np.repeat(N_UP, 2, 0)
+    s = brdf.specular_cosine(mat, normals, views, dirs)
+    lobe = brdf.specular_cosine(plain, normals, views, dirs)
+    h = views[:, None, :] + dirs[None, :, :]
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    F = brdf.fresnel_dielectric(np.einsum("pdk,pk->pd", h, views), 1.5)
+    np.testing.assert_allclose(s[..., 0], F * lobe, rtol=1e-5, atol=1e-9)
+    # specular tint scales f0 only; metallic blends in the F82 metal lobe
+    tinted = brdf.principled_material(roughness=0.4, distribution="GGX", specular_tint=(1, 0.5, 0))
+    assert tinted.specular_color == pytest.approx((0.04, 0.02, 0.0))
+    st = brdf.specular_cosine(tinted, normals, views, dirs)
+    assert np.all(st[..., 2] <= st[..., 1] + 1e-9) and np.all(st[..., 1] <= st[..., 0] + 1e-9)
+    assert np.all(st[..., 2] >= 0.0) and st[..., 2].max() > 0.0     # F90 = 1 stays
+    # the Fresnel curve is the textbook one (s/p average via Snell), not Schlick
+    c = np.array([1.0, 0.7, 0.3, 0.1, 0.01])
+    ct = np.sqrt(1.0 - (1.0 - c * c) / 1.5 ** 2)
+    rs = (c - 1.5 * ct) / (c + 1.5 * ct)
+    rp = (1.5 * c - ct) / (1.5 * c + ct)
+    np.testing.assert_allclose(brdf.fresnel_dielectric(c, 1.5), 0.5 * (rs ** 2 + rp ** 2),
+                               rtol=1e-12)
+    assert brdf.fresnel_dielectric(0.3, 1.0 / 1.5) == 1.0          # total internal reflection
+
+
+def test_principled_mapping_details():
+    # Specular IOR Level 0 switches the layer off (eta = 1), 1 doubles F0.
+    off = brdf.principled_material(specular_ior_level=0.0)
+    assert off.ior == 1.0 and off.is_diffuse_only and off.has_diffuse
+    np.testing.assert_array_equal(brdf.diffuse_view_weight(off, N_UP, view_at(80)), 1.0)
+    hi = brdf.principled_material(specular_ior_level=1.0)
+    assert brdf.F0_from_ior(hi.ior) == pytest.approx(0.08, rel=1e-6)
+    assert hi.specular_color == pytest.approx((0.08,) * 3)
+    # metallic 1: no base, no dielectric lobe, an F82 lobe with F0 = base colour
+    metal = brdf.principled_material(base_color=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3,
+                                     distribution="GGX")
+    assert not metal.has_diffuse and not metal.is_diffuse_only
+    np.testing.assert_array_equal(brdf.diffuse_view_weight(metal, N_UP, view_at(30)), 0.0)
+    conductor = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.9, 0.6, 0.3),
+                              roughness=0.3, distribution="GGX", fresnel="F82")
+    dirs = fibonacci_sphere(500)
+    a = brdf.reflectance_cosine(metal, N_UP, view_at(50), dirs)
+    b = brdf.reflectance_cosine(conductor, N_UP, view_at(50), dirs)
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-9)
+    # half metallic: half of each
+    half = brdf.principled_material(base_color=(0.9, 0.6, 0.3), metallic=0.5, roughness=0.3,
+                                    distribution="GGX")
+    diel = brdf.principled_material(base_color=(0.9, 0.6, 0.3), metallic=0.0, roughness=0.3,
+                                    distribution="GGX")
+    c = brdf.reflectance_cosine(half, N_UP, view_at(50), dirs)
+    d = brdf.reflectance_cosine(diel, N_UP, view_at(50), dirs)
+    np.testing.assert_allclose(c, 0.5 * (b + d), rtol=1e-5, atol=1e-8)
+
+
+def test_f82_tint():
+    f0 = np.array([0.9, 0.6, 0.3])
+    tint = np.array([1.0, 0.5, 0.0])
+    B = brdf.f82_tint_B(f0, tint)
+    c82 = 1.0 / 7.0
+    schlick = f0 + (1 - f0) * (1 - c82) ** 5
+    np.testing.assert_allclose(brdf.fresnel_f82(np.array([c82]), f0, B)[0], schlick * tint,
+                               atol=1e-12)
+    np.testing.assert_allclose(brdf.fresnel_f82(np.array([1.0]), f0, B)[0], f0)
+    np.testing.assert_allclose(brdf.fresnel_f82(np.array([0.0]), f0, B)[0], 1.0)
+    # clamped at 0 for dark, untinted metals (the clamped path is used)
+    m = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.02, 0.02, 0.02), roughness=0.5,
+                      distribution="GGX", fresnel="F82", f82_tint=(0, 0, 0))
+    r = brdf.reflectance_cosine(m, N_UP, view_at(45), fibonacci_sphere(2000))
+    assert np.all(r >= 0.0) and np.all(np.isfinite(r))
+
+
+@pytest.mark.parametrize("fresnel,dist", [("DIELECTRIC", "MULTI_GGX"), ("DIELECTRIC", "GGX"),
+                                          ("F82", "MULTI_GGX"), ("NONE", "MULTI_GGX"),
+                                          ("SCHLICK", "MULTI_GGX")])
+@pytest.mark.parametrize("roughness", [0.0, 1e-4, 0.05, 1.0])
+def test_new_modes_finite_everywhere(fresnel, dist, roughness):
+    views = _nasty_views()
+    normals = np.repeat(N_UP, len(views), axis=0)
+    dirs = np.concatenate([fibonacci_sphere(1000), views, -views,
+                           [[0, 0, 1], [0, 0, -1], [1, 0, 0]],
+                           views * np.array([-1.0, -1.0, 1.0])])
+    mat = brdf.Material(diffuse_albedo=(0.5, 0.5, 0.5), specular_color=(0.9, 0.5, 0.04),
+                        roughness=roughness, distribution=dist, fresnel=fresnel,
+                        f82_tint=(0.3, 0.8, 1.0), metallic=0.3 if fresnel == "DIELECTRIC" else 0.0)
+    s = brdf.specular_cosine(mat, normals, views, dirs)
+    r = brdf.reflectance_cosine(mat, normals, views, dirs)
+    w = brdf.diffuse_view_weight(mat, normals, views)
+    assert s.shape == (len(views), len(dirs), 3) and r.dtype == np.float32
+    for arr in (s, r, w):
+        assert np.all(np.isfinite(arr)) and np.all(arr >= 0.0)
+    assert np.all(w <= 1.0)
+    below = dirs[:, 2] <= 0.0
+    assert np.all(s[:, below] == 0.0) and np.all(r[:, below] == 0.0)
+    # grazing and slightly back-facing views give (nearly) the same result
+    np.testing.assert_allclose(w[3], w[2], atol=1e-3)
+    np.testing.assert_allclose(w[4], w[2], atol=1e-3)
+    if roughness >= 0.05:
+        np.testing.assert_allclose(s[3], s[2], rtol=2e-3, atol=1e-5)
+
+
+def test_principled_single_scatter_is_reciprocal():
+    # GGX (no multiscatter factor) with a Fresnel of h.wi only is reciprocal.
+    rng = np.random.default_rng(11)
+
+    def upper(k):
+        v = rng.normal(size=(k, 3))
+        v[:, 2] = np.abs(v[:, 2]) + 0.1
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+    a, b = upper(30), upper(40)
+    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.04, 0.03, 0.02), roughness=0.4,
+                        distribution="GGX", fresnel="DIELECTRIC", ior=1.45)
+    f_ab = brdf.specular_cosine(mat, np.repeat(N_UP, 30, 0), a, b) / b[None, :, 2, None]
+    f_ba = brdf.specular_cosine(mat, np.repeat(N_UP, 40, 0), b, a) / a[None, :, 2, None]
+    np.testing.assert_allclose(f_ab, np.transpose(f_ba, (1, 0, 2)), rtol=1e-4, atol=1e-7)
+
+
+def test_specular_terms_sum_to_specular_cosine():
+    mats = [brdf.principled_material(base_color=(0.7, 0.5, 0.2), metallic=0.4, roughness=0.35,
+                                     specular_tint=(1.0, 0.7, 0.4)),
+            brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.6, 0.1), roughness=0.4,
+                          distribution="MULTI_GGX")]
+    views = np.concatenate([view_at(20), view_at(70, 50)])
+    normals = np.repeat(N_UP, 2, 0)
+    dirs = fibonacci_sphere(300)
+    for mat in mats:
+        total = sum(l[:, :, None] * w[:, None, :]
+                    for l, w in brdf.specular_terms(mat, normals, views, dirs))
+        np.testing.assert_allclose(total, brdf.specular_cosine(mat, normals, views, dirs),
+                                   rtol=1e-6, atol=1e-9)

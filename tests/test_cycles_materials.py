@@ -1,0 +1,159 @@
+"""REFERENCE against Cycles (max_bounces 0) for Cycles' own BSDF models: slow.
+
+What is checked (forest HDRI, Cycles 1024 spp, our F12):
+
+* A ground grid with **no material**.  Cycles' default surface is a Principled
+  BSDF with the node defaults (``intern/cycles/scene/shader.cpp``
+  ``ShaderManager::add_default``), not Lambert 0.8: its dielectric layer takes
+  a view-dependent share from the base (``closure_layering_weight``), so a
+  Lambert 0.8 is ~4 % too bright at the default oblique camera.
+* An explicit Principled BSDF (metallic 0, roughness 0.3).
+* A Glossy BSDF with Multiscatter GGX, roughness 0.4, on a sphere.
+
+Thresholds (measured when written, Cycles seed 0):
+
+========================  =============  =============  ===============
+case                      mean (after)   rel-L2 (after)  before (mean/L2)
+========================  =============  =============  ===============
+no material, oblique      -0.3 %         2.0 %           +4.1 % / 4.7 %
+no material, from above   -0.1 %         0.6 %           -0.9 % / 1.6 %
+Principled r=0.3, oblique -0.3 %         2.0 %           +0.6 % / 3.5 %
+Principled r=0.3, above   -0.1 %         0.7 %           -4.6 % / 4.7 %
+Glossy MULTI_GGX sphere   +0.2 %         2.2 %           -3.9 % / 4.5 %
+========================  =============  =============  ===============
+
+"before" is Lambert 0.8 / the old Schlick approximation / single-scatter GGX.
+The oblique rel-L2 is Cycles' per-pixel noise: averaging the difference over
+4 x 4 pixel blocks leaves 0.2 %.  The sphere adds per-vertex tessellation
+error of the glossy reflection (128 x 64 UV sphere; 2.8 % at 96 x 48, 5.7 % at
+64 x 32), hence its 3.5 % bound.  Means are over pixels Cycles covers.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+import prt_relight
+
+from . import blender_scene as bs
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module", autouse=True)
+def addon():
+    prt_relight.register()
+    yield
+    prt_relight.unregister()
+
+
+ABOVE = dict(location=(0.0, 0.0, 6.0), rotation=(0.0, 0.0, 0.0))
+
+
+def _ground_scene(camera=None, roughness=None):
+    """Ground grid under the forest HDRI; Principled of ``roughness`` or no material."""
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    ground = bs.add_ground(size=6.0, cuts=48)
+    if roughness is not None:
+        ground.data.materials.append(_principled(roughness))
+    bs.add_camera(**(camera or {}))       # default: 66 deg from the ground normal
+    bs.set_resolution(64, 48)
+    return ground
+
+
+def _principled(roughness):
+    mat = bpy.data.materials.new("principled")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    p = mat.node_tree.nodes["Principled BSDF"]
+    p.inputs["Metallic"].default_value = 0.0
+    p.inputs["Roughness"].default_value = roughness
+    return mat
+
+
+def _compare(tmp_path, samples=1024):
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    ours = bs.render_exr(tmp_path / "prt.exr")
+    cycles = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=samples)
+    m = cycles[..., 3] > 0.5
+    assert m.sum() > 500
+    mean = float(ours[m][:, :3].mean() / cycles[m][:, :3].mean() - 1.0)
+    err = bs.rel_l2(ours, cycles)
+    print(f"mean {mean:+.4f}  rel-L2 {err:.4f}")
+    return mean, err
+
+
+def test_no_material_oblique_is_cycles_default_principled(tmp_path):
+    _ground_scene()
+    mean, err = _compare(tmp_path)
+    assert abs(mean) < 0.01, mean          # Lambert 0.8 was +4.1 %
+    assert err < 0.03, err
+
+
+def test_no_material_from_above(tmp_path):
+    _ground_scene(camera=ABOVE)
+    mean, err = _compare(tmp_path)
+    assert abs(mean) < 0.005, mean         # Lambert 0.8 was -0.9 %
+    assert err < 0.012, err                # Lambert 0.8 was 1.6 %
+
+
+@pytest.mark.parametrize("camera,mean_tol,l2_tol", [(None, 0.01, 0.028), (ABOVE, 0.005, 0.012)],
+                         ids=["oblique", "above"])
+def test_principled_roughness_03(tmp_path, camera, mean_tol, l2_tol):
+    _ground_scene(camera=camera, roughness=0.3)
+    mean, err = _compare(tmp_path)
+    assert abs(mean) < mean_tol, mean      # old Schlick mapping: +0.6 % / -4.6 %
+    assert err < l2_tol, err               # old: 3.5 % / 4.7 %
+
+
+def test_glossy_multiscatter_sphere(tmp_path):
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=128, ring_count=64, radius=1.0)
+    bpy.ops.object.shade_smooth()
+    sphere = bpy.context.object
+    mat = bpy.data.materials.new("glossy")
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.remove(nt.nodes["Principled BSDF"])
+    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
+    glossy.distribution = "MULTI_GGX"
+    glossy.inputs["Roughness"].default_value = 0.4
+    nt.links.new(glossy.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    sphere.data.materials.append(mat)
+    bs.add_camera(location=(0.0, -4.0, 0.0), rotation=(np.pi / 2, 0.0, 0.0))
+    bs.set_resolution(64, 48)
+    mean, err = _compare(tmp_path)
+    assert abs(mean) < 0.01, mean          # single-scatter GGX was -3.9 %
+    assert err < 0.035, err                # single-scatter GGX was 4.5 %
+
+
+def test_exported_materials_follow_cycles_nodes():
+    from prt_relight.addon import scene_export
+
+    default = scene_export.DEFAULT_MATERIAL
+    assert default.fresnel == "DIELECTRIC" and default.distribution == "MULTI_GGX"
+    assert default.diffuse_albedo == pytest.approx((0.8, 0.8, 0.8))
+    assert default.roughness == 0.5 and default.ior == pytest.approx(1.5)
+    assert default.metallic == 0.0
+    warnings = []
+    mat = _principled(0.3)
+    p = mat.node_tree.nodes["Principled BSDF"]
+    # a fresh Principled node is the default surface (but roughness)
+    m = scene_export.export_material(mat, warnings)
+    for field, value in default.__dict__.items():
+        want = 0.3 if field == "roughness" else value
+        got = getattr(m, field)
+        assert got == (want if isinstance(want, str) else pytest.approx(want, rel=1e-6)), field
+    assert warnings == []
+    p.inputs["Coat Weight"].default_value = 0.5
+    p.inputs["Transmission Weight"].default_value = 1.0
+    p.inputs["Specular IOR Level"].default_value = 1.0
+    p.distribution = "GGX"
+    m = scene_export.export_material(mat, warnings)
+    assert any("coat" in w for w in warnings) and any("transmission" in w for w in warnings)
+    assert m.specular_color == pytest.approx((0.08, 0.08, 0.08)) and m.distribution == "GGX"
