@@ -32,3 +32,12 @@ def pytest_configure(config):
 def repo_root() -> pathlib.Path:
     """Absolute path of the repository root (== the extension source dir)."""
     return ROOT
+
+
+@pytest.fixture(scope="module")
+def registered_addon():
+    """The add-on registered in this process (Blender as a module) for one test module."""
+    addon = sys.modules["prt_relight"]
+    addon.register()
+    yield addon
+    addon.unregister()

@@ -6,18 +6,12 @@ import bpy
 import numpy as np
 import pytest
 
-import prt_relight
 from prt_relight.addon import precompute, runtime
 from prt_relight.core.visibility import Cancelled
 
 from . import blender_scene as bs
 
-
-@pytest.fixture(scope="module", autouse=True)
-def addon():
-    prt_relight.register()
-    yield
-    prt_relight.unregister()
+pytestmark = pytest.mark.usefixtures("registered_addon")
 
 
 def _prt_images():
@@ -191,15 +185,10 @@ def test_materials_export():
     from prt_relight.addon import scene_export
 
     warnings = []
-    mat = bpy.data.materials.new("glossy")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
+    mat = bs.bsdf_material("glossy", "ShaderNodeBsdfGlossy", distribution="BECKMANN",
+                           Roughness=0.3)
     nt = mat.node_tree
-    nt.nodes.remove(nt.nodes["Principled BSDF"])
-    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
-    glossy.distribution = "BECKMANN"
-    glossy.inputs["Roughness"].default_value = 0.3
-    nt.links.new(glossy.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    glossy = nt.nodes["Glossy BSDF"]
     m = scene_export.export_material(mat, warnings)
     assert m.distribution == "BECKMANN" and m.roughness == pytest.approx(0.3)
     assert m.is_diffuse_only is False and m.diffuse_albedo == (0.0, 0.0, 0.0)

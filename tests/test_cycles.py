@@ -11,18 +11,10 @@ import bpy
 import numpy as np
 import pytest
 
-import prt_relight
 
 from . import blender_scene as bs
 
-pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module", autouse=True)
-def addon():
-    prt_relight.register()
-    yield
-    prt_relight.unregister()
+pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("registered_addon")]
 
 
 def _sphere_under_sun(direction):

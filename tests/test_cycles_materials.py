@@ -35,18 +35,10 @@ import bpy
 import numpy as np
 import pytest
 
-import prt_relight
 
 from . import blender_scene as bs
 
-pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module", autouse=True)
-def addon():
-    prt_relight.register()
-    yield
-    prt_relight.unregister()
+pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("registered_addon")]
 
 
 ABOVE = dict(location=(0.0, 0.0, 6.0), rotation=(0.0, 0.0, 0.0))
@@ -115,16 +107,8 @@ def test_glossy_multiscatter_sphere(tmp_path):
     bpy.ops.mesh.primitive_uv_sphere_add(segments=128, ring_count=64, radius=1.0)
     bpy.ops.object.shade_smooth()
     sphere = bpy.context.object
-    mat = bpy.data.materials.new("glossy")
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.remove(nt.nodes["Principled BSDF"])
-    glossy = nt.nodes.new("ShaderNodeBsdfGlossy")
-    glossy.distribution = "MULTI_GGX"
-    glossy.inputs["Roughness"].default_value = 0.4
-    nt.links.new(glossy.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
-    sphere.data.materials.append(mat)
+    sphere.data.materials.append(bs.bsdf_material("glossy", "ShaderNodeBsdfGlossy",
+                                                  distribution="MULTI_GGX", Roughness=0.4))
     bs.add_camera(location=(0.0, -4.0, 0.0), rotation=(np.pi / 2, 0.0, 0.0))
     bs.set_resolution(64, 48)
     mean, err = _compare(tmp_path)
