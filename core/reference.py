@@ -18,6 +18,9 @@ view and are evaluated per frame.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from .brdf import Material, diffuse_view_weight, specular_cosine, specular_terms
@@ -34,6 +37,20 @@ def _blocks(count, block):
         yield start, min(count, start + block)
 
 
+def _for_blocks(count, block, fn):
+    """Call ``fn(a, b)`` for every block of points; blocks run on all cores (numpy's
+    large ufuncs and matrix products release the GIL) and write disjoint rows."""
+    spans = list(_blocks(count, block))
+    threads = min(len(spans), os.cpu_count() or 1)
+    if threads <= 1:
+        for a, b in spans:
+            fn(a, b)
+        return
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for f in [pool.submit(fn, a, b) for a, b in spans]:
+            f.result()
+
+
 def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
                        lighting: CubeLighting) -> np.ndarray:
     """E(x) = sum_k L_k V_k max(0, n.w_k) dw_k per point, (P, 3) float32.
@@ -47,13 +64,15 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
     L = np.asarray(lighting.radiance, dtype=np.float32)
     out = np.zeros((len(normals), 3), dtype=np.float32)
     block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
-    for a, b in _blocks(len(normals), block):
-        vis = unpack_visibility(vis_bits[a:b], cube.size)
+
+    def block_irradiance(a, b):
         cos = normals[a:b] @ dirs.T
         np.maximum(cos, 0.0, out=cos)
-        cos *= vis
+        cos *= unpack_visibility(vis_bits[a:b], cube.size)
         cos *= dw
         out[a:b] = cos @ L
+
+    _for_blocks(len(normals), block, block_irradiance)
     return out
 
 
@@ -64,13 +83,16 @@ def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> 
     dw = cube.solid_angles.astype(np.float32)
     out = np.zeros(len(normals), dtype=np.float32)
     block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
-    for a, b in _blocks(len(normals), block):
+
+    def block_sky(a, b):
         w = normals[a:b] @ dirs.T
         np.maximum(w, 0.0, out=w)
         w *= dw
         total = w.sum(axis=1)
         w *= unpack_visibility(vis_bits[a:b], cube.size)
         out[a:b] = w.sum(axis=1) / np.maximum(total, 1e-12)
+
+    _for_blocks(len(normals), block, block_sky)
     return out
 
 
@@ -101,18 +123,25 @@ def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.n
     L = np.asarray(lighting.radiance, dtype=np.float32)
     block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
     scalar = material.fresnel == "NONE" and material.distribution != "MULTI_GGX"
-    for a, b in _blocks(P, block):
+
+    def block_radiance(a, b):
         vis = unpack_visibility(vis_bits[a:b], cube.size)
-        visdw = vis * dw
+        # Only texels some point of the block sees carry light (bits below each
+        # point's horizon are 0): on flat or open regions that is half the sphere.
+        cols = np.nonzero(vis.any(axis=0))[0]
+        visdw = vis[:, cols] * dw[cols]
+        d, Lc = dirs[cols], L[cols]
         if scalar:            # scalar lobe; colour applied after the sum
-            f = np.asarray(specular_cosine(material, normals[a:b], view_dirs[a:b], dirs),
+            f = np.asarray(specular_cosine(material, normals[a:b], view_dirs[a:b], d),
                            dtype=np.float32)
             f *= visdw
-            out[a:b] = (f @ L) * np.asarray(material.specular_color, dtype=np.float32)
-            continue
-        for lobe, weight in specular_terms(material, normals[a:b], view_dirs[a:b], dirs):
+            out[a:b] = (f @ Lc) * np.asarray(material.specular_color, dtype=np.float32)
+            return
+        for lobe, weight in specular_terms(material, normals[a:b], view_dirs[a:b], d):
             lobe *= visdw
-            out[a:b] += (lobe @ L) * weight
+            out[a:b] += (lobe @ Lc) * weight
+
+    _for_blocks(P, block, block_radiance)
     return out
 
 
