@@ -97,7 +97,8 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     objects = []
     tri_blocks = []
     empty = []
-    for ob in scene_export.visible_mesh_objects(depsgraph):
+    skipped = []
+    for ob in scene_export.visible_mesh_objects(depsgraph, skipped):
         arrays = scene_export.mesh_arrays(ob)
         if not np.isfinite(arrays.positions).all():
             raise scene_export.ExportError(f"Object '{ob.name}' has non-finite vertex positions")
@@ -116,6 +117,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
         tri_blocks.append(arrays.triangle_positions)
     if empty:
         warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
+    warnings += scene_export.instance_warning(skipped)
     if not objects:
         raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")
     occluders = np.concatenate(tri_blocks)

@@ -115,7 +115,8 @@ class FrameState:
         objects = []
         missing, stale = [], []
         fingerprints = []
-        for ob in scene_export.visible_mesh_objects(depsgraph):
+        skipped = []
+        for ob in scene_export.visible_mesh_objects(depsgraph, skipped):
             arrays = scene_export.mesh_arrays(ob)
             if len(arrays.triangles) == 0:
                 continue
@@ -143,6 +144,7 @@ class FrameState:
             if data.coarse_warning and status == "ok":
                 self.warnings.append(data.coarse_warning)
             objects.append(ObjectState(orig.name, arrays, points, mats, bits, status))
+        self.warnings += scene_export.instance_warning(skipped)
         if missing:
             self.warnings.append("Not precomputed (drawn without shadows): " + ", ".join(missing))
         if stale:

@@ -44,18 +44,37 @@ class ExportError(RuntimeError):
 
 # --------------------------------------------------------------------------- meshes
 
-def visible_mesh_objects(depsgraph):
-    """Evaluated mesh objects visible in the render, in a stable (name) order."""
+#: object types Cycles renders as surfaces; all of them convert with ``to_mesh()``.
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+
+
+def visible_mesh_objects(depsgraph, skipped: list | None = None):
+    """Evaluated geometry objects visible in the render, in a stable (name) order.
+
+    Instances (collection instances, particles, geometry-node instances) are not
+    supported yet: their names are appended to ``skipped`` when it is given.
+    """
     found = []
     for inst in depsgraph.object_instances:
         ob = inst.object
-        if inst.is_instance or ob.type != "MESH":
+        if ob.type not in GEOMETRY_TYPES:
+            continue
+        if inst.is_instance:
+            if skipped is not None and ob.original.name not in skipped:
+                skipped.append(ob.original.name)
             continue
         if depsgraph.mode == "RENDER" and ob.original.hide_render:
             continue
         found.append(ob)
     found.sort(key=lambda o: o.name)
     return found
+
+
+def instance_warning(skipped: list) -> list:
+    if not skipped:
+        return []
+    return ["Instanced objects are not drawn yet (make them real to include them): "
+            + ", ".join(sorted(skipped)[:8]) + (" ..." if len(skipped) > 8 else "")]
 
 
 def mesh_arrays(ob_eval) -> MeshArrays:

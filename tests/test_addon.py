@@ -218,3 +218,20 @@ def test_precompute_again_replaces_cached_visibility(tmp_path):
     open_bits = runtime.open_visibility(grid.points.count, grid.bits.shape[1], grid.points.normals,
                                         runtime.directions.cubemap(state.resolution))
     np.testing.assert_array_equal(grid.bits, open_bits)
+
+
+def test_text_objects_render_and_instances_are_reported(tmp_path):
+    _small_scene()
+    bpy.ops.object.text_add(location=(1.5, -1.0, 0.01))
+    coll = bpy.data.collections.new("inst")
+    bpy.data.objects["Suzanne"].users_collection[0].objects.unlink(bpy.data.objects["Suzanne"])
+    coll.objects.link(bpy.data.objects["Suzanne"])
+    empty = bpy.data.objects.new("Instancer", None)
+    empty.instance_type = "COLLECTION"
+    empty.instance_collection = coll
+    bpy.context.scene.collection.objects.link(empty)
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    assert bpy.data.objects["Text"].prt.visibility is not None
+    state = _frame_warnings()
+    assert any("Instanced objects" in w and "Suzanne" in w for w in state.warnings)
+    assert np.isfinite(bs.render_exr(tmp_path / "a.exr")).all()
