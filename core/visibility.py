@@ -12,8 +12,9 @@ The origin is not moved along the ray, so occluders in contact (a wall
 meeting a floor) still block.
 
 Work is split in chunks of points handed to a thread pool; Embree releases
-the GIL during ``run``, so both cores trace.  Memory stays bounded by the
-chunk size (``chunk_points * hemisphere_texels`` rays in flight per thread).
+the GIL during ``run``, so all cores trace, and two threads per core let one
+thread's numpy set-up overlap the others' tracing.  Memory stays bounded by
+the chunk size (about half a million rays in flight per thread).
 """
 
 from __future__ import annotations
@@ -58,7 +59,9 @@ def build_occluder_scene(triangle_positions: np.ndarray):
 
 
 def default_threads() -> int:
-    return max(1, os.cpu_count() or 1)
+    """Two threads per core: Embree releases the GIL, numpy's ray set-up does not,
+    and oversubscribing lets one thread's set-up overlap the others' tracing."""
+    return max(2, 2 * (os.cpu_count() or 1))
 
 
 def ray_step(points: np.ndarray, offset: float) -> np.ndarray:
@@ -97,7 +100,10 @@ def hemisphere_rays(points: np.ndarray, normals: np.ndarray, cube: Cubemap, offs
     """
     mask = hemisphere_mask(normals, cube)
     origins = _repeat_rows(ray_origins(points, normals, offset), mask.sum(axis=1))
-    directions = np.take(_directions32(cube), np.nonzero(mask)[1], axis=0)
+    # Select 12-byte records from a broadcast (never materialised) direction table.
+    records = _directions32(cube).view(np.dtype((np.void, 12))).reshape(-1)
+    table = np.broadcast_to(records, mask.shape)
+    directions = table[mask].view(np.float32).reshape(-1, 3)
     return origins, directions, mask
 
 
@@ -129,45 +135,23 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
         stats["rays"] = 0
     if total == 0:
         return out
-    if chunk_points is None:      # about 3 M ray slots per chunk
-        chunk_points = max(8, 3_000_000 // cube.size)
+    if chunk_points is None:      # about 0.5 M rays per chunk
+        chunk_points = max(8, 1_000_000 // cube.size)
     lock = threading.Lock()
     done = [0, 0]
-    # Points are traced in their mesh order (neighbours share BVH nodes in cache).
-    # A chunk gets ray slots for the union of its points' hemispheres: half the
-    # sphere on a flat region, all of it on a curved one.
-    order = np.arange(total)
-    dirs32 = _directions32(cube)
-    tiled = {}
-
-    def tiled_directions(cols, count):
-        if len(cols) < cube.size:
-            return np.tile(dirs32[cols], (count, 1))
-        with lock:        # the whole sphere: one shared block per chunk size
-            if count not in tiled:
-                tiled[count] = np.tile(dirs32, (count, 1))
-            return tiled[count]
 
     def work(start):
         if cancel is not None and cancel():
             raise Cancelled()
-        idx = order[start:start + chunk_points]
-        mask = hemisphere_mask(nrm[idx], cube)
-        cols = np.nonzero(mask.any(axis=0))[0]
-        sub = mask[:, cols]
-        # Slots outside a point's own hemisphere get tfar = -1, which Embree skips
-        # at once.  The rays traced are exactly those of hemisphere_rays, without
-        # compacting them per point (numpy holds the GIL, Embree does not: the
-        # less numpy per ray, the better two cores scale).
-        origins = _repeat_rows(ray_origins(pts[idx], nrm[idx], offset), len(cols))
-        rays = tiled_directions(cols, len(idx))
-        tfar = np.where(sub.reshape(-1), np.float32(np.inf), np.float32(-1.0))
-        hit = scene.run(origins, rays, dists=tfar, query="OCCLUDED")
-        mask[:, cols] = (hit.reshape(sub.shape) == -1) & sub   # -1: no hit, visible
-        out[idx] = np.packbits(mask, axis=1)
+        stop = min(total, start + chunk_points)
+        origins, rays, mask = hemisphere_rays(pts[start:stop], nrm[start:stop], cube, offset)
+        if len(rays):
+            hit = scene.run(origins, rays, query="OCCLUDED")
+            mask[mask] = hit == -1                    # -1: no hit, the texel is visible
+        out[start:stop] = np.packbits(mask, axis=1)
         with lock:
-            done[0] += len(idx)
-            done[1] += int(np.count_nonzero(sub))
+            done[0] += stop - start
+            done[1] += len(rays)
             if progress is not None:
                 progress(done[0], total)
 
