@@ -131,6 +131,8 @@ def commit(scene, job: PrecomputeJob):
     import bpy
 
     t0 = time.perf_counter()
+    # Objects deleted while a modal precompute ran are dropped.
+    job.objects = [o for o in job.objects if o.name in bpy.data.objects]
     # Create every image first; only then swap them in, so a failure leaves old data.
     new_images = {}
     try:

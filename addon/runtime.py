@@ -12,7 +12,7 @@ import hashlib
 
 import numpy as np
 
-from ..core import directions, envmap, mesh as core_mesh, reference
+from ..core import directions, envmap, mesh as core_mesh, reference, visibility
 from . import scene_export, storage
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
@@ -39,7 +39,7 @@ def _env_key(world: envmap.WorldLighting, resolution: int):
     return (ident, float(world.strength), world.rotation.round(9).tobytes(), resolution)
 
 
-def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> np.ndarray:
+def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> envmap.CubeLighting:
     key = _env_key(world, resolution)
     cube = _ENV_CACHE.get(key)
     if cube is None:
@@ -68,10 +68,9 @@ def stored_visibility(ob_orig, points: int, nbytes: int):
     return bits
 
 
-def open_visibility(count: int, nbytes: int, normals: np.ndarray, cube) -> np.ndarray:
-    """Unshadowed visibility (every upper-hemisphere texel visible), for fallbacks."""
-    vis = (np.asarray(normals) @ cube.directions.T) > 0.0
-    return np.packbits(vis, axis=1)
+def open_visibility(normals: np.ndarray, cube) -> np.ndarray:
+    """Unshadowed visibility (every traced texel visible), for objects without data."""
+    return np.packbits(visibility.hemisphere_mask(normals, cube), axis=1)
 
 
 class ObjectState:
@@ -138,7 +137,7 @@ class FrameState:
             else:
                 status = "missing"
             if bits is None:
-                bits = open_visibility(points.count, nbytes, points.normals, cube)
+                bits = open_visibility(points.normals, cube)
             (stale if status == "stale" else missing if status == "missing" else []).append(
                 orig.name)
             if data.coarse_warning and status == "ok":

@@ -215,7 +215,7 @@ def test_precompute_again_replaces_cached_visibility(tmp_path):
     assert np.isfinite(without).all() and not np.array_equal(with_occluder, without)
     # The ground where Suzanne stood is now lit as open sky: no dark contact shadow left.
     grid = [o for o in state.objects if o.name == "Grid"][0]
-    open_bits = runtime.open_visibility(grid.points.count, grid.bits.shape[1], grid.points.normals,
+    open_bits = runtime.open_visibility(grid.points.normals,
                                         runtime.directions.cubemap(state.resolution))
     np.testing.assert_array_equal(grid.bits, open_bits)
 
