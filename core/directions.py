@@ -168,3 +168,137 @@ def fibonacci_sphere(count: int) -> np.ndarray:
     r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
     phi = np.pi * (3.0 - np.sqrt(5.0)) * i
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+# --------------------------------------------------------------------------- hemisphere maps
+# Local frame: z is the normal.  Both maps below are equal-area, so solid
+# angles follow from areas in the square exactly.
+
+def shirley_chiu_to_hemisphere(a, b):
+    """Shirley-Chiu concentric map of the square [-1, 1]^2 to the upper hemisphere.
+
+    The square goes to the unit disk by the concentric map (area preserving up
+    to pi/4), the disk to the hemisphere by the equal-area lift
+    ``z = 1 - r^2``, ``xy *= sqrt(2 - r^2)``.  Every region of the square of area
+    ``A`` covers the solid angle ``A * pi / 2``.  (Shirley & Chiu 1997; the SSDF
+    images of seed 003 §5.2 live in this square.)
+    """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    use_a = np.abs(a) > np.abs(b)
+    safe_a = np.where(a == 0, 1.0, a)
+    safe_b = np.where(b == 0, 1.0, b)
+    r = np.where(use_a, a, b)
+    phi = np.where(use_a, (np.pi / 4) * (b / safe_a), np.pi / 2 - (np.pi / 4) * (a / safe_b))
+    phi = np.where((a == 0) & (b == 0), 0.0, phi)
+    r2 = r * r
+    s = np.abs(r) * np.sqrt(np.maximum(0.0, 2.0 - r2))
+    sign = np.where(r < 0, -1.0, 1.0)
+    return np.stack([sign * s * np.cos(phi), sign * s * np.sin(phi), 1.0 - r2], axis=-1)
+
+
+def hemisphere_to_shirley_chiu(dirs):
+    """Inverse of :func:`shirley_chiu_to_hemisphere` for local directions with z >= 0."""
+    d = np.asarray(dirs, dtype=np.float64)
+    z = np.clip(d[..., 2], 0.0, 1.0)
+    r = np.sqrt(1.0 - z)                                  # disk radius
+    phi = np.mod(np.arctan2(d[..., 1], d[..., 0]) + np.pi / 4, 2 * np.pi)   # [0, 2pi)
+    sector = np.minimum((phi // (np.pi / 2)).astype(np.int64), 3)
+    t = (phi - sector * (np.pi / 2)) * (4 / np.pi) - 1.0        # in [-1, 1]
+    a = np.empty_like(r)
+    b = np.empty_like(r)
+    for k in range(4):
+        m = sector == k
+        tk = t[m]
+        rk = r[m]
+        if k == 0:
+            a[m], b[m] = rk, rk * tk
+        elif k == 1:
+            a[m], b[m] = -rk * tk, rk
+        elif k == 2:
+            a[m], b[m] = -rk, -rk * tk
+        else:
+            a[m], b[m] = rk * tk, -rk
+    return a, b
+
+
+def shirley_chiu_hemisphere(resolution: int):
+    """Texel centres of an N x N Shirley-Chiu square and their exact solid angles.
+
+    Returns ``(directions (N*N, 3) local, solid_angles (N*N,))``; rows index b,
+    columns index a, both from -1 to 1.  Every texel covers ``2*pi / N^2``.
+    """
+    n = int(resolution)
+    c = -1.0 + (np.arange(n) + 0.5) * (2.0 / n)
+    b, a = np.meshgrid(c, c, indexing="ij")
+    dirs = shirley_chiu_to_hemisphere(a, b).reshape(-1, 3)
+    return dirs, np.full(n * n, 2.0 * np.pi / (n * n))
+
+
+def rsl_disk_to_hemisphere(px, py):
+    """The hemisphere map of seed 000 §5: ``p = sin(t)/sqrt(1+cos(t)) * (sin(f), cos(f))``.
+
+    ``|p|^2 = 1 - cos(t)``: an equal-area (Lambert azimuthal) map of the
+    hemisphere onto the unit disk, a region of area ``A`` covering ``2 A``
+    steradians.  Points outside the disk are clamped to the horizon.
+    """
+    px = np.asarray(px, dtype=np.float64)
+    py = np.asarray(py, dtype=np.float64)
+    r2 = np.minimum(px * px + py * py, 1.0)
+    cos_t = 1.0 - r2
+    sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
+    phi = np.arctan2(px, py)                              # p = r (sin f, cos f)
+    return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)
+
+
+def hemisphere_to_rsl_disk(dirs):
+    """Inverse of :func:`rsl_disk_to_hemisphere`: (px, py) for local directions."""
+    d = np.asarray(dirs, dtype=np.float64)
+    cos_t = np.clip(d[..., 2], -1.0, 1.0)
+    r = np.sqrt(np.maximum(0.0, 1.0 - cos_t))
+    phi = np.arctan2(d[..., 1], d[..., 0])
+    return r * np.sin(phi), r * np.cos(phi)
+
+
+def _disk_strip_area(x0, x1, y0, y1):
+    """Exact area of the unit disk inside [x0, x1] x [y0, y1] (vectorised)."""
+    def H(x):                                            # integral of sqrt(1 - x^2)
+        x = np.clip(x, -1.0, 1.0)
+        return 0.5 * (x * np.sqrt(1.0 - x * x) + np.arcsin(x))
+
+    def upto(y, x_lo, x_hi):
+        # integral over [x_lo, x_hi] of the length of {y' <= y} inside the disk
+        # column at x, i.e. clip(y + h(x), 0, 2h(x)) with h = sqrt(1 - x^2).
+        # Split where h(x) = |y| (the only kink inside |x| < 1).
+        xs = np.sqrt(np.clip(1.0 - y * y, 0.0, 1.0))
+        total = np.zeros_like(y)
+        # pieces: |x| > xs (h < |y|) and |x| < xs (h > |y|)
+        for lo, hi, inner in ((-1.0, -xs, False), (-xs, xs, True), (xs, 1.0, False)):
+            a = np.clip(np.maximum(x_lo, lo), -1.0, 1.0)
+            b = np.clip(np.minimum(x_hi, hi), -1.0, 1.0)
+            b = np.maximum(a, b)
+            if inner:           # |y| < h: column cut at y: length y + h
+                total += y * (b - a) + (H(b) - H(a))
+            else:               # h <= |y|: whole column (2h) if y > 0, nothing if y < 0
+                total += np.where(y > 0, 2.0 * (H(b) - H(a)), 0.0)
+        return total
+
+    return upto(np.asarray(y1, float), x0, x1) - upto(np.asarray(y0, float), x0, x1)
+
+
+def rsl_hemisphere(resolution: int):
+    """N x N texels of the seed-000 disk map over [-1, 1]^2 (rows py, columns px).
+
+    Returns ``(directions (N*N, 3) local, solid_angles (N*N,))``: texel centres
+    mapped to the hemisphere (clamped to the horizon outside the disk) and the
+    exact solid angle ``2 * area(texel ∩ disk)`` (0 for texels outside it).
+    """
+    n = int(resolution)
+    edges = np.linspace(-1.0, 1.0, n + 1)
+    c = 0.5 * (edges[:-1] + edges[1:])
+    py, px = np.meshgrid(c, c, indexing="ij")
+    y0, x0 = np.meshgrid(edges[:-1], edges[:-1], indexing="ij")
+    y1, x1 = np.meshgrid(edges[1:], edges[1:], indexing="ij")
+    area = _disk_strip_area(x0, x1, y0, y1)
+    dirs = rsl_disk_to_hemisphere(px, py).reshape(-1, 3)
+    return dirs, (2.0 * area).reshape(-1)

@@ -441,3 +441,85 @@ def test_load_equirect_missing(tmp_path):
     pytest.importorskip("OpenImageIO")
     with pytest.raises(envmap.EnvironmentError_):
         envmap.load_equirect(str(tmp_path / "does_not_exist.exr"))
+
+
+# --------------------------------------------------------------------------- #
+# hemisphere parameterizations (Shirley-Chiu square for SSDFs, seed-000 disk)
+# --------------------------------------------------------------------------- #
+
+def _uniform_hemisphere(count, seed=7):
+    rng = np.random.default_rng(seed)
+    z = rng.uniform(0.0, 1.0, count)
+    phi = rng.uniform(0.0, 2 * np.pi, count)
+    s = np.sqrt(1.0 - z * z)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+
+
+def test_shirley_chiu_round_trip_and_unit_directions():
+    rng = np.random.default_rng(0)
+    a, b = rng.uniform(-1, 1, 5000), rng.uniform(-1, 1, 5000)
+    d = directions.shirley_chiu_to_hemisphere(a, b)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-12)
+    assert (d[:, 2] >= 0).all()
+    a2, b2 = directions.hemisphere_to_shirley_chiu(d)
+    np.testing.assert_allclose(a2, a, atol=1e-12)
+    np.testing.assert_allclose(b2, b, atol=1e-12)
+    # corners and centre
+    np.testing.assert_allclose(directions.shirley_chiu_to_hemisphere(0.0, 0.0), [0, 0, 1])
+    assert abs(directions.shirley_chiu_to_hemisphere(1.0, 1.0)[2]) < 1e-12
+
+
+def test_shirley_chiu_cells_have_equal_solid_angle():
+    n = 8
+    dirs, w = directions.shirley_chiu_hemisphere(n)
+    np.testing.assert_allclose(w.sum(), 2 * np.pi, rtol=1e-12)
+    samples = _uniform_hemisphere(2_000_000)
+    a, b = directions.hemisphere_to_shirley_chiu(samples)
+    col = np.clip(((a + 1) / 2 * n).astype(int), 0, n - 1)
+    row = np.clip(((b + 1) / 2 * n).astype(int), 0, n - 1)
+    frac = np.bincount(row * n + col, minlength=n * n) / len(samples)
+    np.testing.assert_allclose(frac * 2 * np.pi, w, rtol=0.03)
+    # texel centres map back into their own texel
+    a, b = directions.hemisphere_to_shirley_chiu(dirs)
+    c = -1 + (np.arange(n) + 0.5) * 2 / n
+    B, A = np.meshgrid(c, c, indexing="ij")
+    np.testing.assert_allclose(a, A.ravel(), atol=1e-12)
+    np.testing.assert_allclose(b, B.ravel(), atol=1e-12)
+
+
+def test_rsl_map_matches_the_papers_formula_and_is_equal_area():
+    theta, phi = 0.7, 2.1
+    d = [np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)]
+    px, py = directions.hemisphere_to_rsl_disk(np.array(d))
+    scale = np.sin(theta) / np.sqrt(1 + np.cos(theta))
+    np.testing.assert_allclose([px, py], [scale * np.sin(phi), scale * np.cos(phi)], atol=1e-12)
+    np.testing.assert_allclose(directions.rsl_disk_to_hemisphere(px, py), d, atol=1e-12)
+    n = 16
+    _, w = directions.rsl_hemisphere(n)
+    np.testing.assert_allclose(w.sum(), 2 * np.pi, rtol=1e-12)
+    samples = _uniform_hemisphere(2_000_000, seed=3)
+    px, py = directions.hemisphere_to_rsl_disk(samples)
+    col = np.clip(((px + 1) / 2 * n).astype(int), 0, n - 1)
+    row = np.clip(((py + 1) / 2 * n).astype(int), 0, n - 1)
+    frac = np.bincount(row * n + col, minlength=n * n) / len(samples)
+    big = w > 0.2 * w.max()                  # texels with enough samples for 3 %
+    np.testing.assert_allclose(frac[big] * 2 * np.pi, w[big], rtol=0.03)
+    assert np.all(w[frac == 0] < 1e-3)       # texels no sample reached are (almost) empty
+
+
+def test_disk_area_of_boxes_is_exact():
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        x0, x1 = np.sort(rng.uniform(-1.2, 1.2, 2))
+        y0, y1 = np.sort(rng.uniform(-1.2, 1.2, 2))
+        # dense midpoint rule of the indicator as the reference
+        xs = np.linspace(x0, x1, 400001)[:-1] + (x1 - x0) / 800000
+        h = np.sqrt(np.clip(1 - xs * xs, 0, None)) * (np.abs(xs) <= 1)
+        length = np.clip(np.minimum(y1, h) - np.maximum(y0, -h), 0, None)
+        ref = length.sum() * (x1 - x0) / 400000
+        got = float(directions._disk_strip_area(np.array(x0), np.array(x1),
+                                                np.array(y0), np.array(y1)))
+        assert got == pytest.approx(ref, abs=2e-6)
+    assert float(directions._disk_strip_area(np.array(-1.0), np.array(1.0),
+                                             np.array(-1.0), np.array(1.0))) == \
+        pytest.approx(np.pi, rel=1e-12)
