@@ -10,6 +10,8 @@ def draw_settings(layout, context):
     prt = scene.prt
     col = layout.column()
     col.prop(prt, "method")
+    if prt.method == "SH":
+        col.prop(prt, "sh_order")
     col.prop(prt, "resolution")
     col.prop(prt, "ray_offset")
     col.prop(prt, "supersampling")

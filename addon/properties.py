@@ -7,6 +7,9 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, P
 METHOD_ITEMS = [
     ("REFERENCE", "Reference",
      "Pixel-basis triple product over every cubemap texel (exact for the cubemap; slowest)"),
+    ("SH", "Spherical Harmonics",
+     "Diffuse shadowed transfer in spherical harmonics (Sloan 2002): low frequency, fastest; "
+     "draws the diffuse part of materials only"),
 ]
 
 RESOLUTION_ITEMS = [
@@ -27,6 +30,9 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
     method: EnumProperty(name="Method", items=METHOD_ITEMS, default="REFERENCE",
                          description="How the stored transfer is turned into pixels",
                          update=_redraw)
+    sh_order: IntProperty(name="SH Order", default=4, min=2, max=5, update=_redraw,
+                          description="Spherical-harmonic bands kept by the SH method "
+                                      "(order n: n*n coefficients)")
     resolution: EnumProperty(name="Directions", items=RESOLUTION_ITEMS, default="32",
                              description="Cubemap resolution of the precomputed visibility")
     ray_offset: FloatProperty(name="Ray Offset", default=1e-4, min=1e-7, max=1e-1,

@@ -12,7 +12,7 @@ import hashlib
 
 import numpy as np
 
-from ..core import directions, envmap, mesh as core_mesh, reference, visibility
+from ..core import brdf, directions, envmap, mesh as core_mesh, reference, sh, visibility
 from . import scene_export, storage
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
@@ -22,6 +22,10 @@ _VIS_CACHE: dict = {}
 _VIS_CACHE_MAX = 16
 # View-independent diffuse sums per (object, visibility, lighting).
 _IRRADIANCE_CACHE: dict = {}
+# SH transfer vectors per (object, visibility, order).
+_TRANSFER_CACHE: dict = {}
+# SH lighting projectors per order (each caches its unrotated projection).
+_SH_PROJECTORS: dict = {}
 # Area-resampled environment per (world key, resolution).
 _ENV_CACHE: dict = {}
 
@@ -97,6 +101,8 @@ class FrameState:
         self.warnings: list[str] = []
         self.error: str | None = None
         self.resolution = 32
+        self.method = "REFERENCE"
+        self.sh_order = 4
 
     # ------------------------------------------------------------------ sync
     def sync(self, depsgraph):
@@ -109,6 +115,8 @@ class FrameState:
             self.error = str(exc)
             self.world = envmap.WorldLighting(color=(0.0, 0.0, 0.0))
         self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
+        self.method = scene.prt.method
+        self.sh_order = scene.prt.sh_order
         cube = directions.cubemap(self.resolution)
         nbytes = cube.size // 8
         objects = []
@@ -163,6 +171,8 @@ class FrameState:
         ``eye``: camera position for perspective views; ``view_dirs_for`` a unit
         direction toward an orthographic camera (then ``eye`` is ignored).
         """
+        if self.method == "SH":
+            return self._shade_sh(eye, view_dirs_for)
         cube = directions.cubemap(self.resolution)
         L = environment_cubemap(self.world, self.resolution)
         env_key = _env_key(self.world, self.resolution)
@@ -188,4 +198,44 @@ class FrameState:
                                               irradiance=st.irradiance, view_dirs=view_dirs)
             radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
             out.append(radiance[pts.point_of_corner])
+        return out
+
+    def _shade_sh(self, eye, view_dirs_for):
+        """SH method: Lambert (and Principled base layer) radiance from transfer vectors."""
+        order = int(self.sh_order)
+        cube = directions.cubemap(self.resolution)
+        projector = _SH_PROJECTORS.setdefault(order, sh.LightingProjector(order))
+        light = projector.coefficients(self.world, _env_key(self.world, 0)[0])
+        out = []
+        glossy = []
+        for st in self.objects:
+            pts = st.points
+            key = (st.name, id(st.bits), order)
+            cached = _TRANSFER_CACHE.get(key)
+            if cached is None or cached[0] is not st.bits:
+                if len(_TRANSFER_CACHE) >= 64:
+                    _TRANSFER_CACHE.pop(next(iter(_TRANSFER_CACHE)))
+                cached = _TRANSFER_CACHE[key] = (st.bits, sh.transfer(st.bits, pts.normals, cube,
+                                                                      order))
+            sums = sh.shade_diffuse(cached[1], light)
+            radiance = np.zeros_like(sums)
+            for slot in np.unique(pts.materials):
+                sel = np.nonzero(pts.materials == slot)[0]
+                mat = st.materials[int(slot)] if 0 <= slot < len(st.materials) else brdf.Material()
+                vd = None
+                if mat.fresnel == "DIELECTRIC":
+                    if view_dirs_for is not None:
+                        vd = np.broadcast_to(np.asarray(view_dirs_for, np.float64), (len(sel), 3))
+                    else:
+                        vd = reference.view_directions(pts.positions[sel], eye)
+                radiance[sel] = reference.lambert_layer(mat, sums[sel], pts.normals[sel], vd)
+                if not mat.is_diffuse_only:
+                    glossy.append(st.name)
+            radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
+            out.append(radiance[pts.point_of_corner])
+        if glossy:
+            note = ("SH draws diffuse transfer only; the glossy part of these materials is "
+                    "left out: " + ", ".join(sorted(set(glossy))))
+            if note not in self.warnings:
+                self.warnings.append(note)
         return out

@@ -96,7 +96,7 @@ def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> 
     return out
 
 
-def _view_dirs(positions, eye) -> np.ndarray:
+def view_directions(positions, eye) -> np.ndarray:
     """Unit directions from each point toward the (perspective) eye, (P, 3) float64."""
     v = np.asarray(eye, dtype=np.float64)[None, :] - np.asarray(positions, dtype=np.float64)
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
@@ -117,7 +117,7 @@ def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.n
     if material.is_diffuse_only or P == 0:
         return out
     if view_dirs is None:
-        view_dirs = _view_dirs(positions, eye)
+        view_dirs = view_directions(positions, eye)
     dirs = lighting.unit_directions
     dw = cube.solid_angles.astype(np.float32)
     L = np.asarray(lighting.radiance, dtype=np.float32)
@@ -145,6 +145,16 @@ def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.n
     return out
 
 
+def lambert_layer(material: Material, irradiance: np.ndarray, normals: np.ndarray,
+                  view_dirs: np.ndarray | None) -> np.ndarray:
+    """Radiance of the Lambert base: ``irradiance * albedo/pi``, times the view-dependent
+    weight left by a dielectric layer above it (Principled BSDF)."""
+    out = irradiance * (np.asarray(material.diffuse_albedo, dtype=np.float32) / np.float32(np.pi))
+    if material.fresnel == "DIELECTRIC":
+        out = out * diffuse_view_weight(material, normals, view_dirs)
+    return out
+
+
 def shade_points(vis_bits, positions, normals, materials, material_table, eye, cube, lighting,
                  irradiance=None, view_dirs=None) -> np.ndarray:
     """Outgoing radiance (P, 3) of every point, each with ``material_table[materials[p]]``.
@@ -161,15 +171,11 @@ def shade_points(vis_bits, positions, normals, materials, material_table, eye, c
     for slot in np.unique(materials):
         sel = np.nonzero(materials == slot)[0]
         mat = material_table[int(slot)] if 0 <= int(slot) < len(material_table) else Material()
-        albedo = np.asarray(mat.diffuse_albedo, dtype=np.float32) / np.float32(np.pi)
         needs_view = mat.fresnel == "DIELECTRIC" or not mat.is_diffuse_only
         vd = None
         if needs_view:
-            vd = _view_dirs(positions[sel], eye) if view_dirs is None else view_dirs[sel]
-        diffuse = irradiance[sel] * albedo
-        if mat.fresnel == "DIELECTRIC":
-            diffuse *= diffuse_view_weight(mat, normals[sel], vd)
-        out[sel] = diffuse
+            vd = view_directions(positions[sel], eye) if view_dirs is None else view_dirs[sel]
+        out[sel] = lambert_layer(mat, irradiance[sel], normals[sel], vd)
         if not mat.is_diffuse_only:
             out[sel] += specular_radiance(vis_bits[sel], positions[sel], normals[sel], eye, cube,
                                           lighting, mat, view_dirs=vd)

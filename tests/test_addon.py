@@ -235,3 +235,43 @@ def test_text_objects_render_and_instances_are_reported(tmp_path):
     state = _frame_warnings()
     assert any("Instanced objects" in w and "Suzanne" in w for w in state.warnings)
     assert np.isfinite(bs.render_exr(tmp_path / "a.exr")).all()
+
+
+def test_sh_method_renders_near_reference_for_low_frequency_light(tmp_path):
+    """A smooth world is (nearly) inside the SH span: SH order 4 ~ REFERENCE; a sharp
+    HDRI shows SH's low-frequency error, shrinking with the order."""
+    bs.reset()
+    h, w = 32, 64
+    th = (np.arange(h) + 0.5) / h * np.pi
+    ph = (0.5 - (np.arange(w) + 0.5) / w) * 2 * np.pi
+    T, P = np.meshgrid(th, ph, indexing="ij")
+    z, x = np.cos(T), np.sin(T) * np.cos(P)
+    smooth = (1.2 + 0.6 * z + 0.3 * x)[..., None] * np.array([1.0, 0.9, 0.7])
+    bs.add_world(image=bs.float_image("smooth", smooth.astype(np.float32)))
+    bs.add_ground(size=6.0, cuts=16)
+    bs.add_suzanne(subdiv=1)
+    bs.add_camera()
+    bs.set_resolution(64, 48)
+    for ob in bpy.data.objects:
+        if ob.type == "MESH":
+            ob.data.materials.append(bs.bsdf_material("diffuse", "ShaderNodeBsdfDiffuse"))
+    bpy.ops.prt.precompute()
+    scene = bpy.context.scene
+    ref = bs.render_exr(tmp_path / "ref.exr")
+    scene.prt.method = "SH"
+    scene.prt.sh_order = 4
+    ours = bs.render_exr(tmp_path / "sh.exr")
+    assert np.isfinite(ours).all()
+    assert bs.rel_l2(ours, ref) < 0.01
+
+    env = scene.world.node_tree.nodes["Environment Texture"]
+    env.image = bpy.data.images.load(bs.hdri_path("sunset"))
+    scene.prt.method = "REFERENCE"
+    ref = bs.render_exr(tmp_path / "ref2.exr")
+    errors = []
+    for order in (2, 5):
+        scene.prt.method = "SH"
+        scene.prt.sh_order = order
+        errors.append(bs.rel_l2(bs.render_exr(tmp_path / f"sh{order}.exr"), ref))
+    assert errors[1] < errors[0]
+    assert errors[1] > 0.01              # the sun's sharp shadows are beyond order 5
