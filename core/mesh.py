@@ -108,23 +108,36 @@ class ShadingPoints:
 
 
 def shading_points(mesh: MeshArrays) -> ShadingPoints:
-    """Group corners into shading points (deterministic order)."""
-    q = np.round(mesh.corner_normals * 4096.0).astype(np.int64)
-    key = np.column_stack([mesh.corner_verts, q, mesh.corner_materials])
-    if len(key) == 0:
+    """Group corners into shading points, ordered by (vertex, normal, material).
+
+    Normals are compared quantised to 1/4096 per component; the three components
+    and the material slot are packed into one integer key so a two-key stable
+    sort groups the corners (much faster than ``np.unique(axis=0)``).
+    """
+    count = len(mesh.corner_verts)
+    if count == 0:
         empty = np.zeros((0, 3))
         return ShadingPoints(np.zeros(0, np.int64), empty, empty, np.zeros(0, np.int64))
-    uniq, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    normals = np.zeros((len(uniq), 3))
+    q = np.clip(np.round(mesh.corner_normals * 4096.0).astype(np.int64) + 4096, 0, 8192)  # 14 bits
+    mat = np.clip(mesh.corner_materials, 0, (1 << 20) - 1)
+    key = (((q[:, 0] << 14) | q[:, 1]) << 14 | q[:, 2]) << 20 | mat
+    order = np.lexsort((key, mesh.corner_verts))
+    v_sorted, k_sorted = mesh.corner_verts[order], key[order]
+    new = np.ones(count, dtype=bool)
+    new[1:] = (v_sorted[1:] != v_sorted[:-1]) | (k_sorted[1:] != k_sorted[:-1])
+    point_sorted = np.cumsum(new) - 1
+    inverse = np.empty(count, dtype=np.int64)
+    inverse[order] = point_sorted
+    first = order[new]
+    normals = np.zeros((int(point_sorted[-1]) + 1, 3))
     np.add.at(normals, inverse, mesh.corner_normals)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-30), [0.0, 0.0, 1.0])
     return ShadingPoints(
         point_of_corner=inverse,
-        positions=mesh.positions[uniq[:, 0]],
+        positions=mesh.positions[mesh.corner_verts[first]],
         normals=normals,
-        materials=uniq[:, 4].copy(),
+        materials=mesh.corner_materials[first].copy(),
     )
 
 
