@@ -275,3 +275,66 @@ def test_sh_method_renders_near_reference_for_low_frequency_light(tmp_path):
         errors.append(bs.rel_l2(bs.render_exr(tmp_path / f"sh{order}.exr"), ref))
     assert errors[1] < errors[0]
     assert errors[1] > 0.01              # the sun's sharp shadows are beyond order 5
+
+
+class _FakeEngine:
+    """Stands in for the RenderEngine instance Blender passes to ``view_draw``."""
+
+    def __init__(self):
+        self._state = None
+        self._view_texture = None
+        self._view_key = None
+        self.bound = 0
+        self.stats = None
+
+    def bind_display_space_shader(self, scene):
+        self.bound += 1
+
+    def unbind_display_space_shader(self):
+        self.bound -= 1
+
+    def update_stats(self, a, b):
+        self.stats = (a, b)
+
+    def view_update(self, context, depsgraph):
+        from prt_relight.addon.engine import PRTRenderEngine
+        PRTRenderEngine.view_update(self, context, depsgraph)
+
+
+def test_view_draw_path_draws_the_same_frame_as_f12():
+    """The viewport's drawing code (everything but Blender's display shader) runs
+    headless: a fake region/view from the scene camera gives the F12 pixels."""
+    import types
+
+    import gpu
+    from prt_relight.addon import drawing
+    from prt_relight.addon.engine import PRTRenderEngine, render_pixels
+
+    _small_scene()
+    bpy.ops.prt.precompute()
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()                      # gives the gpu module a context in -b
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    w, h = 64, 48
+    rv3d = types.SimpleNamespace(
+        view_matrix=cam.matrix_world.inverted(),
+        window_matrix=cam.calc_matrix_camera(depsgraph, x=w, y=h),
+        is_perspective=True)
+    ctx = types.SimpleNamespace(region=types.SimpleNamespace(width=w, height=h),
+                                region_data=rv3d)
+    engine = _FakeEngine()
+    offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
+    with offscreen.bind():
+        PRTRenderEngine.view_draw(engine, ctx, depsgraph)
+    offscreen.free()
+    assert engine.bound == 0 and engine._view_texture is not None
+    assert engine.stats is not None
+    buf = engine._view_texture.read()
+    buf.dimensions = h * w * 4                   # flat first: np.array of a 3D Buffer is wrong
+    shown = np.array(buf, dtype=np.float32).reshape(h, w, 4)
+    direct = render_pixels(engine._state, rv3d.view_matrix, rv3d.window_matrix, w, h,
+                           scene.render.film_transparent, True)
+    np.testing.assert_array_equal(shown, direct)
+    assert np.isfinite(shown).all() and shown[..., :3].max() > 0.05
