@@ -11,6 +11,9 @@ import bpy
 from ..core.visibility import Cancelled
 from . import precompute, scene_export, storage
 
+#: Modal precomputes in progress (kept out of the .blend, unlike a scene property).
+RUNNING: set = set()
+
 
 def _gather(context, op):
     depsgraph = context.evaluated_depsgraph_get()
@@ -62,7 +65,7 @@ class PRT_OT_precompute(bpy.types.Operator):
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
-        if context.scene.prt.is_running:
+        if RUNNING:
             self.report({"WARNING"}, "A PRT precompute is already running")
             return {"CANCELLED"}
         job = _gather(context, self)
@@ -83,7 +86,7 @@ class PRT_OT_precompute(bpy.types.Operator):
         wm.progress_begin(0, 100)
         self._timer = wm.event_timer_add(0.2, window=context.window)
         wm.modal_handler_add(self)
-        context.scene.prt.is_running = True
+        RUNNING.add(id(self))
         return {"RUNNING_MODAL"}
 
     def _end(self, context):
@@ -92,7 +95,7 @@ class PRT_OT_precompute(bpy.types.Operator):
             wm.event_timer_remove(self._timer)
             self._timer = None
         wm.progress_end()
-        context.scene.prt.is_running = False
+        RUNNING.discard(id(self))
         context.workspace.status_text_set(None)
 
     def modal(self, context, event):

@@ -2,6 +2,7 @@
 
 import bpy
 
+from .operators import RUNNING
 from .runtime import LAST_MESSAGES
 
 
@@ -16,7 +17,7 @@ def draw_settings(layout, context):
     col.prop(prt, "ray_offset")
     col.prop(prt, "supersampling")
     row = layout.row(align=True)
-    row.enabled = not prt.is_running
+    row.enabled = not RUNNING
     row.operator("prt.precompute", icon="LIGHT_SUN")
     row.operator("prt.clear", text="", icon="TRASH")
     if prt.last_report:

@@ -1,7 +1,7 @@
 """Scene and object settings (``scene.prt``, ``object.prt``)."""
 
 import bpy
-from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
+from bpy.props import (EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
 METHOD_ITEMS = [
@@ -47,7 +47,6 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
     last_report: StringProperty(name="Last Precompute", default="")
     scene_fingerprint: StringProperty(name="Scene Fingerprint", default="",
                                       description="Geometry of every object at the precompute")
-    is_running: BoolProperty(name="Running", default=False)
 
 
 class PRTObjectData(bpy.types.PropertyGroup):
