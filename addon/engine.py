@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import bpy
 import gpu
 import numpy as np
@@ -46,11 +48,9 @@ def _eye(view_matrix: Matrix, is_perspective: bool):
     return None, np.asarray(forward, dtype=np.float64) / max(np.linalg.norm(forward), 1e-30)
 
 
-def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: int, height: int,
-                  transparent: bool, is_perspective: bool, supersampling: int = 1) -> np.ndarray:
-    """Linear RGBA (height, width, 4), bottom row first: the engine's one drawing path."""
-    eye, view_dir = _eye(view, is_perspective)
-    radiance = state.shade(eye, view_dirs_for=view_dir)
+def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, width: int,
+                height: int, transparent: bool, supersampling: int = 1) -> np.ndarray:
+    """Draw per-corner ``radiance`` offscreen: linear RGBA (height, width, 4), bottom row first."""
     batches = _batches(state, radiance)
     s = max(1, int(supersampling))
     big = drawing.render_offscreen(batches, _background(state), projection @ view,
@@ -58,6 +58,70 @@ def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: in
     if s > 1:
         big = big.reshape(height, s, width, s, 4).mean(axis=(1, 3))
     return big
+
+
+def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: int, height: int,
+                  transparent: bool, is_perspective: bool, supersampling: int = 1) -> np.ndarray:
+    """Shade for this view and draw: the engine's one drawing path (viewport and F12)."""
+    eye, view_dir = _eye(view, is_perspective)
+    radiance = state.shade(eye, view_dirs_for=view_dir)
+    return draw_pixels(state, radiance, view, projection, width, height, transparent,
+                       supersampling)
+
+
+class ViewportShading:
+    """Per-vertex radiance for the viewport, recomputed off the main thread when it
+    depends on the view and is slow (REFERENCE with glossy or layered materials).
+
+    Meanwhile the geometry is redrawn at once with the newest radiance available, so
+    the camera follows the mouse and highlights catch up when the worker finishes
+    (a timer then asks Blender to redraw).  numpy releases the GIL, so the UI stays
+    responsive.
+    """
+
+    def __init__(self):
+        self.radiance = None         # newest finished result
+        self.layout = None           # (object name, corner count) tuples it belongs to
+        self.key = None              # (state id, eye/view key) it was computed for
+        self.worker = None
+        self.result = None
+        self.version = 0             # bumped whenever ``radiance`` changes
+
+    @staticmethod
+    def layout_of(state: FrameState):
+        return tuple((st.name, len(st.arrays.corner_verts)) for st in state.objects)
+
+    def radiance_for(self, state: FrameState, eye, view_dir, on_done):
+        key = (id(state), None if eye is None else tuple(np.round(eye, 6)),
+               None if view_dir is None else tuple(np.round(view_dir, 6)))
+        self._collect()
+        if key == self.key:
+            return self.radiance
+        layout = self.layout_of(state)
+        if not state.view_dependent or self.radiance is None or self.layout != layout:
+            self.radiance = state.shade(eye, view_dirs_for=view_dir)
+            self.layout, self.key = layout, key
+            self.version += 1
+            return self.radiance
+        if self.worker is None:
+            def work():
+                try:
+                    self.result = (state.shade(eye, view_dirs_for=view_dir), layout, key)
+                except Exception as exc:           # shown as stale; never breaks drawing
+                    self.result = (None, layout, key)
+                    print("PRT Relight: viewport shading failed:", exc)
+            self.worker = threading.Thread(target=work, name="prt-view-shading", daemon=True)
+            self.worker.start()
+            on_done(self.worker)
+        return self.radiance
+
+    def _collect(self):
+        if self.worker is not None and not self.worker.is_alive():
+            self.worker = None
+            radiance, layout, key = self.result
+            if radiance is not None:
+                self.radiance, self.layout, self.key = radiance, layout, key
+                self.version += 1
 
 
 class PRTRenderEngine(bpy.types.RenderEngine):
@@ -72,6 +136,7 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         self._state = None
         self._view_texture = None
         self._view_key = None
+        self._shading = None
 
     # ------------------------------------------------------------- final render
     def render(self, depsgraph):
@@ -103,9 +168,10 @@ class PRTRenderEngine(bpy.types.RenderEngine):
 
     # ------------------------------------------------------------- viewport
     def view_update(self, context, depsgraph):
-        if self._state is None:
-            self._state = FrameState()
-        self._state.sync(depsgraph)
+        # A new state each time: a shading worker may still be reading the old one.
+        state = FrameState()
+        state.sync(depsgraph)
+        self._state = state
         self._view_key = None
         messages = ([self._state.error] if self._state.error else []) + self._state.warnings
         self.update_stats("PRT Relight", " | ".join(messages) if messages else "")
@@ -113,15 +179,19 @@ class PRTRenderEngine(bpy.types.RenderEngine):
     def view_draw(self, context, depsgraph):
         if self._state is None:
             self.view_update(context, depsgraph)
+        if self._shading is None:
+            self._shading = ViewportShading()
         state = self._state
         region, rv3d = context.region, context.region_data
         scene = depsgraph.scene
         width, height = region.width, region.height
+        eye, view_dir = _eye(rv3d.view_matrix, rv3d.is_perspective)
+        radiance = self._shading.radiance_for(state, eye, view_dir, self._redraw_when_done)
         key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)),
-               width, height, scene.render.film_transparent, scene.prt.method)
+               width, height, scene.render.film_transparent, id(state), self._shading.version)
         if key != self._view_key or self._view_texture is None:
-            pixels = render_pixels(state, rv3d.view_matrix, rv3d.window_matrix, width, height,
-                                   scene.render.film_transparent, rv3d.is_perspective)
+            pixels = draw_pixels(state, radiance, rv3d.view_matrix, rv3d.window_matrix, width,
+                                 height, scene.render.film_transparent)
             self._view_texture = drawing.float_texture(pixels)
             self._view_key = key
         gpu.state.blend_set("ALPHA_PREMULT")
@@ -129,6 +199,18 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         draw_texture_2d(self._view_texture, (0, 0), width, height)
         self.unbind_display_space_shader()
         gpu.state.blend_set("NONE")
+
+    def _redraw_when_done(self, worker):
+        """Poll the shading worker from Blender's main loop; redraw when it is done."""
+        def poll():
+            if worker.is_alive():
+                return 0.1
+            try:
+                self.tag_redraw()
+            except ReferenceError:            # the viewport was closed meanwhile
+                pass
+            return None
+        bpy.app.timers.register(poll, first_interval=0.1)
 
 
 def get_panels():

@@ -164,6 +164,15 @@ class FrameState:
         self.objects = objects
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
 
+    @property
+    def view_dependent(self) -> bool:
+        """Whether shading changes with the camera (REFERENCE with glossy or layered
+        materials); SH and diffuse-only scenes do not."""
+        if self.method == "SH":
+            return False
+        return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
+                   for st in self.objects for m in st.materials)
+
     # ------------------------------------------------------------------ shade
     def shade(self, eye, view_dirs_for=None):
         """Per-corner radiance (C, 3) float32 for each object.

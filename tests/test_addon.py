@@ -284,8 +284,13 @@ class _FakeEngine:
         self._state = None
         self._view_texture = None
         self._view_key = None
+        self._shading = None
         self.bound = 0
         self.stats = None
+        self.workers = []
+
+    def _redraw_when_done(self, worker):
+        self.workers.append(worker)           # Blender's timer would poll it
 
     def bind_display_space_shader(self, scene):
         self.bound += 1
@@ -406,3 +411,51 @@ def test_modal_precompute_esc_cancels_and_timer_finishes():
     assert drive(op, "TIMER") == {"FINISHED"}
     assert bpy.data.objects["Suzanne"].prt.visibility is not None
     assert not operators.RUNNING
+
+
+def test_viewport_shades_view_dependent_materials_off_the_main_thread():
+    """REFERENCE with a glossy layer: after a camera move the viewport redraws at once
+    with the previous radiance and a worker computes the new one; the next draw shows
+    exactly what F12 computes for that view."""
+    import types
+
+    import gpu
+    from prt_relight.addon.engine import PRTRenderEngine, render_pixels
+
+    _small_scene()                               # no materials: Principled, view dependent
+    bpy.ops.prt.precompute()
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    w, h = 48, 36
+
+    def draw(view):
+        rv3d = types.SimpleNamespace(view_matrix=view,
+                                     window_matrix=cam.calc_matrix_camera(depsgraph, x=w, y=h),
+                                     is_perspective=True)
+        ctx = types.SimpleNamespace(region=types.SimpleNamespace(width=w, height=h),
+                                    region_data=rv3d)
+        offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
+        with offscreen.bind():
+            PRTRenderEngine.view_draw(engine, ctx, depsgraph)
+        offscreen.free()
+        buf = engine._view_texture.read()
+        buf.dimensions = w * h * 4
+        return np.array(buf, dtype=np.float32).reshape(h, w, 4), rv3d
+
+    engine = _FakeEngine()
+    view_a = cam.matrix_world.inverted()
+    first, _ = draw(view_a)
+    assert engine._state.view_dependent and not engine.workers     # first frame: synchronous
+    from mathutils import Matrix
+    view_b = view_a @ Matrix.Rotation(0.15, 4, "Z")
+    interim, rv3d = draw(view_b)
+    assert len(engine.workers) == 1                                 # shading went to a worker
+    engine.workers[0].join(60)
+    final, _ = draw(view_b)
+    expected = render_pixels(engine._state, rv3d.view_matrix, rv3d.window_matrix, w, h,
+                             scene.render.film_transparent, True)
+    np.testing.assert_array_equal(final, expected)
+    assert not np.array_equal(interim, final)                       # highlights caught up
