@@ -8,6 +8,7 @@ import time
 
 import bpy
 
+from ..core import visibility
 from ..core.visibility import Cancelled
 from . import precompute, scene_export, storage
 
@@ -16,6 +17,10 @@ RUNNING: set = set()
 
 
 def _gather(context, op):
+    if not visibility.have_embree():
+        op.report({"ERROR"}, "PRT precompute needs embreex, which ships as a wheel with this "
+                             "extension: reinstall it for this platform")
+        return None
     depsgraph = context.evaluated_depsgraph_get()
     t0 = time.perf_counter()
     try:

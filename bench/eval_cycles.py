@@ -19,20 +19,8 @@ import time
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
 
-
-def diffuse_material(name="diffuse", albedo=0.8):
-    import bpy
-    mat = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    nt = mat.node_tree
-    for node in list(nt.nodes):
-        if node.type == "BSDF_PRINCIPLED":
-            nt.nodes.remove(node)
-    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    diffuse.inputs["Color"].default_value = (albedo, albedo, albedo, 1.0)
-    nt.links.new(diffuse.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
-    return mat
+sys.path.insert(0, str(scenes.ROOT))
+from tests.blender_scene import bsdf_material  # noqa: E402
 
 
 def main(argv=None):
@@ -55,7 +43,8 @@ def main(argv=None):
         scenes.add_world(hdri, rotation_z=0.6)
         ground = scenes.add_ground(cuts=96)
         obj = scenes.add_obj(args.mesh) if args.mesh.is_file() else scenes.add_suzanne()
-        mat = diffuse_material()
+        mat = bsdf_material("diffuse", "ShaderNodeBsdfDiffuse",
+                            Color=(0.8, 0.8, 0.8, 1.0))
         for ob in (ground, obj):
             ob.data.materials.clear()
             ob.data.materials.append(mat)

@@ -11,7 +11,6 @@ import pytest
 
 from prt_relight.core import brdf, directions, envmap, mesh, reference, visibility
 
-pytestmark = pytest.mark.skipif(not visibility.have_embree(), reason="embreex not installed")
 
 N = 32
 OFFSET = 1e-4
