@@ -19,7 +19,7 @@ energy ``sum L * dw`` is preserved to rounding; a one-pixel sun's energy goes
 to the texel(s) its area overlaps, and every texel keeps the luminance-weighted
 mean direction of the light it received, so the sun keeps its direction.
 Binning by sub-pixel centre aliases: a constant image resamples to a constant
-only within about 10 % per texel (8 sub-pixels across a texel edge).
+only within 10–15 % per texel (8 sub-pixels across a texel edge).
 """
 
 from __future__ import annotations
