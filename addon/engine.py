@@ -17,7 +17,7 @@ from .runtime import FrameState
 def _background(state: FrameState):
     """(texture, rotation, strength) for drawing the world, cached on the state."""
     world = state.world
-    cached = getattr(state, "_bg", None)
+    cached = state.background
     if cached is not None and cached[0] is world:
         tex = cached[1]
     else:
@@ -29,7 +29,7 @@ def _background(state: FrameState):
             rgba = np.ones((1, 1, 4), dtype=np.float32)
             rgba[0, 0, :3] = world.color
         tex = drawing.float_texture(rgba)
-        state._bg = (world, tex)
+        state.background = (world, tex)
     R = Matrix([[float(v) for v in row] for row in world.rotation])
     return tex, R, world.strength
 

@@ -53,6 +53,17 @@ def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> envmap.
     return cube
 
 
+def _per_visibility(cache: dict, key, bits, compute, limit: int = 64):
+    """``cache[key]`` derived from ``bits`` (computed when missing).  An entry keeps
+    its ``bits`` alive, so the ``id(bits)`` in ``key`` cannot be reused meanwhile."""
+    entry = cache.get(key)
+    if entry is None or entry[0] is not bits:
+        if len(cache) >= limit:
+            cache.pop(next(iter(cache)))
+        entry = cache[key] = (bits, compute())
+    return entry[1]
+
+
 def stored_visibility(ob_orig, points: int, nbytes: int):
     """Decoded visibility bits of an object, or None if missing/unusable."""
     data = ob_orig.prt
@@ -103,6 +114,7 @@ class FrameState:
         self.resolution = 32
         self.method = "REFERENCE"
         self.sh_order = 4
+        self.background = None       # (world, GPU texture) cached by the engine
 
     # ------------------------------------------------------------------ sync
     def sync(self, depsgraph):
@@ -190,14 +202,10 @@ class FrameState:
             pts = st.points
             key = (st.name, id(st.bits), env_key)
             if st.irradiance is None or st.irradiance_key != key:
-                # The entry keeps ``bits`` alive, so its id cannot be reused meanwhile.
-                cached = _IRRADIANCE_CACHE.get(key)
-                if cached is None or cached[0] is not st.bits:
-                    irr = reference.diffuse_irradiance(st.bits, pts.normals, cube, L)
-                    if len(_IRRADIANCE_CACHE) >= 64:
-                        _IRRADIANCE_CACHE.pop(next(iter(_IRRADIANCE_CACHE)))
-                    cached = _IRRADIANCE_CACHE[key] = (st.bits, irr)
-                st.irradiance, st.irradiance_key = cached[1], key
+                st.irradiance = _per_visibility(
+                    _IRRADIANCE_CACHE, key, st.bits,
+                    lambda: reference.diffuse_irradiance(st.bits, pts.normals, cube, L))
+                st.irradiance_key = key
             view_dirs = None
             if view_dirs_for is not None:
                 view_dirs = np.broadcast_to(np.asarray(view_dirs_for, dtype=np.float64),
@@ -219,14 +227,10 @@ class FrameState:
         glossy = []
         for st in self.objects:
             pts = st.points
-            key = (st.name, id(st.bits), order)
-            cached = _TRANSFER_CACHE.get(key)
-            if cached is None or cached[0] is not st.bits:
-                if len(_TRANSFER_CACHE) >= 64:
-                    _TRANSFER_CACHE.pop(next(iter(_TRANSFER_CACHE)))
-                cached = _TRANSFER_CACHE[key] = (st.bits, sh.transfer(st.bits, pts.normals, cube,
-                                                                      order))
-            sums = sh.shade_diffuse(cached[1], light)
+            transfer = _per_visibility(
+                _TRANSFER_CACHE, (st.name, id(st.bits), order), st.bits,
+                lambda: sh.transfer(st.bits, pts.normals, cube, order))
+            sums = sh.shade_diffuse(transfer, light)
             radiance = np.zeros_like(sums)
             for slot in np.unique(pts.materials):
                 sel = np.nonzero(pts.materials == slot)[0]

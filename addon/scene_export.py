@@ -303,11 +303,7 @@ def _mapping_rotation(node, warnings) -> np.ndarray:
     scale = node.inputs.get("Scale")
     if scale is not None and not np.allclose(tuple(scale.default_value), 1.0):
         warnings.append("World: Mapping scale is ignored for directions")
-    if vtype == "TEXTURE":
-        return R.T
-    if vtype == "NORMAL":
-        return R
-    return R
+    return R.T if vtype == "TEXTURE" else R        # TEXTURE applies the inverse
 
 
 def export_world(scene, warnings: list) -> envmap.WorldLighting:
@@ -347,11 +343,8 @@ def export_world(scene, warnings: list) -> envmap.WorldLighting:
             rotation = _mapping_rotation(src, warnings)
         elif src.type != "TEX_COORD":
             warnings.append(f"World: '{src.bl_label}' before the Environment Texture is ignored")
-    pixels = _image_pixels(tex.image)
-    bad = envmap.count_non_finite(pixels)
-    if bad:
-        raise ExportError(f"Environment image '{tex.image.name}' has {bad} NaN/Inf pixel(s)")
-    try:
-        return envmap.WorldLighting(image=pixels, strength=strength, rotation=rotation)
+    try:    # WorldLighting validates the pixels (NaN/Inf) once
+        return envmap.WorldLighting(image=_image_pixels(tex.image), strength=strength,
+                                    rotation=rotation)
     except envmap.EnvironmentError_ as exc:
-        raise ExportError(str(exc)) from exc
+        raise ExportError(f"Environment image '{tex.image.name}': {exc}") from exc

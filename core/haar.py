@@ -114,6 +114,16 @@ def _levels(n: int) -> int:
 # Transform
 
 
+def _butterfly(a, b, c, d):
+    """One 2x2 Haar step: 0.5 * [[1,1,1,1],[1,-1,1,-1],[1,1,-1,-1],[1,-1,-1,1]] @ (a,b,c,d).
+
+    The matrix is symmetric and orthogonal, hence its own inverse: the same step
+    maps the four pixels of a square to (scaling, type 1, type 2, type 3) and back.
+    """
+    return (0.5 * (a + b + c + d), 0.5 * (a - b + c - d),
+            0.5 * (a + b - c - d), 0.5 * (a - b - c + d))
+
+
 def forward(face_values) -> np.ndarray:
     """Orthonormal 2D non-standard Haar transform of ``(..., N, N)`` faces."""
     a = np.array(face_values, dtype=np.float64, copy=True)
@@ -124,11 +134,8 @@ def forward(face_values) -> np.ndarray:
     while n > 1:
         h = n // 2
         p = a[..., :n, :n].reshape(lead + (h, 2, h, 2))
-        A, B, C, D = p[..., :, 0, :, 0], p[..., :, 0, :, 1], p[..., :, 1, :, 0], p[..., :, 1, :, 1]
-        ll = 0.5 * (A + B + C + D)
-        t1 = 0.5 * (A - B + C - D)
-        t2 = 0.5 * (A + B - C - D)
-        t3 = 0.5 * (A - B - C + D)
+        ll, t1, t2, t3 = _butterfly(p[..., :, 0, :, 0], p[..., :, 0, :, 1],
+                                    p[..., :, 1, :, 0], p[..., :, 1, :, 1])
         a[..., :h, :h] = ll
         a[..., :h, h:n] = t1
         a[..., h:n, :h] = t2
@@ -150,10 +157,8 @@ def inverse(coeffs) -> np.ndarray:
         ll, t1 = a[..., :h, :h], a[..., :h, h:n]
         t2, t3 = a[..., h:n, :h], a[..., h:n, h:n]
         out = np.empty(lead + (h, 2, h, 2))
-        out[..., :, 0, :, 0] = 0.5 * (ll + t1 + t2 + t3)
-        out[..., :, 0, :, 1] = 0.5 * (ll - t1 + t2 - t3)
-        out[..., :, 1, :, 0] = 0.5 * (ll + t1 - t2 - t3)
-        out[..., :, 1, :, 1] = 0.5 * (ll - t1 - t2 + t3)
+        (out[..., :, 0, :, 0], out[..., :, 0, :, 1],
+         out[..., :, 1, :, 0], out[..., :, 1, :, 1]) = _butterfly(ll, t1, t2, t3)
         a[..., :n, :n] = out.reshape(lead + (n, n))
         h = n
     return a

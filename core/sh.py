@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from .directions import Cubemap, fibonacci_sphere
+from .directions import Cubemap, cubemap, fibonacci_sphere
 from .envmap import CubeLighting, WorldLighting
 from .visibility import unpack_visibility
 
@@ -145,7 +145,6 @@ class LightingProjector:
         key = (content_key if content_key is not None else id(world.image), tuple(world.color))
         if key != self._key:
             unrotated = WorldLighting(image=world.image, color=world.color, strength=1.0)
-            from .directions import cubemap
             cube = cubemap(self.resolution)
             self._texture_coeffs = project_lighting(unrotated.to_cubemap(self.resolution), cube,
                                                     self.order)
