@@ -124,12 +124,17 @@ def _butterfly(a, b, c, d):
             0.5 * (a + b - c - d), 0.5 * (a - b - c + d))
 
 
+def _square_copy(values, name):
+    """A float64 copy of ``(..., N, N)`` faces (N a power of two) and N."""
+    a = np.array(values, dtype=np.float64, copy=True)
+    if a.ndim < 2 or a.shape[-1] != a.shape[-2]:
+        raise ValueError(f"{name} expects (..., N, N) square faces")
+    return a, _check_resolution(a.shape[-1])
+
+
 def forward(face_values) -> np.ndarray:
     """Orthonormal 2D non-standard Haar transform of ``(..., N, N)`` faces."""
-    a = np.array(face_values, dtype=np.float64, copy=True)
-    if a.ndim < 2 or a.shape[-1] != a.shape[-2]:
-        raise ValueError("forward expects (..., N, N) square faces")
-    n = _check_resolution(a.shape[-1])
+    a, n = _square_copy(face_values, "forward")
     lead = a.shape[:-2]
     while n > 1:
         h = n // 2
@@ -146,10 +151,7 @@ def forward(face_values) -> np.ndarray:
 
 def inverse(coeffs) -> np.ndarray:
     """Inverse of :func:`forward` on ``(..., N, N)`` coefficient arrays."""
-    a = np.array(coeffs, dtype=np.float64, copy=True)
-    if a.ndim < 2 or a.shape[-1] != a.shape[-2]:
-        raise ValueError("inverse expects (..., N, N) square coefficient arrays")
-    N = _check_resolution(a.shape[-1])
+    a, N = _square_copy(coeffs, "inverse")
     lead = a.shape[:-2]
     h = 1
     while h < N:
