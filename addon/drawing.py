@@ -85,8 +85,9 @@ def _quad_batch():
     return _QUAD
 
 
-def draw_frame(batches, background, view_projection, transparent: bool):
-    """Draw into the bound framebuffer.  ``background`` = (texture, rotation 4x4, strength)."""
+def draw_frame(batches, background, view_projection, transparent: bool, object_draws=()):
+    """Draw into the bound framebuffer.  ``background`` = (texture, rotation 4x4, strength);
+    ``object_draws``: callables ``draw(view_projection)`` of a per-pixel method."""
     fb = gpu.state.active_framebuffer_get()
     fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
     gpu.state.blend_set("NONE")
@@ -109,16 +110,19 @@ def draw_frame(batches, background, view_projection, transparent: bool):
     sh.uniform_float("viewProjection", view_projection)
     for batch in batches:
         batch.draw(sh)
+    for draw in object_draws:
+        draw(view_projection)
     gpu.state.depth_test_set("NONE")
     gpu.state.depth_mask_set(False)
 
 
-def render_offscreen(batches, background, view_projection, width, height, transparent):
+def render_offscreen(batches, background, view_projection, width, height, transparent,
+                     object_draws=()):
     """Draw a frame offscreen; return linear RGBA (height, width, 4), bottom row first."""
     offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
     try:
         with offscreen.bind():
-            draw_frame(batches, background, view_projection, transparent)
+            draw_frame(batches, background, view_projection, transparent, object_draws)
             fb = gpu.state.active_framebuffer_get()
             buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
         buf.dimensions = width * height * 4

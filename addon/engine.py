@@ -49,12 +49,15 @@ def _eye(view_matrix: Matrix, is_perspective: bool):
 
 
 def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, width: int,
-                height: int, transparent: bool, supersampling: int = 1) -> np.ndarray:
-    """Draw per-corner ``radiance`` offscreen: linear RGBA (height, width, 4), bottom row first."""
-    batches = _batches(state, radiance)
+                height: int, transparent: bool, supersampling: int = 1,
+                object_draws=None) -> np.ndarray:
+    """Draw per-corner ``radiance`` (or a per-pixel method's ``object_draws``) offscreen:
+    linear RGBA (height, width, 4), bottom row first."""
+    batches = [] if object_draws is not None else _batches(state, radiance)
     s = max(1, int(supersampling))
     big = drawing.render_offscreen(batches, _background(state), projection @ view,
-                                   width * s, height * s, transparent)
+                                   width * s, height * s, transparent,
+                                   object_draws=object_draws or ())
     if s > 1:
         big = big.reshape(height, s, width, s, 4).mean(axis=(1, 3))
     return big
@@ -64,9 +67,10 @@ def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: in
                   transparent: bool, is_perspective: bool, supersampling: int = 1) -> np.ndarray:
     """Shade for this view and draw: the engine's one drawing path (viewport and F12)."""
     eye, view_dir = _eye(view, is_perspective)
-    radiance = state.shade(eye, view_dirs_for=view_dir)
+    object_draws = state.draw_objects(eye, view_dir)
+    radiance = None if object_draws is not None else state.shade(eye, view_dirs_for=view_dir)
     return draw_pixels(state, radiance, view, projection, width, height, transparent,
-                       supersampling)
+                       supersampling, object_draws=object_draws)
 
 
 class ViewportShading:
@@ -186,12 +190,17 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         scene = depsgraph.scene
         width, height = region.width, region.height
         eye, view_dir = _eye(rv3d.view_matrix, rv3d.is_perspective)
-        radiance = self._shading.radiance_for(state, eye, view_dir, self._redraw_when_done)
+        object_draws = state.draw_objects(eye, view_dir)
+        radiance = None
+        if object_draws is None:
+            radiance = self._shading.radiance_for(state, eye, view_dir, self._redraw_when_done)
         key = (tuple(map(tuple, rv3d.view_matrix)), tuple(map(tuple, rv3d.window_matrix)),
-               width, height, scene.render.film_transparent, id(state), self._shading.version)
+               width, height, scene.render.film_transparent, id(state), self._shading.version,
+               object_draws is None)
         if key != self._view_key or self._view_texture is None:
             pixels = draw_pixels(state, radiance, rv3d.view_matrix, rv3d.window_matrix, width,
-                                 height, scene.render.film_transparent)
+                                 height, scene.render.film_transparent,
+                                 object_draws=object_draws)
             self._view_texture = drawing.float_texture(pixels)
             self._view_key = key
         gpu.state.blend_set("ALPHA_PREMULT")

@@ -2,6 +2,7 @@
 
 import bpy
 
+from . import methods
 from .operators import RUNNING
 from .runtime import LAST_MESSAGES
 
@@ -11,8 +12,7 @@ def draw_settings(layout, context):
     prt = scene.prt
     col = layout.column()
     col.prop(prt, "method")
-    if prt.method == "SH":
-        col.prop(prt, "sh_order")
+    methods.get(prt.method).draw_settings(col, prt)
     col.prop(prt, "resolution")
     col.prop(prt, "ray_offset")
     col.prop(prt, "supersampling")

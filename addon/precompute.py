@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core import directions, mesh as core_mesh, reference, visibility
-from . import scene_export, storage
+from . import methods, scene_export, storage
 
 
 @dataclass
@@ -31,7 +31,12 @@ class PrecomputeJob:
     objects: list
     occluders: np.ndarray
     warnings: list = field(default_factory=list)
+    method: str = "REFERENCE"
+    #: scene.prt values of every method's settings at gather time
+    settings: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    #: method data from Method.derive (stored by Method.store in the commit)
+    derived: object = None
     progress_done: int = 0
     progress_total: int = 0
     cancel_requested: bool = False
@@ -67,6 +72,8 @@ class PrecomputeJob:
         self.timings.update(build_bvh=t1 - t0, rays=t2 - t1, ray_count=stats["rays"],
                             rays_per_second=stats["rays"] / max(t2 - t1, 1e-9),
                             tessellation_check=t3 - t2)
+        self.derived = methods.get(self.method).derive(self)
+        self.timings["derive"] = time.perf_counter() - t3
 
 
 def coarse_receiver_warning(job: ObjectJob, cube) -> str:
@@ -123,7 +130,10 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     occluders = np.concatenate(tri_blocks)
     diag = core_mesh.bounding_diagonal(occluders.reshape(-1, 3))
     offset = float(settings.ray_offset) * max(diag, 1e-6)
-    return PrecomputeJob(int(settings.resolution), offset, objects, occluders, warnings)
+    return PrecomputeJob(int(settings.resolution), offset, objects, occluders, warnings,
+                         method=settings.method, settings={
+                             name: getattr(settings, name)
+                             for name in methods.scene_properties()})
 
 
 def commit(scene, job: PrecomputeJob):
@@ -156,6 +166,7 @@ def commit(scene, job: PrecomputeJob):
             old.use_fake_user = False
             storage.remove_image(old)
         new_images[o.name].name = storage.IMAGE_PREFIX + o.name
+    methods.get(job.method).store(scene, job, job.derived)
     scene.prt.precomputed_resolution = job.resolution
     scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(
         (o.name, o.fingerprint) for o in job.objects)

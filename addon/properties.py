@@ -4,13 +4,8 @@ import bpy
 from bpy.props import (EnumProperty, FloatProperty, IntProperty, PointerProperty,
                        StringProperty)
 
-METHOD_ITEMS = [
-    ("REFERENCE", "Reference",
-     "Pixel-basis triple product over every cubemap texel (exact for the cubemap; slowest)"),
-    ("SH", "Spherical Harmonics",
-     "Diffuse shadowed transfer in spherical harmonics (Sloan 2002): low frequency, fastest; "
-     "draws the diffuse part of materials only"),
-]
+from . import methods
+from .runtime import redraw_viewports
 
 RESOLUTION_ITEMS = [
     ("32", "6×32×32", "6144 directions: the default"),
@@ -19,20 +14,10 @@ RESOLUTION_ITEMS = [
 ]
 
 
-def _redraw(self, context):
-    for window in getattr(context.window_manager, "windows", []):
-        for area in window.screen.areas:
-            if area.type == "VIEW_3D":
-                area.tag_redraw()
-
-
 class PRTSceneSettings(bpy.types.PropertyGroup):
-    method: EnumProperty(name="Method", items=METHOD_ITEMS, default="REFERENCE",
+    method: EnumProperty(name="Method", items=methods.enum_items(), default="REFERENCE",
                          description="How the stored transfer is turned into pixels",
-                         update=_redraw)
-    sh_order: IntProperty(name="SH Order", default=4, min=2, max=5, update=_redraw,
-                          description="Spherical-harmonic bands kept by the SH method "
-                                      "(order n: n*n coefficients)")
+                         update=redraw_viewports)
     resolution: EnumProperty(name="Directions", items=RESOLUTION_ITEMS, default="32",
                              description="Cubemap resolution of the precomputed visibility")
     ray_offset: FloatProperty(name="Ray Offset", default=1e-4, min=1e-7, max=1e-1,
@@ -66,6 +51,8 @@ CLASSES = (PRTSceneSettings, PRTObjectData)
 
 
 def register():
+    # Every method's settings (budgets, sliders) become scene.prt properties.
+    PRTSceneSettings.__annotations__.update(methods.scene_properties())
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Scene.prt = PointerProperty(type=PRTSceneSettings)

@@ -12,7 +12,7 @@ import hashlib
 
 import numpy as np
 
-from ..core import brdf, directions, envmap, mesh as core_mesh, reference, sh, visibility
+from ..core import directions, envmap, mesh as core_mesh, visibility
 from . import scene_export, storage
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
@@ -20,17 +20,11 @@ LAST_MESSAGES: list = []
 # Decoded visibility per (image name, precompute id, point count); small LRU.
 _VIS_CACHE: dict = {}
 _VIS_CACHE_MAX = 16
-# View-independent diffuse sums per (object, visibility, lighting).
-_IRRADIANCE_CACHE: dict = {}
-# SH transfer vectors per (object, visibility, order).
-_TRANSFER_CACHE: dict = {}
-# SH lighting projectors per order (each caches its unrotated projection).
-_SH_PROJECTORS: dict = {}
 # Area-resampled environment per (world key, resolution).
 _ENV_CACHE: dict = {}
 
 
-def _env_key(world: envmap.WorldLighting, resolution: int):
+def env_key(world: envmap.WorldLighting, resolution: int):
     """Content key of the lighting (pixels hashed once per WorldLighting object)."""
     ident = getattr(world, "_content_key", None)
     if ident is None:
@@ -43,8 +37,18 @@ def _env_key(world: envmap.WorldLighting, resolution: int):
     return (ident, float(world.strength), world.rotation.round(9).tobytes(), resolution)
 
 
+def redraw_viewports(self=None, context=None):
+    """Property update callback: redraw every 3D viewport."""
+    import bpy
+    wm = bpy.context.window_manager if context is None else context.window_manager
+    for window in getattr(wm, "windows", []):
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+
 def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> envmap.CubeLighting:
-    key = _env_key(world, resolution)
+    key = env_key(world, resolution)
     cube = _ENV_CACHE.get(key)
     if cube is None:
         cube = world.to_cubemap(resolution)
@@ -53,7 +57,7 @@ def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> envmap.
     return cube
 
 
-def _per_visibility(cache: dict, key, bits, compute, limit: int = 64):
+def per_visibility(cache: dict, key, bits, compute, limit: int = 64):
     """``cache[key]`` derived from ``bits`` (computed when missing).  An entry keeps
     its ``bits`` alive, so the ``id(bits)`` in ``key`` cannot be reused meanwhile."""
     entry = cache.get(key)
@@ -89,8 +93,7 @@ def open_visibility(normals: np.ndarray, cube) -> np.ndarray:
 
 
 class ObjectState:
-    __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "irradiance",
-                 "irradiance_key")
+    __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "data")
 
     def __init__(self, name, arrays, points, materials, bits, status):
         self.name = name
@@ -99,8 +102,7 @@ class ObjectState:
         self.materials = materials
         self.bits = bits
         self.status = status
-        self.irradiance = None
-        self.irradiance_key = None
+        self.data = {}               # per-method data loaded in Method.sync
 
 
 class FrameState:
@@ -113,7 +115,7 @@ class FrameState:
         self.error: str | None = None
         self.resolution = 32
         self.method = "REFERENCE"
-        self.sh_order = 4
+        self.settings: dict = {}     # scene.prt values of every method's settings
         self.background = None       # (world, GPU texture) cached by the engine
 
     # ------------------------------------------------------------------ sync
@@ -128,7 +130,8 @@ class FrameState:
             self.world = envmap.WorldLighting(color=(0.0, 0.0, 0.0))
         self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
         self.method = scene.prt.method
-        self.sh_order = scene.prt.sh_order
+        from . import methods
+        self.settings = {name: getattr(scene.prt, name) for name in methods.scene_properties()}
         cube = directions.cubemap(self.resolution)
         nbytes = cube.size // 8
         objects = []
@@ -174,81 +177,35 @@ class FrameState:
             self.warnings.append("Scene geometry changed since precompute (objects added, "
                                  "removed or moved): shadows are stale, press Precompute")
         self.objects = objects
+        self.method_impl.sync(self)
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
+
+    def note(self, message: str):
+        """Add a warning for the panels/status bar once (methods call this while shading)."""
+        if message not in self.warnings:
+            self.warnings.append(message)
+            LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
+
+    @property
+    def method_impl(self):
+        from . import methods
+        return methods.get(self.method)
 
     @property
     def view_dependent(self) -> bool:
-        """Whether shading changes with the camera (REFERENCE with glossy or layered
-        materials); SH and diffuse-only scenes do not."""
-        if self.method == "SH":
-            return False
-        return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
-                   for st in self.objects for m in st.materials)
+        """Whether shading changes with the camera (e.g. REFERENCE with glossy or
+        layered materials); SH and diffuse-only scenes do not."""
+        return self.method_impl.view_dependent(self)
 
     # ------------------------------------------------------------------ shade
     def shade(self, eye, view_dirs_for=None):
-        """Per-corner radiance (C, 3) float32 for each object.
+        """Per-corner radiance (C, 3) float32 for each object, by the active method.
 
         ``eye``: camera position for perspective views; ``view_dirs_for`` a unit
         direction toward an orthographic camera (then ``eye`` is ignored).
         """
-        if self.method == "SH":
-            return self._shade_sh(eye, view_dirs_for)
-        cube = directions.cubemap(self.resolution)
-        L = environment_cubemap(self.world, self.resolution)
-        env_key = _env_key(self.world, self.resolution)
-        out = []
-        for st in self.objects:
-            pts = st.points
-            key = (st.name, id(st.bits), env_key)
-            if st.irradiance is None or st.irradiance_key != key:
-                st.irradiance = _per_visibility(
-                    _IRRADIANCE_CACHE, key, st.bits,
-                    lambda: reference.diffuse_irradiance(st.bits, pts.normals, cube, L))
-                st.irradiance_key = key
-            view_dirs = None
-            if view_dirs_for is not None:
-                view_dirs = np.broadcast_to(np.asarray(view_dirs_for, dtype=np.float64),
-                                            pts.normals.shape)
-            radiance = reference.shade_points(st.bits, pts.positions, pts.normals, pts.materials,
-                                              st.materials, eye, cube, L,
-                                              irradiance=st.irradiance, view_dirs=view_dirs)
-            radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
-            out.append(radiance[pts.point_of_corner])
-        return out
+        return self.method_impl.shade(self, eye, view_dirs_for)
 
-    def _shade_sh(self, eye, view_dirs_for):
-        """SH method: Lambert (and Principled base layer) radiance from transfer vectors."""
-        order = int(self.sh_order)
-        cube = directions.cubemap(self.resolution)
-        projector = _SH_PROJECTORS.setdefault(order, sh.LightingProjector(order))
-        light = projector.coefficients(self.world, _env_key(self.world, 0)[0])
-        out = []
-        glossy = []
-        for st in self.objects:
-            pts = st.points
-            transfer = _per_visibility(
-                _TRANSFER_CACHE, (st.name, id(st.bits), order), st.bits,
-                lambda: sh.transfer(st.bits, pts.normals, cube, order))
-            sums = sh.shade_diffuse(transfer, light)
-            radiance = np.zeros_like(sums)
-            for slot in np.unique(pts.materials):
-                sel = np.nonzero(pts.materials == slot)[0]
-                mat = st.materials[int(slot)] if 0 <= slot < len(st.materials) else brdf.Material()
-                vd = None
-                if mat.fresnel == "DIELECTRIC":
-                    if view_dirs_for is not None:
-                        vd = np.broadcast_to(np.asarray(view_dirs_for, np.float64), (len(sel), 3))
-                    else:
-                        vd = reference.view_directions(pts.positions[sel], eye)
-                radiance[sel] = reference.lambert_layer(mat, sums[sel], pts.normals[sel], vd)
-                if not mat.is_diffuse_only:
-                    glossy.append(st.name)
-            radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
-            out.append(radiance[pts.point_of_corner])
-        if glossy:
-            note = ("SH draws diffuse transfer only; the glossy part of these materials is "
-                    "left out: " + ", ".join(sorted(set(glossy))))
-            if note not in self.warnings:
-                self.warnings.append(note)
-        return out
+    def draw_objects(self, eye, view_dirs_for=None):
+        """Per-pixel draw callables of the active method, or None (see methods)."""
+        return self.method_impl.draw_objects(self, eye, view_dirs_for)

@@ -21,11 +21,16 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
 
-#: (method, setting name, values) swept by the benchmark.
-SWEEPS = [
-    ("REFERENCE", None, [None]),
-    ("SH", "sh_order", [2, 3, 4, 5]),
-]
+def sweeps():
+    """(method, setting name, values) for every registered method (its ``budget``),
+    REFERENCE first."""
+    from prt_relight.addon import methods
+    out = []
+    for m in methods.REGISTRY.values():
+        setting, values = m.budget if m.budget else (None, [None])
+        out.append((m.id, setting, list(values)))
+    out.sort(key=lambda row: row[0] != "REFERENCE")
+    return out
 
 
 def psnr(a: np.ndarray, ref: np.ndarray) -> float:
@@ -80,7 +85,7 @@ def main(argv=None):
     out_dir.mkdir(parents=True, exist_ok=True)
 
     rows, ref_img, ref_shade = [], None, None
-    for method, setting, values in SWEEPS:
+    for method, setting, values in sweeps():
         for value in values:
             prt.method = method
             if setting:

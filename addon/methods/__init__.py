@@ -1,0 +1,92 @@
+"""Shading methods: one module each, registered here.
+
+A method turns the synced scene (:class:`..runtime.FrameState`: world, objects,
+their stored visibility) into pixels.  Each module defines a :class:`Method`
+subclass and adds an instance to :data:`REGISTRY` with :func:`register`; the
+``scene.prt.method`` enum, its settings, the panels and the benchmarks are built
+from the registry, so adding a method touches no other glue.
+
+The contract of a method:
+
+* ``shade(state, eye, view_dir)`` returns, for each ``state.objects`` entry, the
+  per-corner linear radiance (C, 3) float32 drawn with Gouraud interpolation
+  (``eye``: perspective camera position, or ``view_dir``: unit direction toward
+  an orthographic camera).
+* A per-pixel GPU method overrides ``draw_objects`` instead: it returns a list
+  of callables ``draw(view_projection)`` that draw each object into the bound
+  framebuffer (depth test is set up by the caller); ``shade`` is then only used
+  where per-vertex values are wanted (it may return None).
+* ``scene_properties()`` returns ``{name: bpy.props.*Property(...)}`` added to
+  ``scene.prt`` (its budgets and sliders); ``budget`` names the one swept by the
+  benchmarks/report as ``(property name, values)``; ``draw_settings`` shows them.
+* ``derive(job)`` (optional, no bpy, runs in the precompute worker after the
+  visibility is traced; may raise ``core.visibility.Cancelled`` when
+  ``job.cancel_requested``) returns method data for ``job.objects``;
+  ``store(scene, job, derived)`` (main thread, in the commit) writes it to the
+  .blend.  Both run for the active method only.  ``sync(state)`` (optional)
+  loads stored data into ``state.objects[i].data`` each time a frame state is
+  built.
+"""
+
+from __future__ import annotations
+
+REGISTRY: dict = {}
+
+
+class Method:
+    id = ""
+    label = ""
+    description = ""
+    #: (scene.prt property, values swept by bench/report), or None.
+    budget = None
+
+    def scene_properties(self) -> dict:
+        return {}
+
+    def draw_settings(self, layout, prt):
+        for name in self.scene_properties():
+            layout.prop(prt, name)
+
+    def view_dependent(self, state) -> bool:
+        return False
+
+    def sync(self, state):
+        """Called at the end of FrameState.sync (load stored per-method data)."""
+
+    def shade(self, state, eye, view_dir):
+        raise NotImplementedError
+
+    def draw_objects(self, state, eye, view_dir):
+        """Per-pixel drawing hook; None means: draw ``shade``'s per-corner radiance."""
+        return None
+
+    def derive(self, job):
+        """Method data computed from ``job.objects[i].bits`` (precompute worker, no bpy)."""
+        return None
+
+    def store(self, scene, job, derived):
+        """Write ``derived`` into the .blend (main thread, precompute commit)."""
+
+
+def register(method: Method) -> Method:
+    REGISTRY[method.id] = method
+    return method
+
+
+def get(method_id: str) -> Method:
+    return REGISTRY.get(method_id) or REGISTRY["REFERENCE"]
+
+
+def enum_items():
+    return [(m.id, m.label, m.description) for m in REGISTRY.values()]
+
+
+def scene_properties() -> dict:
+    props = {}
+    for m in REGISTRY.values():
+        props.update(m.scene_properties())
+    return props
+
+
+# Registration order = order in the UI enum.
+from . import reference, sh  # noqa: E402,F401

@@ -1,0 +1,48 @@
+"""REFERENCE: the pixel-basis triple product over every cubemap texel (exact for the
+cubemap; the yardstick every other method is measured against)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core import directions, reference
+from .. import runtime
+from . import Method, register
+
+# View-independent diffuse sums per (object, visibility, lighting).
+_IRRADIANCE_CACHE: dict = {}
+
+
+class ReferenceMethod(Method):
+    id = "REFERENCE"
+    label = "Reference"
+    description = ("Pixel-basis triple product over every cubemap texel (exact for the "
+                   "cubemap; slowest)")
+
+    def view_dependent(self, state) -> bool:
+        return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
+                   for st in state.objects for m in st.materials)
+
+    def shade(self, state, eye, view_dir):
+        cube = directions.cubemap(state.resolution)
+        L = runtime.environment_cubemap(state.world, state.resolution)
+        env_key = runtime.env_key(state.world, state.resolution)
+        out = []
+        for st in state.objects:
+            pts = st.points
+            irradiance = runtime.per_visibility(
+                _IRRADIANCE_CACHE, (st.name, id(st.bits), env_key), st.bits,
+                lambda: reference.diffuse_irradiance(st.bits, pts.normals, cube, L))
+            view_dirs = None
+            if view_dir is not None:
+                view_dirs = np.broadcast_to(np.asarray(view_dir, dtype=np.float64),
+                                            pts.normals.shape)
+            radiance = reference.shade_points(st.bits, pts.positions, pts.normals, pts.materials,
+                                              st.materials, eye, cube, L,
+                                              irradiance=irradiance, view_dirs=view_dirs)
+            radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
+            out.append(radiance[pts.point_of_corner].astype(np.float32))
+        return out
+
+
+register(ReferenceMethod())
