@@ -89,4 +89,4 @@ def scene_properties() -> dict:
 
 
 # Registration order = order in the UI enum.
-from . import reference, sh  # noqa: E402,F401
+from . import reference, sh, wavelet  # noqa: E402,F401

@@ -1,0 +1,99 @@
+"""WAVELET: Haar wavelets on the cube faces -- Ng 03 non-linear lighting approximation
+for the diffuse part, Ng 04 triple product for the glossy part (core/wavelet.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core import brdf, directions, haar, reference, wavelet
+from .. import runtime
+from . import Method, register
+
+# Sparse Haar transport per (object, visibility, kept terms).
+_TRANSFER_CACHE: dict = {}
+# Lighting approximations per (lighting key, kept terms); the newest few.
+_LIGHT_CACHE: dict = {}
+
+
+def _lighting(state, cube_lighting, terms: int) -> wavelet.LightingApproximation:
+    key = (runtime.env_key(state.world, state.resolution), int(terms))
+    light = _LIGHT_CACHE.get(key)
+    if light is None:
+        if len(_LIGHT_CACHE) >= 4:
+            _LIGHT_CACHE.pop(next(iter(_LIGHT_CACHE)))
+        light = _LIGHT_CACHE[key] = wavelet.LightingApproximation(cube_lighting.radiance, terms)
+    return light
+
+
+class WaveletMethod(Method):
+    id = "WAVELET"
+    label = "Haar Wavelets"
+    description = ("Haar wavelets on the cube faces: the lighting's N largest terms for "
+                   "diffuse transfer (Ng 2003), a triple product keeping a fraction of the "
+                   "lighting and BRDF coefficients for glossy materials (Ng 2004)")
+    budget = ("wavelet_terms", [32, 128, 512, 2048])
+
+    def scene_properties(self):
+        from bpy.props import FloatProperty, IntProperty
+        upd = runtime.redraw_viewports
+        return {
+            "wavelet_terms": IntProperty(
+                name="Lighting Terms", default=256, min=1, max=98304, update=upd,
+                description="Haar coefficients of the lighting kept for diffuse transfer "
+                            "(non-linear approximation: the largest ones)"),
+            "wavelet_glossy_percent": FloatProperty(
+                name="Glossy Kept %", default=1.0, min=0.01, max=100.0, precision=2,
+                update=upd, subtype="PERCENTAGE",
+                description="Percentage of the lighting's and of each BRDF's Haar "
+                            "coefficients kept in the glossy triple product"),
+            "wavelet_transfer_percent": FloatProperty(
+                name="Transport Kept %", default=10.0, min=0.1, max=100.0, precision=1,
+                update=upd, subtype="PERCENTAGE",
+                description="Percentage of each point's diffuse transport coefficients "
+                            "stored (the largest ones)"),
+        }
+
+    def view_dependent(self, state) -> bool:
+        return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
+                   for st in state.objects for m in st.materials)
+
+    def shade(self, state, eye, view_dir):
+        cube = directions.cubemap(state.resolution)
+        L = runtime.environment_cubemap(state.world, state.resolution)
+        settings = state.settings
+        diffuse_light = _lighting(state, L, settings["wavelet_terms"])
+        glossy_terms = haar.keep_count(settings["wavelet_glossy_percent"] / 100.0, cube.resolution)
+        transfer_terms = haar.keep_count(settings["wavelet_transfer_percent"] / 100.0,
+                                         cube.resolution)
+        out = []
+        for st in state.objects:
+            pts = st.points
+            transfer = runtime.per_visibility(
+                _TRANSFER_CACHE, (st.name, id(st.bits), transfer_terms), st.bits,
+                lambda: wavelet.diffuse_transfer(st.bits, pts.normals, cube, transfer_terms),
+                limit=8)
+            irradiance = wavelet.diffuse_irradiance(transfer, diffuse_light)
+            radiance = np.zeros((pts.count, 3), dtype=np.float32)
+            for slot in np.unique(pts.materials):
+                sel = np.nonzero(pts.materials == slot)[0]
+                mat = (st.materials[int(slot)] if 0 <= slot < len(st.materials)
+                       else brdf.Material())
+                vd = None
+                if mat.fresnel == "DIELECTRIC" or not mat.is_diffuse_only:
+                    if view_dir is not None:
+                        vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
+                    else:
+                        vd = reference.view_directions(pts.positions[sel], eye)
+                radiance[sel] = reference.lambert_layer(mat, irradiance[sel], pts.normals[sel],
+                                                        vd)
+                if not mat.is_diffuse_only:
+                    glossy_light = _lighting(state, L, glossy_terms)
+                    radiance[sel] += wavelet.glossy_radiance(
+                        st.bits[sel], pts.normals[sel], vd, cube, L, mat, glossy_light,
+                        glossy_terms)
+            radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
+            out.append(radiance[pts.point_of_corner].astype(np.float32))
+        return out
+
+
+register(WaveletMethod())
