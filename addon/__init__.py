@@ -1,8 +1,8 @@
 """Blender-side glue of prt_relight (bpy only; the numerics live in ``core``)."""
 
-from . import engine, operators, panels, properties
+from . import engine, operators, panels, properties, report
 
-_MODULES = (properties, operators, engine, panels)
+_MODULES = (properties, operators, report, engine, panels)
 
 
 def register():

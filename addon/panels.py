@@ -20,6 +20,7 @@ def draw_settings(layout, context):
     row.enabled = not RUNNING
     row.operator("prt.precompute", icon="LIGHT_SUN")
     row.operator("prt.clear", text="", icon="TRASH")
+    layout.operator("prt.report", icon="GRAPH")
     if prt.last_report:
         layout.label(text=prt.last_report, icon="INFO")
     if prt.precomputed_resolution and str(prt.precomputed_resolution) != prt.resolution:

@@ -1,0 +1,202 @@
+"""The speed/error report: metrics against brute force, PNG/SVG/HTML output, and the
+``prt.report`` run on a tiny scene (every registered method shows up, the scene is put
+back, cancelling leaves nothing behind)."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import bpy
+import numpy as np
+import pytest
+
+from prt_relight.addon import methods
+from prt_relight.core import report as core_report
+
+from . import blender_scene as bs
+
+# ----------------------------------------------------------------------------- core
+
+
+def test_rel_l2_and_psnr_match_their_definitions():
+    rng = np.random.default_rng(1)
+    ref = rng.random((9, 7, 4)).astype(np.float32)
+    ref[..., 3] = (rng.random((9, 7)) > 0.3)
+    img = ref + 0.05 * rng.standard_normal(ref.shape).astype(np.float32)
+    m = ref[..., 3] > 0.5
+    num = sum(float(np.sum((img[i, j, :3].astype(np.float64) - ref[i, j, :3]) ** 2))
+              for i in range(9) for j in range(7) if m[i, j])
+    den = sum(float(np.sum(ref[i, j, :3].astype(np.float64) ** 2))
+              for i in range(9) for j in range(7) if m[i, j])
+    assert core_report.rel_l2(img, ref) == pytest.approx(math.sqrt(num / den), rel=1e-9)
+    mse = num / (3 * m.sum())
+    peak = float(ref[m][:, :3].max())
+    assert core_report.psnr(img, ref) == pytest.approx(10 * math.log10(peak ** 2 / mse),
+                                                       rel=1e-9)
+    assert core_report.rel_l2(ref, ref) == 0.0 and core_report.psnr(ref, ref) == math.inf
+    black = np.zeros_like(ref)
+    black[..., 3] = 1.0
+    assert core_report.rel_l2(black, black) == 0.0          # no division by zero
+    bad = img.copy()
+    bad[0, 0, 0] = np.nan
+    bad[..., 3] = 1.0
+    assert core_report.rel_l2(bad, black) == math.inf
+
+
+def test_pareto_frontier_is_exactly_the_non_dominated_set():
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        n = int(rng.integers(1, 30))
+        t = rng.random(n).round(2)
+        e = rng.random(n).round(2)
+        front = core_report.pareto_frontier(t, e)
+        dominated = {i for i in range(n) for j in range(n)
+                     if t[j] <= t[i] and e[j] <= e[i] and (t[j] < t[i] or e[j] < e[i])}
+        # duplicates of a frontier point: exactly one of them is kept
+        expected = {i for i in range(n) if i not in dominated}
+        kept = {(t[i], e[i]) for i in front}
+        assert kept == {(t[i], e[i]) for i in expected}
+        assert len(front) == len(kept)
+        assert list(front) == sorted(front, key=lambda i: t[i])
+    assert core_report.pareto_frontier([1.0, np.nan, 2.0], [0.5, 0.0, np.inf]) == [0]
+
+
+def test_png_round_trip_and_heatmap_ramp(tmp_path):
+    rng = np.random.default_rng(3)
+    rgb = rng.integers(0, 256, (5, 11, 3), dtype=np.uint8)
+    core_report.write_png(tmp_path / "a.png", rgb)
+    np.testing.assert_array_equal(core_report.read_png(tmp_path / "a.png"), rgb)
+    try:
+        import OpenImageIO as oiio
+    except ImportError:          # pragma: no cover
+        oiio = None
+    if oiio is not None:         # an independent decoder reads the same pixels
+        buf = oiio.ImageBuf(str(tmp_path / "a.png"))
+        np.testing.assert_array_equal(np.asarray(buf.get_pixels(oiio.UINT8)), rgb)
+    heat = core_report.heatmap_rgb(np.array([[0.0, 0.1, 0.2, 5.0, np.nan]]), 0.2)
+    assert tuple(heat[0, 0]) == (0, 0, 5)                        # ramp start
+    assert tuple(heat[0, 2]) == tuple(heat[0, 3])                # saturates at vmax
+    assert tuple(heat[0, 4]) == (0, 255, 0)                      # non-finite stands out
+    assert heat[0, 1].sum() < heat[0, 2].sum()
+
+
+def test_svg_plot_shows_every_method_and_the_frontier():
+    rows = [dict(method="A", label="1", frame_seconds=0.01, error_ref=0.2),
+            dict(method="A", label="2", frame_seconds=0.02, error_ref=0.1),
+            dict(method="B", label="", frame_seconds=1.0, error_ref=0.0),
+            dict(method="C", label="x", frame_seconds=2.0, error_ref=0.3),
+            dict(method="D", label="", frame_seconds=math.nan, error_ref=None)]
+    svg = core_report.speed_error_svg(rows)
+    for mid in "ABC":
+        assert f">{mid}<" in svg
+    assert "D (no finite point)" in svg
+    assert svg.count("<circle") == 4 + 4                         # 4 points, 4 legend dots
+    frontier = re.search(r'<polyline points="([^"]+)"', svg).group(1).split()
+    assert len(frontier) == 3                                    # C is dominated
+
+
+# ----------------------------------------------------------------------------- Blender
+
+def _tiny_scene():
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    bs.add_ground(size=6.0, cuts=8)
+    bs.add_suzanne(subdiv=0)
+    diffuse = bs.bsdf_material("Diffuse", "ShaderNodeBsdfDiffuse",
+                               Color=(0.7, 0.6, 0.5, 1.0))
+    for ob in bpy.data.objects:
+        if ob.type == "MESH":
+            ob.data.materials.append(diffuse)
+    bs.add_camera()
+    bs.set_resolution(40, 30)
+    bpy.context.scene.prt.supersampling = 1
+
+
+@pytest.mark.usefixtures("registered_addon")
+def test_report_covers_every_method_and_restores_the_scene(tmp_path):
+    from prt_relight.addon import report
+    _tiny_scene()
+    scene = bpy.context.scene
+    scene.prt.method = "SH"
+    scene.prt.sh_order = 3
+    out = tmp_path / "rep"
+    run = report.ReportRun(scene, out, repeats=1)
+    index = run.run()
+    assert index == out / "index.html" and index.is_file()
+    text = index.read_text()
+    expected_rows = sum(len(m.budget[1]) if m.budget else 1 for m in methods.REGISTRY.values())
+    assert len(run.rows) == expected_rows
+    for m in methods.REGISTRY.values():
+        assert f">{m.id}<" in text                               # in the plot's legend
+        assert any(r["method"] == m.id for r in run.rows)
+    ref = [r for r in run.rows if r["method"] == "REFERENCE"][0]
+    assert ref["error_ref"] == 0.0
+    for r in run.rows:
+        assert np.isfinite(r["frame_seconds"]) and r["frame_seconds"] > 0, r
+        assert r["error_ref"] is not None and np.isfinite(r["error_ref"]), r
+        assert (out / r["image"]).is_file() and (out / r["heatmap"]).is_file()
+    # SH is a truncation of the same transfer: wrong, but not wildly
+    sh = {r["label"]: r["error_ref"] for r in run.rows if r["method"] == "SH"}
+    assert 0 < sh["5"] < 0.5
+    # every image the page names exists
+    for name in re.findall(r"src='([^']+)'", text):
+        assert (out / name).is_file(), name
+    img = core_report.read_png(out / "reference.png")
+    assert img.shape == (30, 40, 3) and img.max() > 50
+    # the scene is as it was: method, budgets, no stored data (it had none)
+    assert scene.prt.method == "SH" and scene.prt.sh_order == 3
+    assert all(ob.prt.visibility is None for ob in bpy.data.objects if ob.type == "MESH")
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+@pytest.mark.usefixtures("registered_addon")
+def test_report_cancel_leaves_no_half_report(tmp_path):
+    from prt_relight.addon import report
+    _tiny_scene()
+    scene = bpy.context.scene
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    images = sorted(i.name for i in bpy.data.images)
+    scene.prt.method = "SH"
+    scene.prt.sh_order = 2
+    out = tmp_path / "rep"
+    run = report.ReportRun(scene, out, repeats=1)
+    steps = run.steps()
+    next(steps)
+    next(steps)
+    next(steps)                             # inside the sweep: REFERENCE then SH measured
+    assert scene.prt.method != "SH" or scene.prt.sh_order != 2
+    steps.close()                           # what ESC does
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == []
+    assert scene.prt.method == "SH" and scene.prt.sh_order == 2
+    assert sorted(i.name for i in bpy.data.images) == images
+    assert all(ob.prt.visibility is not None for ob in bpy.data.objects if ob.type == "MESH")
+
+
+@pytest.mark.usefixtures("registered_addon")
+def test_report_operator_in_background(tmp_path):
+    _tiny_scene()
+    out = tmp_path / "op"
+    result = bpy.ops.prt.report(directory=str(out), repeats=1, stability=False)
+    assert result == {"FINISHED"}
+    assert (out / "index.html").is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("registered_addon")
+def test_report_against_cycles(tmp_path):
+    from prt_relight.addon import report
+    _tiny_scene()
+    engine = bpy.context.scene.render.engine
+    out = tmp_path / "cy"
+    run = report.ReportRun(bpy.context.scene, out, repeats=1, include_cycles=True,
+                           cycles_samples=32, method_ids={"REFERENCE", "SH"})
+    run.run()
+    assert (out / "cycles.png").is_file() and (out / "cycles.exr").is_file()
+    ref = [r for r in run.rows if r["method"] == "REFERENCE"][0]
+    # REFERENCE against Cycles: per-vertex shading and 32 spp noise on a coarse
+    # Suzanne; the same order as the add-on's Cycles tests
+    assert 0 < ref["error_cycles"] < 0.25
+    assert "vs Cycles" in (out / "index.html").read_text()
+    assert bpy.context.scene.render.engine == engine
