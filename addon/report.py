@@ -432,7 +432,8 @@ def _clear_objects(job):
 
 def _equirect_world(name, pixels):
     world = bpy.data.worlds.new(name)
-    world.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
     nt = world.node_tree
     h, w = pixels.shape[:2]
     img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True, is_data=True)
@@ -449,7 +450,8 @@ def _equirect_world(name, pixels):
 
 def _hdri_world(name, hdri="forest"):
     world = bpy.data.worlds.new(name)
-    world.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
     nt = world.node_tree
     folder = bpy.utils.system_resource("DATAFILES", path="studiolights/world")
     env = nt.nodes.new("ShaderNodeTexEnvironment")
@@ -500,7 +502,8 @@ def _suzanne(scene, location=(0.0, 0.0, 1.0), scale=0.8):
 
 def _glossy(name, roughness, colour=(0.8, 0.8, 0.8, 1.0), distribution="GGX"):
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        mat.use_nodes = True
     nt = mat.node_tree
     for node in list(nt.nodes):
         if node.type == "BSDF_PRINCIPLED":

@@ -1,0 +1,84 @@
+"""Hard cases × every registered method (the report's stability table, same function):
+1-pixel sun of 1e6, black world, NaN/Inf pixels, roughness 0, grazing view, fully
+occluded and fully open vertices, plus the cases methods declare themselves."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from prt_relight.addon import methods
+
+pytestmark = pytest.mark.usefixtures("registered_addon")
+
+
+@pytest.fixture(scope="module")
+def table(registered_addon):
+    from prt_relight.addon import report
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scenes_before = len(bpy.data.scenes)
+    t = report.stability_table(resolution=16)
+    assert len(bpy.data.scenes) == scenes_before          # temporary scenes are removed
+    assert not bpy.data.meshes and not bpy.data.worlds     # and everything they made
+    return t
+
+
+def _case(table, name):
+    return next(c for c in table["cases"] if c["name"] == name)
+
+
+def test_every_method_and_case_is_in_the_table(table):
+    from prt_relight.addon import report
+    assert table["methods"][0] == "REFERENCE"
+    assert set(table["methods"]) == set(methods.REGISTRY)
+    assert [c["name"] for c in table["cases"]] == [c["name"] for c in report.stability_cases()]
+    for case in table["cases"]:
+        assert set(case["cells"]) == set(methods.REGISTRY), case["name"]
+
+
+def test_no_cell_has_a_non_finite_value_or_a_failure(table):
+    bad = [(c["name"], mid, cell["message"]) for c in table["cases"]
+           for mid, cell in c["cells"].items()
+           if not cell["finite"] or cell["message"].startswith("failed")]
+    assert not bad, bad
+    missing = [(c["name"], mid) for c in table["cases"] for mid, cell in c["cells"].items()
+               if cell["error"] is None or not np.isfinite(cell["error"])]
+    assert not missing, missing
+
+
+@pytest.mark.parametrize("name", ["NaN pixels", "Inf pixels"])
+def test_non_finite_environment_is_refused_with_a_message_and_draws_black(table, name):
+    for mid, cell in _case(table, name)["cells"].items():
+        assert cell["refused_ok"], (mid, cell["message"])
+        assert "NaN/Inf" in cell["message"]
+        assert cell["max"] == 0.0, mid
+
+
+def test_black_world_gives_black_everywhere(table):
+    for mid, cell in _case(table, "black world")["cells"].items():
+        assert cell["max"] == 0.0 and cell["error"] == 0.0, mid
+
+
+def test_one_pixel_sun_stays_finite_and_bright(table):
+    cells = _case(table, "1-pixel sun 1e6")["cells"]
+    # 1e6 × one 64×32 pixel (≈ 6e-3 sr near the horizon band) ≈ 6e3 of irradiance;
+    # diffuse radiance 0.8/π of it: hundreds to thousands, never inf
+    assert 1e2 < cells["REFERENCE"]["max"] < 1e5
+    for mid, cell in cells.items():
+        assert np.isfinite(cell["max"]) and cell["max"] < 1e6, mid
+
+
+def test_method_declared_cases_are_included(monkeypatch):
+    from prt_relight.addon import report
+
+    class Declares(methods.Method):
+        id = "DECLARES"
+
+        def stability_cases(self):
+            return [dict(name="sharp lobe", description="λ = 1e5", build=lambda s: None)]
+
+    monkeypatch.setitem(methods.REGISTRY, "DECLARES", Declares())
+    names = [c["name"] for c in report.stability_cases()]
+    assert "sharp lobe [DECLARES]" in names
+    assert names[:len(report.BASE_CASES)] == [c["name"] for c in report.BASE_CASES]
