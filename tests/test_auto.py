@@ -1,0 +1,83 @@
+"""AUTO: per-object choice meets the error target against REFERENCE, falls back to
+REFERENCE when nothing does, and is cached (only what changed is selected again)."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from prt_relight.addon import runtime
+from prt_relight.addon.methods import REGISTRY, auto
+
+from . import blender_scene as bs
+
+pytestmark = pytest.mark.usefixtures("registered_addon")
+
+
+def _scene():
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    bs.add_ground(size=6.0, cuts=8)
+    bs.add_suzanne(subdiv=0)
+    diffuse = bs.bsdf_material("Diffuse", "ShaderNodeBsdfDiffuse", Color=(0.7, 0.6, 0.5, 1.0))
+    for ob in bpy.data.objects:
+        if ob.type == "MESH":
+            ob.data.materials.append(diffuse)
+    bs.add_camera()
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+
+
+def _state(method, **settings):
+    scene = bpy.context.scene
+    scene.prt.method = method
+    for k, v in settings.items():
+        setattr(scene.prt, k, v)
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    return state
+
+
+def _rel(a, b):
+    a, b = np.concatenate(a).astype(np.float64), np.concatenate(b).astype(np.float64)
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+def test_auto_meets_the_target_per_object_and_is_cached():
+    _scene()
+    eye = np.array(bpy.context.scene.camera.matrix_world.translation)
+    truth = _state("REFERENCE").shade(eye)
+    auto._CHOICE_CACHE.clear()
+    state = _state("AUTO", auto_error_target=0.02)
+    before = auto.SELECTIONS[0]
+    got = state.shade(eye)
+    assert auto.SELECTIONS[0] - before == len(state.objects) == 2
+    choices = auto.LAST_CHOICES
+    assert [c["object"] for c in choices] == [st.name for st in state.objects]
+    for st, c, a, b in zip(state.objects, choices, got, truth):
+        assert np.isfinite(a).all()
+        assert _rel([a], [b]) <= 0.02, (c, _rel([a], [b]))
+        assert c["method"] in REGISTRY
+    assert _rel(got, truth) <= 0.02
+    assert any("AUTO:" in w for w in state.warnings)
+    # same lighting, same objects, same target: nothing is selected again
+    state.shade(eye + 0.1)
+    assert auto.SELECTIONS[0] - before == 2
+    # a looser target: selected again, and never a slower choice than REFERENCE for all
+    loose = _state("AUTO", auto_error_target=0.5)
+    loose_out = loose.shade(eye)
+    assert auto.SELECTIONS[0] - before == 4
+    assert all(c["method"] != "REFERENCE" for c in auto.LAST_CHOICES), auto.LAST_CHOICES
+    assert _rel(loose_out, truth) <= 0.5
+
+
+def test_auto_falls_back_to_reference_when_nothing_meets_the_target():
+    _scene()
+    eye = np.array(bpy.context.scene.camera.matrix_world.translation)
+    truth = _state("REFERENCE").shade(eye)
+    state = _state("AUTO", auto_error_target=0.0)
+    got = state.shade(eye)
+    assert all(c["method"] == "REFERENCE" for c in auto.LAST_CHOICES)
+    assert all("no candidate meets" in c["reason"] for c in auto.LAST_CHOICES)
+    for a, b in zip(got, truth):
+        np.testing.assert_array_equal(a, b)
