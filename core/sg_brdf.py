@@ -1,0 +1,837 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+r"""Microfacet BRDFs as spherical-Gaussian mixtures (paper 003, Wang et al. 2009, §4).
+
+Equation numbers refer to ``/work/shared/papers/003_*.txt``.  Every SG lobe is
+``G(i; axis, lam, mu) = mu * exp(lam * (i . axis - 1))`` (eq. 2, :mod:`.sg`).
+
+The split of eq. 8
+------------------
+The BRDF is ``rho(o, i) = kd + ks rho_s(o, i)`` (eq. 8).  Here
+
+* ``kd = diffuse_albedo(material) / pi`` (a Lambert term; :func:`diffuse_albedo`
+  returns the *albedo*, so the diffuse radiance is ``albedo / pi * R_d`` with the
+  ``R_d`` of eq. 37), and
+* ``ks rho_s(o, i)`` is returned by :func:`specular_lobes` as an SG mixture in
+  the light direction ``i`` for the given view ``o``: ``ks``, the Fresnel factor
+  and the shadowing/masking are already inside the lobe amplitudes.  The cosine
+  ``max(0, n . i)`` is *not* included (eq. 41 multiplies by the clamped-cosine SG
+  of eq. 40).
+
+Microfacet form (eq. 9): ``rho_s(o, i) = M_o(i) D(h)``, ``h = (o + i)/|o + i|``.
+The NDF ``D`` is fitted by SGs once per parameter set (:func:`ndf_lobes`,
+least squares against the analytic ``D``); the view slice is obtained by the
+per-lobe spherical warp of eq. 17-21 (:func:`.sg.spherical_warp`) and ``M_o`` is
+evaluated at each warped lobe centre (eq. 22).
+
+Models (``SGMaterial.model``) and their parameters
+--------------------------------------------------
+With ``c = n . h`` (``theta`` its angle), ``cos_i = n . i``, ``cos_o = n . o``,
+``phi`` the azimuth of ``h`` from the tangent ``t`` (``b = n x t``):
+
+``COOK_TORRANCE`` (eq. 10-12; the NDF is the normalised Beckmann distribution,
+  i.e. eq. 11's ``exp(-(theta/m)^2)`` with Beckmann's ``tan`` and normalisation,
+  which is what Cycles evaluates):
+  ``D = exp(-tan^2 theta / a^2) / (pi a^2 c^4)``, ``a = roughness``;
+  ``M = F G2 / (4 cos_i cos_o)`` with the height-correlated Smith
+  ``G2 = 1/(1 + Lambda(cos_i) + Lambda(cos_o))`` and Cycles' rational Beckmann
+  ``Lambda`` (:func:`.brdf.smith_lambda`).  With ``F = 1`` and ``ks`` = colour this
+  is Cycles' Glossy BSDF (Beckmann) exactly, up to the SG approximation.
+``BLINN_PHONG``: ``D = (e + 2)/(2 pi) c^e`` with exponent ``e = 2/a^2 - 2``
+  (``a = roughness``, the Beckmann-equivalent slope), ``M`` as Cook-Torrance.
+``WARD``: ``D = exp(-tan^2 theta / a^2) / (pi a^2)``, ``M = F / (4 sqrt(cos_i cos_o))``
+  (Ward 1992).
+``WARD_ANISO``: ``D = exp(-tan^2 theta (cos^2 phi / ax^2 + sin^2 phi / ay^2)) / (pi ax ay)``,
+  ``ax = alpha_x``, ``ay = alpha_y``, ``M`` as Ward.
+``ASHIKHMIN_SHIRLEY``: ``D = sqrt((nu+1)(nv+1))/(2 pi) c^(nu cos^2 phi + nv sin^2 phi)``,
+  ``M = F / (4 (h . i) max(cos_i, cos_o))`` (Ashikhmin & Shirley 2000).
+
+``roughness`` is floored at :data:`ALPHA_MIN` (NDF sharpness <= ~8e4, inside the
+range where :mod:`.sg` is exact); the Blender slider is the Blender roughness
+``r`` with ``a = r^2`` (:func:`sg_material_from_brdf`).
+
+Fresnel (eq. 14 and Cycles' variants) -- ``F(c)`` with ``c = |i . h| = o . h``
+taken at the lobe centre, always written as ``F = A + B_d F_eq14(c, eta) + B_s (1 - c)^5``
+(:func:`fresnel_coefficients`; ``A, B_d, B_s`` RGB, ``ks`` folded in):
+
+* ``"NONE"``: ``F = ks`` (Cycles Glossy BSDF: the colour is the reflectance);
+* ``"SCHLICK"``: ``F = ks + (1 - ks)(1 - c)^5`` (``ks`` = F0);
+* ``"DIELECTRIC"``: ``F = ks F_eq14(c, eta)``, eq. 14 with ``eta = ior``;
+* ``"PRINCIPLED"``: Cycles' Principled v2 layering, linear in ``F_eq14``:
+  ``(1 - m)(ks + (1 - ks)(F_eq14 - F0(eta))/(1 - F0(eta))) + m (base + (1 - base)(1 - c)^5)``
+  with ``m = metallic``, ``base = diffuse`` (the metal F0) and ``ks`` the
+  dielectric ``f0`` colour.
+
+Isotropic NDFs are one SG lobe around ``n`` whose sharpness/amplitude are
+``lam = c_lam(a) 2/a^2`` and ``mu = c_mu(a)/(pi a^2)``; the corrections
+``c_lam, c_mu`` are tabulated on ``a = 0, 0.05, ..., 1`` (:data:`ISO_NDF_TABLE`,
+linear interpolation; the same constants are in ``shaders/sg_common.glsl``) and
+come from :func:`fit_isotropic_ndf` (a 1-D least-squares fit of the L2 error
+over the hemisphere of ``h``; the amplitude is solved in closed form for each
+trial sharpness, the sharpness by golden section on ``log lam``).
+
+Anisotropic NDFs (``WARD_ANISO``, ``ASHIKHMIN_SHIRLEY``) follow §4.2: several
+*isotropic* lobes with variable axes (in the local frame ``t, b, n``), fitted
+by a non-linear least-squares solve per parameter set (:func:`fit_anisotropic_ndf`,
+Levenberg-Marquardt with the amplitudes projected out; lobes placed
+symmetrically along the wide axis: one on ``n`` and up to 3 mirrored pairs, so
+K <= 7, the 7 lobes of Fig. 2 for ``nu = 75, nv = 1200``).  Each lobe is warped
+separately (§4.3) into an isotropic lobe of the view slice.
+
+What is approximated, and where it hurts: the isotropic warp at oblique views
+(§4.3 says so), ``M`` constant over each lobe (eq. 22), GGX lobes drawn with a
+Beckmann NDF of the same ``alpha`` (:func:`sg_material_from_brdf`), and
+Cycles' multiple-scattering energy compensation (dropped: its factor is at most
+1.0 + ~0.1 at roughness 0.5).  Measured errors: ``tests/test_sg_brdf.py``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import NamedTuple
+
+import numpy as np
+
+from . import brdf as core_brdf
+from . import sg as core_sg
+from .directions import orthonormal_frame
+
+__all__ = [
+    "MODELS", "ISOTROPIC_MODELS", "FRESNEL_MODES", "MAX_LOBES", "ALPHA_MIN",
+    "SGMaterial", "NDFLobes", "ndf_value", "ndf_lobes", "fit_isotropic_ndf",
+    "fit_anisotropic_ndf", "iso_ndf_sg", "specular_lobes", "specular_brdf",
+    "fresnel_coefficients", "fresnel_eq14", "diffuse_albedo", "diffuse_view_weight",
+    "sg_material_from_brdf", "ISO_TABLE_ALPHA", "ISO_NDF_TABLE", "iso_table_fit",
+    "MODEL_INDEX", "FRESNEL_INDEX",
+]
+
+MODELS = ("COOK_TORRANCE", "BLINN_PHONG", "WARD", "WARD_ANISO", "ASHIKHMIN_SHIRLEY")
+ISOTROPIC_MODELS = MODELS[:3]
+FRESNEL_MODES = ("NONE", "SCHLICK", "DIELECTRIC", "PRINCIPLED")
+#: integer codes used by the GLSL twin (``shaders/sg_common.glsl``).
+MODEL_INDEX = {m: i for i, m in enumerate(MODELS)}
+FRESNEL_INDEX = {m: i for i, m in enumerate(FRESNEL_MODES)}
+#: most lobes :func:`specular_lobes` returns per point.
+MAX_LOBES = 8
+#: smallest slope parameter (NDF lobe sharpness 2/a^2 = 8e4).
+ALPHA_MIN = 0.005
+#: cosines inside ``M_o`` are floored here (view and light at the horizon).
+COS_MIN = 1e-4
+#: Ward / Ashikhmin-Shirley ``M`` diverges like 1/sqrt(cos) at the horizon; its
+#: cosines are floored at this larger value (the integrand ``M cos`` still -> 0).
+COS_MIN_SINGULAR = 0.05
+#: warped lobes are capped at this sharpness (grazing facets, tau -> 0).
+LAMBDA_MAX = 1e5
+
+
+# --------------------------------------------------------------------------- material
+
+def _rgb_array(v, name):
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape[-1:] != (3,):
+        raise ValueError(f"{name} must have 3 components in its last axis, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} has NaN/Inf values")
+    return a
+
+
+def _positive_array(v, name, floor):
+    a = np.asarray(v, dtype=np.float64)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} has NaN/Inf values")
+    return np.maximum(a, floor)
+
+
+@dataclass
+class SGMaterial:
+    """Parameters of one SG-represented BRDF (eq. 8 with a microfacet ``rho_s``, eq. 9).
+
+    Per-point (textured) values may be arrays broadcastable to ``(P,)`` for
+    scalars and ``(P, 3)`` for colours.
+
+    model:      one of :data:`MODELS`.
+    diffuse:    Lambert albedo (``kd = diffuse / pi``); for ``fresnel="PRINCIPLED"``
+                the Principled base colour (also the metal F0).
+    specular:   ``ks`` (colour of the specular lobe; F0 for ``"SCHLICK"``, the
+                dielectric ``f0`` colour for ``"PRINCIPLED"``).
+    roughness:  slope ``a`` of the isotropic models (module docstring).
+    alpha_x, alpha_y:  ``WARD_ANISO`` slopes along the tangent / bitangent.
+    nu, nv:     ``ASHIKHMIN_SHIRLEY`` exponents along the tangent / bitangent.
+    fresnel:    one of :data:`FRESNEL_MODES`.
+    ior:        relative index of refraction ``eta`` of eq. 14.
+    metallic:   ``"PRINCIPLED"`` metal weight.
+    """
+
+    model: str = "COOK_TORRANCE"
+    diffuse: object = (0.8, 0.8, 0.8)
+    specular: object = (0.04, 0.04, 0.04)
+    roughness: object = 0.3
+    alpha_x: float = 0.3
+    alpha_y: float = 0.1
+    nu: float = 75.0
+    nv: float = 1200.0
+    fresnel: str = "NONE"
+    ior: object = 1.5
+    metallic: object = 0.0
+
+    def __post_init__(self):
+        self.model = str(self.model).upper()
+        if self.model not in MODELS:
+            raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
+        self.fresnel = str(self.fresnel).upper()
+        if self.fresnel not in FRESNEL_MODES:
+            raise ValueError(f"fresnel must be one of {FRESNEL_MODES}, got {self.fresnel!r}")
+        self.diffuse = np.maximum(_rgb_array(self.diffuse, "diffuse"), 0.0)
+        self.specular = np.maximum(_rgb_array(self.specular, "specular"), 0.0)
+        self.roughness = _positive_array(self.roughness, "roughness", ALPHA_MIN)
+        self.alpha_x = float(_positive_array(self.alpha_x, "alpha_x", ALPHA_MIN))
+        self.alpha_y = float(_positive_array(self.alpha_y, "alpha_y", ALPHA_MIN))
+        self.nu = float(_positive_array(self.nu, "nu", 0.0))
+        self.nv = float(_positive_array(self.nv, "nv", 0.0))
+        self.ior = _positive_array(self.ior, "ior", 1e-3)
+        self.metallic = np.clip(_positive_array(self.metallic, "metallic", 0.0), 0.0, 1.0)
+
+    @property
+    def is_anisotropic(self) -> bool:
+        return self.model in ("WARD_ANISO", "ASHIKHMIN_SHIRLEY")
+
+    def aniso_params(self):
+        """``(a, b)``: (alpha_x, alpha_y) or (nu, nv)."""
+        if self.model == "WARD_ANISO":
+            return self.alpha_x, self.alpha_y
+        return self.nu, self.nv
+
+
+# --------------------------------------------------------------------------- analytic NDFs
+
+def ndf_value(model, h_local, roughness=0.3, aniso=(0.3, 0.1)):
+    """Analytic NDF ``D(h)`` (module docstring) for local half vectors ``h_local``
+    (..., 3) in the frame (t, b, n).  ``roughness`` is used by the isotropic
+    models, ``aniso`` = (alpha_x, alpha_y) or (nu, nv) by the anisotropic ones.
+    Zero below the horizon."""
+    h = np.asarray(h_local, dtype=np.float64)
+    c = np.clip(h[..., 2], 0.0, 1.0)
+    c2 = np.maximum(c * c, 1e-300)
+    s2 = np.maximum(1.0 - c * c, 0.0)
+    tan2 = s2 / c2
+    with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
+        if model in ISOTROPIC_MODELS:
+            a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)
+            a2 = a * a
+            if model == "COOK_TORRANCE":
+                d = np.exp(-tan2 / a2) / (math.pi * a2 * c2 * c2)
+            elif model == "WARD":
+                d = np.exp(-tan2 / a2) / (math.pi * a2)
+            else:
+                e = np.maximum(2.0 / a2 - 2.0, 0.0)
+                d = (e + 2.0) / (2.0 * math.pi) * np.exp(e * np.log(np.maximum(c, 1e-300)))
+        else:
+            hx, hy = h[..., 0], h[..., 1]
+            r2 = hx * hx + hy * hy
+            cos2p = np.where(r2 > 0, hx * hx / np.where(r2 > 0, r2, 1.0), 1.0)
+            sin2p = 1.0 - cos2p
+            p, q = float(aniso[0]), float(aniso[1])
+            if model == "WARD_ANISO":
+                d = np.exp(-tan2 * (cos2p / (p * p) + sin2p / (q * q))) / (math.pi * p * q)
+            elif model == "ASHIKHMIN_SHIRLEY":
+                e = p * cos2p + q * sin2p
+                d = (math.sqrt((p + 1.0) * (q + 1.0)) / (2.0 * math.pi)
+                     * np.exp(e * np.log(np.maximum(c, 1e-300))))
+            else:
+                raise ValueError(f"unknown model {model!r}")
+    return np.where(c > 0.0, np.nan_to_num(d, nan=0.0, posinf=0.0), 0.0)
+
+
+# --------------------------------------------------------------------------- isotropic fit
+
+def _iso_support_cos(model, a):
+    """cos(theta) below which the isotropic NDF is < e^-40 of its peak."""
+    a = max(float(a), ALPHA_MIN)
+    if model == "BLINN_PHONG":
+        e = max(2.0 / (a * a) - 2.0, 0.0)
+        return 0.0 if e <= 40.0 else math.exp(-40.0 / e)
+    t = a * math.sqrt(40.0)                       # tan theta
+    return 1.0 / math.sqrt(1.0 + t * t)
+
+
+def _hemi_theta_quadrature(cos_min, n=160, panels=4):
+    """Gauss-Legendre nodes in theta on [0, acos(cos_min)] with weights
+    ``2 pi sin(theta) dtheta`` (isotropic integrals over the hemisphere)."""
+    tmax = math.acos(min(max(cos_min, 0.0), 1.0))
+    x, w = np.polynomial.legendre.leggauss(n)
+    edges = np.linspace(0.0, tmax, panels + 1)
+    lo, hi = edges[:-1, None], edges[1:, None]
+    th = ((lo + hi) / 2 + (hi - lo) / 2 * x).ravel()
+    wt = ((hi - lo) / 2 * w + 0 * x).ravel() * 2.0 * math.pi * np.sin(th)
+    return th, wt
+
+
+def fit_isotropic_ndf(model, roughness):
+    """Least-squares single-SG fit ``G(h; n, lam, mu) ~ D(h)`` of an isotropic NDF
+    (eq. 12 generalised): minimises ``int_{h.n>0} (G - D)^2 dh``.
+
+    For a trial ``lam`` the optimal ``mu = <g, D>/<g, g>`` is closed form; ``log lam``
+    is found by golden-section search in ``[lam0 e^-5, lam0 e^5]`` around the
+    small-angle value ``lam0 = 2/a^2`` (Blinn-Phong: the exponent).  Returns
+    ``(lam, mu, rel_error)`` with ``rel_error = ||G - D||_2 / ||D||_2`` over the
+    hemisphere.
+    """
+    if model not in ISOTROPIC_MODELS:
+        raise ValueError(f"{model} is not isotropic")
+    a = max(float(roughness), ALPHA_MIN)
+    th, wt = _hemi_theta_quadrature(_iso_support_cos(model, a) if a < 0.3 else 0.0)
+    h = np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1)
+    d = ndf_value(model, h, a)
+    one_minus_c = 2.0 * np.sin(0.5 * th) ** 2
+    dd = float(np.sum(wt * d * d))
+
+    def cost(log_lam):
+        g = np.exp(-math.exp(log_lam) * one_minus_c)
+        gg = float(np.sum(wt * g * g))
+        mu = float(np.sum(wt * g * d)) / gg
+        return dd - mu * mu * gg, mu
+
+    lam0 = 2.0 / (a * a) if model != "BLINN_PHONG" else max(2.0 / (a * a) - 2.0, 1e-2)
+    lo, hi = math.log(lam0) - 5.0, math.log(lam0) + 5.0
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    c1, c2 = hi - g * (hi - lo), lo + g * (hi - lo)
+    f1, f2 = cost(c1)[0], cost(c2)[0]
+    for _ in range(90):
+        if f1 < f2:
+            hi, c2, f2 = c2, c1, f1
+            c1 = hi - g * (hi - lo)
+            f1 = cost(c1)[0]
+        else:
+            lo, c1, f1 = c1, c2, f2
+            c2 = lo + g * (hi - lo)
+            f2 = cost(c2)[0]
+    ll = 0.5 * (lo + hi)
+    e2, mu = cost(ll)
+    return math.exp(ll), mu, math.sqrt(max(e2, 0.0) / dd)
+
+
+#: roughness nodes of the correction tables (uniform, linear interpolation).
+ISO_TABLE_ALPHA = np.linspace(0.0, 1.0, 21)
+
+
+def iso_table_fit(model):
+    """``(c_lam, c_mu)`` on :data:`ISO_TABLE_ALPHA` from :func:`fit_isotropic_ndf`
+    (``lam = c_lam 2/a^2``, ``mu = c_mu/(pi a^2)``; node 0 is the a -> 0 limit,
+    fitted at ``a = ALPHA_MIN``).  This is how :data:`ISO_NDF_TABLE` was made."""
+    cl, cm = [], []
+    for a in ISO_TABLE_ALPHA:
+        a = max(float(a), ALPHA_MIN)
+        lam, mu, _ = fit_isotropic_ndf(model, a)
+        cl.append(lam * a * a / 2.0)
+        cm.append(mu * math.pi * a * a)
+    return np.array(cl), np.array(cm)
+
+
+# Generated by iso_table_fit(model) (rounded to 7 digits); tests refit and compare.
+# Also written, with the same digits, in shaders/sg_common.glsl.
+ISO_NDF_TABLE = {
+    "COOK_TORRANCE": (
+        np.array([0.9999875, 0.998759, 0.9951434, 0.9894735, 0.9822715, 0.9742365, 0.9661932, 0.9590131, 0.9535198, 0.9504024, 0.9501555, 0.9530325, 0.9589624, 0.9674702, 0.9777121, 0.9886328, 0.9991382, 1.008208, 1.014945, 1.018575, 1.018442]),
+        np.array([1.000009, 1.000942, 1.003824, 1.00881, 1.016176, 1.0263, 1.039642, 1.056713, 1.078028, 1.104056, 1.135187, 1.171698, 1.213695, 1.261066, 1.313499, 1.370577, 1.431874, 1.497024, 1.56574, 1.637814, 1.713104])),
+    "BLINN_PHONG": (
+        np.array([0.9999875, 0.9987504, 0.9950063, 0.9887823, 0.9801036, 0.9690081, 0.9555488, 0.9397978, 0.9218516, 0.9018378, 0.8799089, 0.8561223, 0.830001, 0.7998931, 0.7626473, 0.7136991, 0.6471314, 0.5553527, 0.4281937, 0.250977, 3.368977e-05]),
+        np.array([1.000003, 1.000313, 1.001261, 1.002869, 1.005181, 1.008263, 1.012208, 1.01714, 1.023227, 1.030694, 1.039831, 1.050948, 1.064152, 1.078992, 1.094267, 1.108047, 1.117649, 1.119314, 1.107412, 1.072862, 1.000034])),
+    "WARD": (
+        np.array([1.000038, 1.003747, 1.014944, 1.033472, 1.059136, 1.091688, 1.130836, 1.176271, 1.227673, 1.284734, 1.347164, 1.414696, 1.487091, 1.564131, 1.645614, 1.731344, 1.821123, 1.914752, 2.012031, 2.11276, 2.216747]),
+        np.array([1.000009, 1.000934, 1.003699, 1.008185, 1.014223, 1.0216, 1.03008, 1.039424, 1.049401, 1.059803, 1.070449, 1.081186, 1.091891, 1.102468, 1.112836, 1.122934, 1.132709, 1.142121, 1.151137, 1.159735, 1.167898])),
+}
+
+
+def _table_lookup(table, a):
+    x = np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0) * (len(table) - 1)
+    i = np.minimum(x.astype(np.int64), len(table) - 2)
+    t = x - i
+    return (1.0 - t) * table[i] + t * table[i + 1]
+
+
+def iso_ndf_sg(model, roughness):
+    """Single-lobe SG of an isotropic NDF from the correction table:
+    ``(lam, mu)`` arrays of the shape of ``roughness`` (floored at ALPHA_MIN)."""
+    a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)
+    c_lam, c_mu = ISO_NDF_TABLE[model]
+    lam = _table_lookup(c_lam, a) * 2.0 / (a * a)
+    mu = _table_lookup(c_mu, a) / (math.pi * a * a)
+    return np.maximum(lam, 1e-4), mu
+
+
+# --------------------------------------------------------------------------- anisotropic fit
+
+class NDFLobes(NamedTuple):
+    """SG mixture of an NDF in the local frame (t, b, n): ``D(h) ~ sum_k
+    G(h; axes[k], lam[k], mu[k])``; ``rel_error = ||D* - D||_2/||D||_2`` over
+    the hemisphere of ``h``."""
+
+    axes: np.ndarray       # (K, 3)
+    lam: np.ndarray        # (K,)
+    mu: np.ndarray         # (K,)
+    rel_error: float
+
+
+def _aniso_widths(model, p, q):
+    """Angular widths (std-like, radians) along t and b."""
+    if model == "WARD_ANISO":
+        return p / math.sqrt(2.0), q / math.sqrt(2.0)
+    return 1.0 / math.sqrt(max(p, 1e-6)), 1.0 / math.sqrt(max(q, 1e-6))
+
+
+def _aniso_grid(model, p, q, wide_x, nt=72, nphi=48):
+    """Quadrature over one quadrant of the hemisphere (the NDF and the fitted
+    mixtures are mirror symmetric in t and b) -- returns (h (Q,3), w (Q,))."""
+    wx, wy = _aniso_widths(model, p, q)
+    tmax = min(0.5 * math.pi, 7.0 * max(wx, wy))
+    x, w = np.polynomial.legendre.leggauss(nt // 2)
+    edges = np.array([0.0, 0.3 * tmax, tmax])
+    lo, hi = edges[:-1, None], edges[1:, None]
+    th = ((lo + hi) / 2 + (hi - lo) / 2 * x).ravel()
+    wt = ((hi - lo) / 2 * w + 0 * x).ravel() * np.sin(th)
+    xp, wp = np.polynomial.legendre.leggauss(nphi)
+    ph = 0.25 * math.pi * (xp + 1.0)
+    wph = 0.25 * math.pi * wp
+    T, PH = np.meshgrid(th, ph, indexing="ij")
+    h = np.stack([np.sin(T) * np.cos(PH), np.sin(T) * np.sin(PH), np.cos(T)], axis=-1).reshape(-1, 3)
+    return h, (wt[:, None] * wph[None, :]).reshape(-1) * 4.0
+
+
+def _aniso_design(params, n_pairs, h, wide_x):
+    """Basis functions (Q, K) of the symmetric lobe layout for nonlinear params
+    ``[log lam0, (t_k, log lam_k) * n_pairs]``; also returns axes (K,3), lam (K,)."""
+    axes = [np.array([0.0, 0.0, 1.0])]
+    lams = [math.exp(params[0])]
+    for k in range(n_pairs):
+        t, ll = params[1 + 2 * k], params[2 + 2 * k]
+        for s in (1.0, -1.0):
+            ax = np.array([s * math.sin(t), 0.0, math.cos(t)]) if wide_x else \
+                np.array([0.0, s * math.sin(t), math.cos(t)])
+            axes.append(ax)
+            lams.append(math.exp(ll))
+    axes = np.array(axes)
+    lams = np.array(lams)
+    G = np.exp(-0.5 * lams[None, :] * np.sum((h[:, None, :] - axes[None, :, :]) ** 2, axis=-1))
+    # pair columns share one amplitude: sum the two mirrored lobes
+    cols = [G[:, 0]] + [G[:, 1 + 2 * k] + G[:, 2 + 2 * k] for k in range(n_pairs)]
+    return np.stack(cols, axis=1), axes, lams
+
+
+def _project(B, d, w):
+    sw = np.sqrt(w)
+    A = B * sw[:, None]
+    coef, *_ = np.linalg.lstsq(A, d * sw, rcond=None)
+    coef = np.maximum(coef, 0.0)
+    r = (B @ coef - d) * sw
+    return coef, r
+
+
+def fit_anisotropic_ndf(model, p, q, n_pairs=None, iterations=60):
+    """SG mixture of an anisotropic NDF (§4.2: several isotropic lobes with
+    variable axes), ``1 + 2 n_pairs`` lobes mirror-symmetric along the wide
+    axis, minimising ``int (D* - D)^2 dh`` by Levenberg-Marquardt on the lobe
+    angles and log-sharpnesses with the amplitudes solved by linear least
+    squares at each step (variable projection; amplitudes clipped at 0).
+
+    ``n_pairs=None`` picks the smallest count in 0..3 whose relative L2 error
+    is below 5 % (else 3).  Returns :class:`NDFLobes` in the local frame.
+    """
+    if model not in ("WARD_ANISO", "ASHIKHMIN_SHIRLEY"):
+        raise ValueError(f"{model} is not anisotropic")
+    p, q = float(p), float(q)
+    wx, wy = _aniso_widths(model, p, q)
+    wide_x = wx >= wy
+    wide, narrow = max(wx, wy), min(wx, wy)
+    h, w = _aniso_grid(model, p, q, wide_x)
+    d = ndf_value(model, h, aniso=(p, q))
+    dn = math.sqrt(float(np.sum(w * d * d)))
+    counts = range(4) if n_pairs is None else [int(n_pairs)]
+    best = None
+    for npairs in counts:
+        # initial layout: lobes with the narrow width, spread along the wide axis
+        lam_n = 1.0 / (narrow * narrow)
+        x0 = [math.log(lam_n)]
+        span = 1.6 * wide
+        for k in range(npairs):
+            x0 += [span * (k + 1) / (npairs + 0.5), math.log(lam_n)]
+        x = np.array(x0, dtype=np.float64)
+
+        def resid(xx):
+            B, _, _ = _aniso_design(xx, npairs, h, wide_x)
+            _, r = _project(B, d, w)
+            return r
+
+        r = resid(x)
+        cost = float(r @ r)
+        damp = 1e-2
+        for _ in range(iterations):
+            J = np.empty((r.size, x.size))
+            for j in range(x.size):
+                e = 1e-6 * max(1.0, abs(x[j]))
+                xp = x.copy()
+                xp[j] += e
+                J[:, j] = (resid(xp) - r) / e
+            JTJ = J.T @ J
+            g = J.T @ r
+            improved = False
+            for _ in range(12):
+                step = np.linalg.solve(JTJ + damp * np.diag(np.diag(JTJ) + 1e-12), -g)
+                xn = x + step
+                rn = resid(xn)
+                cn = float(rn @ rn)
+                if cn < cost:
+                    rel = (cost - cn) / cost
+                    x, r, cost = xn, rn, cn
+                    damp = max(damp / 3.0, 1e-9)
+                    improved = True
+                    break
+                damp *= 4.0
+            if not improved or rel < 1e-9:
+                break
+        B, axes, lams = _aniso_design(x, npairs, h, wide_x)
+        coef, r = _project(B, d, w)
+        err = math.sqrt(float(r @ r)) / dn
+        mus = np.concatenate([[coef[0]], np.repeat(coef[1:], 2)])
+        keep = mus > 0
+        if not np.any(keep):
+            keep[0] = True
+        fit = NDFLobes(axes[keep], lams[keep], mus[keep], err)
+        if best is None or err < best.rel_error - 1e-3:
+            best = fit
+        if n_pairs is None and err < 0.05:
+            break
+    return best
+
+
+@lru_cache(maxsize=64)
+def _aniso_cached(model, p, q):
+    return fit_anisotropic_ndf(model, p, q)
+
+
+def _round_sig(x, digits=4):
+    x = float(x)
+    return float(f"{x:.{digits}g}")
+
+
+def ndf_lobes(material: SGMaterial) -> NDFLobes:
+    """SG fit of the material's NDF (Fig. 2) in the local frame (t, b, n).
+
+    Isotropic models: one lobe on ``n`` from the correction table
+    (:func:`iso_ndf_sg`; scalar ``roughness`` -- use :func:`specular_lobes` for
+    textured values); ``rel_error`` is measured against the analytic NDF.
+    Anisotropic models: :func:`fit_anisotropic_ndf`, fitted once per parameter
+    set (cached on the parameters rounded to 4 significant digits).
+    Returns :class:`NDFLobes` ``(axes (K,3), lam (K,), mu (K,), rel_error)``.
+    """
+    if material.is_anisotropic:
+        p, q = material.aniso_params()
+        return _aniso_cached(material.model, _round_sig(p), _round_sig(q))
+    a = np.asarray(material.roughness, dtype=np.float64)
+    if a.size != 1:
+        raise ValueError("ndf_lobes needs a scalar roughness (textured values: specular_lobes)")
+    a = float(a.reshape(-1)[0])
+    return _iso_cached(material.model, _round_sig(a, 6))
+
+
+@lru_cache(maxsize=256)
+def _iso_cached(model, a):
+    lam, mu = iso_ndf_sg(model, a)
+    lam, mu = float(lam), float(mu)
+    th, wt = _hemi_theta_quadrature(_iso_support_cos(model, a) if a < 0.3 else 0.0)
+    h = np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1)
+    d = ndf_value(model, h, a)
+    g = mu * np.exp(-lam * 2.0 * np.sin(0.5 * th) ** 2)
+    err = math.sqrt(float(np.sum(wt * (g - d) ** 2)) / float(np.sum(wt * d * d)))
+    return NDFLobes(np.array([[0.0, 0.0, 1.0]]), np.array([lam]), np.array([mu]), err)
+
+
+# --------------------------------------------------------------------------- Fresnel
+
+def fresnel_eq14(c, eta):
+    """Eq. 14 (Cook & Torrance 1981): ``F = (g-c)^2/(2(g+c)^2) (1 + ((c(g+c)-1)/(c(g-c)+1))^2)``,
+    ``g = sqrt(eta^2 + c^2 - 1)``, ``c = |i . h|``; 1 under total internal reflection."""
+    c = np.abs(np.asarray(c, dtype=np.float64))
+    eta = np.asarray(eta, dtype=np.float64)
+    g2 = eta * eta + c * c - 1.0
+    g = np.sqrt(np.maximum(g2, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (g - c) / (g + c)
+        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        f = 0.5 * a * a * (1.0 + b * b)
+    return np.where(g2 > 0.0, np.nan_to_num(f, nan=1.0), 1.0)
+
+
+def fresnel_coefficients(material: SGMaterial):
+    """``(A, B_d, B_s)`` RGB arrays (broadcast shape of the material's values + (3,))
+    such that ``ks F(c) = A + B_d F_eq14(c, ior) + B_s (1 - c)^5`` (module docstring)."""
+    ks = material.specular
+    zero = np.zeros_like(ks)
+    mode = material.fresnel
+    if mode == "NONE":
+        return ks, zero, zero
+    if mode == "SCHLICK":
+        return ks, zero, 1.0 - ks
+    if mode == "DIELECTRIC":
+        return zero, ks, zero
+    eta = np.asarray(material.ior, dtype=np.float64)[..., None]
+    f0r = np.minimum(((eta - 1.0) / (eta + 1.0)) ** 2, 1.0 - 1e-6)
+    m = np.asarray(material.metallic, dtype=np.float64)[..., None]
+    base = np.clip(material.diffuse, 0.0, 1.0)
+    ks = np.clip(ks, 0.0, 1.0)
+    a = (1.0 - m) * (ks - (1.0 - ks) * f0r / (1.0 - f0r)) + m * base
+    bd = (1.0 - m) * (1.0 - ks) / (1.0 - f0r)
+    bs = m * (1.0 - base)
+    return a, bd, bs
+
+
+def _fresnel(material, c):
+    """``ks F(c)`` (..., 3) for cosines ``c`` (...,)."""
+    a, bd, bs = fresnel_coefficients(material)
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    out = a + 0.0 * c[..., None]
+    if np.any(bd):
+        eta = np.asarray(material.ior, dtype=np.float64)
+        out = out + bd * fresnel_eq14(c, eta if eta.ndim == 0 else eta[..., None])[..., None]
+    if np.any(bs):
+        out = out + bs * ((1.0 - c) ** 5)[..., None]
+    if material.fresnel == "PRINCIPLED":
+        out = np.clip(out, 0.0, None)
+    return out
+
+
+# --------------------------------------------------------------------------- M_o and the view slice
+
+def _m_factor(model, roughness, cos_i, cos_o, h_dot_i):
+    """Scalar part of ``M_o(i)`` (without Fresnel) per model (module docstring)."""
+    if model in ("COOK_TORRANCE", "BLINN_PHONG"):
+        ci = np.maximum(cos_i, COS_MIN)
+        co = np.maximum(cos_o, COS_MIN)
+        a2 = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN) ** 2
+        li = core_brdf._lambda_raw("BECKMANN", a2, ci)
+        lo = core_brdf._lambda_raw("BECKMANN", a2, co)
+        return 1.0 / ((1.0 + li + lo) * 4.0 * ci * co)
+    if model in ("WARD", "WARD_ANISO"):
+        ci = np.maximum(cos_i, COS_MIN_SINGULAR)
+        co = np.maximum(cos_o, COS_MIN_SINGULAR)
+        return 1.0 / (4.0 * np.sqrt(ci * co))
+    ci = np.maximum(cos_i, COS_MIN_SINGULAR)
+    co = np.maximum(cos_o, COS_MIN_SINGULAR)
+    return 1.0 / (4.0 * np.maximum(h_dot_i, COS_MIN_SINGULAR) * np.maximum(ci, co))
+
+
+def _unit(v, name):
+    a = np.asarray(v, dtype=np.float64)
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (P, 3), got {np.shape(v)}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} has NaN/Inf values")
+    n = np.linalg.norm(a, axis=1, keepdims=True)
+    return a / np.where(n > 0, n, 1.0)
+
+
+def _frames(normals, tangents):
+    n = _unit(normals, "normals")
+    if tangents is None:
+        t, _ = orthonormal_frame(n)
+    else:
+        t = _unit(tangents, "tangents")
+        if t.shape != n.shape:
+            raise ValueError(f"tangents {t.shape} must match normals {n.shape}")
+        t = t - np.sum(t * n, axis=1, keepdims=True) * n
+        ln = np.linalg.norm(t, axis=1, keepdims=True)
+        fallback, _ = orthonormal_frame(n)
+        t = np.where(ln > 1e-8, t / np.where(ln > 0, ln, 1.0), fallback)
+    b = np.cross(n, t)
+    return n, t, b
+
+
+def _local_ndf_lobes(material, P):
+    """NDF lobes per point: axes_local (P|1, K, 3), lam (P|1, K), mu (P|1, K)."""
+    if material.is_anisotropic:
+        f = ndf_lobes(material)
+        return f.axes[None], f.lam[None], f.mu[None]
+    lam, mu = iso_ndf_sg(material.model, material.roughness)
+    lam = np.broadcast_to(lam, np.shape(lam) if np.ndim(lam) else (1,)).reshape(-1, 1)
+    mu = np.broadcast_to(mu, np.shape(mu) if np.ndim(mu) else (1,)).reshape(-1, 1)
+    if lam.shape[0] not in (1, P):
+        raise ValueError(f"roughness has {lam.shape[0]} values for {P} points")
+    return np.array([[[0.0, 0.0, 1.0]]]), lam, mu
+
+
+def _per_point(x, P, tail=()):
+    a = np.asarray(x, dtype=np.float64)
+    return np.broadcast_to(a, (P,) + tail) if a.ndim and a.shape[0] == P else a
+
+
+def specular_lobes(material: SGMaterial, normals, views, tangents=None):
+    """The view slice ``ks rho_s(o, i)`` of the specular BRDF as an SG mixture in
+    ``i`` (eq. 15-22), without the cosine ``n . i``.
+
+    For each NDF lobe (:func:`ndf_lobes`, placed in the frame (t, b, n); ``t`` is
+    ``tangents`` made orthogonal to ``n``, or the branchless
+    :func:`.directions.orthonormal_frame` tangent when None):
+
+    * warp (eq. 18-21): ``p_W = 2 (o.p) p - o``, ``lam_W = lam_D / (4 |o.p|)``
+      (capped at :data:`LAMBDA_MAX`), ``mu_W = mu_D``;
+    * ``mu = mu_W ks F(o.p) M_o(p_W)`` (eq. 22) with ``M_o`` of the model
+      (cosines floored at :data:`COS_MIN`, or :data:`COS_MIN_SINGULAR` for the
+      ``1/sqrt(cos)`` models) and the Fresnel of :func:`fresnel_coefficients`;
+      lobes whose facet faces away from the view (``o.p <= 0``) get ``mu = 0``.
+
+    ``normals``, ``views`` (toward the viewer), ``tangents``: (P, 3).  Per-point
+    material arrays broadcast over P.  Returns ``axes (P, K, 3)``, ``lam (P, K)``,
+    ``mu (P, K, 3)`` (float64), ``K <= MAX_LOBES``.
+    """
+    n, t, b = _frames(normals, tangents)
+    o = _unit(views, "views")
+    if o.shape != n.shape:
+        raise ValueError(f"views {o.shape} must match normals {n.shape}")
+    P = n.shape[0]
+    ax_l, lam_d, mu_d = _local_ndf_lobes(material, P)
+    K = ax_l.shape[1]
+    if K > MAX_LOBES:
+        raise ValueError(f"{K} NDF lobes > MAX_LOBES = {MAX_LOBES}")
+    p = (ax_l[..., 0:1] * t[:, None, :] + ax_l[..., 1:2] * b[:, None, :]
+         + ax_l[..., 2:3] * n[:, None, :])                               # (P, K, 3)
+    c = np.sum(o[:, None, :] * p, axis=-1)                               # o.h  (P, K)
+    pw = 2.0 * c[..., None] * p - o[:, None, :]
+    pw /= np.maximum(np.linalg.norm(pw, axis=-1, keepdims=True), 1e-300)
+    tau = np.maximum(4.0 * np.abs(c), 4.0 * COS_MIN)
+    lam = np.minimum(np.broadcast_to(lam_d, (P, K)) / tau, LAMBDA_MAX)
+    cos_i = np.sum(n[:, None, :] * pw, axis=-1)
+    cos_o = np.sum(n * o, axis=1)[:, None]
+    rough = material.roughness
+    rough = rough[:, None] if np.ndim(rough) and np.size(rough) == P and P > 1 else rough
+    m = _m_factor(material.model, rough, cos_i, cos_o, c)
+    mat = material
+    if any(np.ndim(v) >= 1 and np.shape(v)[0] == P and P > 1
+           for v in (mat.ior, mat.metallic)) or mat.diffuse.ndim == 2 or mat.specular.ndim == 2:
+        fres = _fresnel_pointwise(mat, c, P)
+    else:
+        fres = _fresnel(mat, c)
+    mu = np.broadcast_to(mu_d, (P, K))[..., None] * (m * (c > 0.0))[..., None] * fres
+    return pw, lam, mu
+
+
+def _fresnel_pointwise(material, c, P):
+    """Fresnel with per-point (P,) / (P, 3) material values against (P, K) cosines."""
+    def col(v):
+        v = np.asarray(v, dtype=np.float64)
+        return np.broadcast_to(v, (P, 3))[:, None, :]
+
+    def sca(v):
+        v = np.asarray(v, dtype=np.float64)
+        return np.broadcast_to(v, (P,))[:, None]
+
+    m = SGMaterial.__new__(SGMaterial)
+    m.__dict__.update(material.__dict__)
+    m.specular = col(material.specular)
+    m.diffuse = col(material.diffuse)
+    m.ior = sca(material.ior)
+    m.metallic = sca(material.metallic)
+    return _fresnel(m, c)
+
+
+def specular_brdf(material: SGMaterial, normals, views, dirs, tangents=None):
+    """Analytic ``ks rho_s(o, i)`` (P, D, 3) for light directions ``dirs`` (D, 3):
+    the function :func:`specular_lobes` approximates (exact NDF, ``M`` and
+    Fresnel at each direction; zero for ``n.i <= 0``).  For tests/benches."""
+    n, t, b = _frames(normals, tangents)
+    o = _unit(views, "views")
+    L = _unit(dirs, "dirs")
+    h = o[:, None, :] + L[None, :, :]
+    h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    hl = np.stack([np.sum(h * t[:, None], -1), np.sum(h * b[:, None], -1),
+                   np.sum(h * n[:, None], -1)], axis=-1)
+    rough = material.roughness
+    rough = rough[:, None] if np.ndim(rough) and np.size(rough) == n.shape[0] and n.shape[0] > 1 else rough
+    d = ndf_value(material.model, hl, rough, material.aniso_params())
+    cos_i = L @ n.T
+    cos_i = cos_i.T
+    cos_o = np.sum(n * o, axis=1)[:, None]
+    c = np.sum(h * L[None], -1)
+    m = _m_factor(material.model, rough, cos_i, cos_o, c)
+    if material.model in ("COOK_TORRANCE", "BLINN_PHONG"):
+        pass
+    fres = _fresnel_pointwise(material, c, n.shape[0]) if (
+        material.diffuse.ndim == 2 or material.specular.ndim == 2) else _fresnel(material, c)
+    return (d * m * (cos_i > 0))[..., None] * fres
+
+
+# --------------------------------------------------------------------------- diffuse part
+
+def diffuse_albedo(material: SGMaterial):
+    """Lambert albedo ``rho_d`` of eq. 8 (``kd = rho_d / pi``), (3,) or (P, 3).
+
+    ``fresnel="PRINCIPLED"``: Cycles scales the base colour by ``(1 - metallic)``
+    and a view-dependent layering weight (:func:`.brdf.diffuse_view_weight`);
+    here its cosine-weighted average over views ``2 int w(mu) mu dmu``, so that
+    ``kd`` stays view independent (the weight varies by ~5 % between normal and
+    grazing views at roughness 0.5).  Other modes: ``material.diffuse``.
+    """
+    if material.fresnel != "PRINCIPLED":
+        return material.diffuse.copy()
+    m = np.asarray(material.metallic, dtype=np.float64)[..., None]
+    w = _principled_mean_layering(material)
+    return material.diffuse * (1.0 - m) * w
+
+
+def _principled_brdf_material(material, rough_r=None, f0=None):
+    a = float(np.mean(material.roughness))
+    r = math.sqrt(max(a, 0.0)) if rough_r is None else rough_r
+    eta = float(np.mean(material.ior))
+    ks = np.asarray(material.specular, dtype=np.float64).reshape(-1, 3).mean(axis=0)
+    return core_brdf.Material(diffuse_albedo=(1.0, 1.0, 1.0), specular_color=tuple(ks),
+                              roughness=r, distribution="GGX", fresnel="DIELECTRIC", ior=eta,
+                              metallic=0.0)
+
+
+def _principled_mean_layering(material):
+    bm = _principled_brdf_material(material)
+    x, w = np.polynomial.legendre.leggauss(16)
+    mu = 0.5 * (x + 1.0)
+    n = np.tile([0.0, 0.0, 1.0], (mu.size, 1))
+    v = np.stack([np.sqrt(1.0 - mu * mu), 0 * mu, mu], axis=1)
+    weight = core_brdf.diffuse_view_weight(bm, n, v)[:, 0].astype(np.float64)
+    return float(np.sum(w * mu * weight))
+
+
+def diffuse_view_weight(material: SGMaterial, normals, views):
+    """(P,) exact per-view Principled layering weight (Cycles), 1 for other modes."""
+    n = _unit(normals, "normals")
+    if material.fresnel != "PRINCIPLED":
+        return np.ones(n.shape[0])
+    bm = _principled_brdf_material(material)
+    return core_brdf.diffuse_view_weight(bm, n, _unit(views, "views"))[:, 0].astype(np.float64)
+
+
+# --------------------------------------------------------------------------- from core.brdf
+
+def sg_material_from_brdf(material: core_brdf.Material) -> SGMaterial:
+    """Closest SG model of a Cycles-like :class:`.brdf.Material`: Cook-Torrance
+    with the Beckmann NDF of the same ``alpha = max(r^2, ...)``.
+
+    * Glossy BSDF (``fresnel="NONE"``): ``F = 1``, ``ks`` = node colour, diffuse
+      albedo kept (0 for a pure Glossy BSDF); Beckmann is exact, GGX /
+      Multiscatter GGX become Beckmann with the same alpha (GGX's long tails and
+      the multiscatter energy are lost).
+    * ``"SCHLICK"`` / ``"F82"``: Schlick with ``F0 = specular_color`` (F82 tint dropped).
+    * Principled (``"DIELECTRIC"``): ``fresnel="PRINCIPLED"`` with the base colour,
+      metallic, the dielectric ``f0`` colour and ``eta`` (module docstring).
+    """
+    alpha = max(material.alpha, ALPHA_MIN)
+    common = dict(model="COOK_TORRANCE", roughness=alpha)
+    if material.fresnel == "NONE":
+        return SGMaterial(diffuse=material.diffuse_albedo, specular=material.specular_color,
+                          fresnel="NONE", **common)
+    if material.fresnel in ("SCHLICK", "F82"):
+        diffuse = material.diffuse_albedo if material.fresnel == "SCHLICK" else (0.0, 0.0, 0.0)
+        return SGMaterial(diffuse=diffuse, specular=material.specular_color,
+                          fresnel="SCHLICK", **common)
+    spec = material.specular_color if material._has_dielectric_lobe else (0.0, 0.0, 0.0)
+    return SGMaterial(diffuse=material.diffuse_albedo, specular=spec, fresnel="PRINCIPLED",
+                      ior=material.ior if material.ior != 1.0 else 1.0 + 1e-6,
+                      metallic=material.metallic, **common)

@@ -1,0 +1,529 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+r"""Lighting for the SG renderer of paper 003 (Wang et al. 2009, §6).
+
+Equation numbers refer to ``/work/shared/papers/003_*.txt``; SG lobes are
+``G(i; axis, lam, mu) = mu exp(lam (i . axis - 1))`` (eq. 2, :mod:`.sg`).
+
+* :func:`fit_environment_sgs` -- the SG mixture ``L*`` of the environment used
+  by the *diffuse* term (eq. 39): a few lobes that keep the irradiance.
+* :class:`PrefilteredEnvironment` -- ``Gamma_L(p, lam)`` of eq. 34-35 for the
+  *specular* term: the environment convolved with SG kernels of a ladder of
+  sharpnesses, a "MIPMAP of cubemaps" indexed by ``lam``.
+* :func:`lamp_sgs` -- point / spot / sun lamps as one SG each (eq. 32-33).
+
+World rotation: everything here works on the *unrotated* environment (texture
+space: a ``WorldLighting`` with ``rotation = I`` resampled to the cubemap).  A
+world direction ``d`` reads texture direction ``R d`` with ``R =
+WorldLighting.rotation``; :meth:`PrefilteredEnvironment.lookup` takes that
+``rotation``, so turning the HDRI needs no refilter, and the diffuse SG axes
+rotate by ``R^T`` (:func:`rotate_to_world`, eq. 7).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import sg as core_sg
+from .directions import FACE_AXES, Cubemap, cubemap
+
+__all__ = [
+    "fit_environment_sgs", "environment_irradiance", "sg_mixture_radiance",
+    "rotate_to_world", "PrefilteredEnvironment", "face_coordinates",
+    "Lamp", "lamp_sgs", "lamp_irradiance", "LAMP_LAMBDA_MAX", "ENV_LAMBDA_CANDIDATES",
+]
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+#: sharpness ladder the greedy environment fit chooses from (capped by the cubemap).
+ENV_LAMBDA_CANDIDATES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0)
+
+
+def _check_radiance(cube_radiance, cube: Cubemap):
+    L = np.asarray(cube_radiance, dtype=np.float64)
+    if L.shape != (cube.size, 3):
+        raise ValueError(f"cube_radiance must be ({cube.size}, 3), got {L.shape}")
+    if not np.all(np.isfinite(L)):
+        raise ValueError("environment radiance has NaN/Inf texels")
+    return np.maximum(L, 0.0)
+
+
+def _lobe_matrix(dirs, axes, lam):
+    """(D, J) values of unit-amplitude lobes at ``dirs`` (D, 3)."""
+    d = dirs @ np.asarray(axes, dtype=np.float64).T
+    return np.exp(np.asarray(lam, dtype=np.float64)[None, :] * (np.minimum(d, 1.0) - 1.0))
+
+
+def sg_mixture_radiance(dirs, axes, lam, mu):
+    """``sum_j G(d; axes_j, lam_j, mu_j)`` (D, 3) for directions (D, 3)."""
+    return _lobe_matrix(np.asarray(dirs, dtype=np.float64), axes, lam) @ np.asarray(mu, dtype=np.float64)
+
+
+def _irradiance_operator(cube: Cubemap, normal_resolution: int = 8):
+    normals = cubemap(normal_resolution).directions
+    C = np.maximum(normals @ np.asarray(cube.mean_directions).T, 0.0) * cube.solid_angles[None, :]
+    return normals, C
+
+
+def environment_irradiance(cube_radiance, cube: Cubemap, normals):
+    """Unshadowed irradiance ``E(n) = sum_k L_k max(0, n . w_k) dw_k`` (exact cube sum)."""
+    L = _check_radiance(cube_radiance, cube)
+    C = np.maximum(np.asarray(normals, dtype=np.float64) @ np.asarray(cube.mean_directions).T, 0.0)
+    return (C * cube.solid_angles[None, :]) @ L
+
+
+def rotate_to_world(axes, rotation):
+    """Texture-space lobe axes -> world (``d_tex = R d_world``, so ``p_world = R^T p_tex``; eq. 7)."""
+    return np.asarray(axes, dtype=np.float64) @ np.asarray(rotation, dtype=np.float64)
+
+
+def _tangent_basis(p):
+    a = np.where(np.abs(p[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
+    t = np.cross(p, a)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return t, np.cross(p, t)
+
+
+def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: float = 0.03,
+                        refine_iterations: int = 12):
+    """SG mixture ``L*(i) = sum_j G(i; p_j, lam_j, mu_j)`` of an environment for the
+    diffuse term (§6, after Tsai & Shih 2006): few lobes, brightest areas first.
+
+    1. Greedy: each new lobe is the (axis, sharpness) with the largest reduction
+       of the luminance residual, ``<g, r>^2/<g, g>`` (axes: the texels of a 6x8^2
+       cubemap plus the brightest residual texel; sharpnesses:
+       :data:`ENV_LAMBDA_CANDIDATES` up to ``(N/pi)^2`` so lobes stay resolved by
+       the N-cube).
+    2. All amplitudes (RGB) are re-solved jointly by least squares (clipped >= 0)
+       and the axes/log-sharpnesses refined by Levenberg-Marquardt (amplitudes
+       projected out) on the **irradiance** error -- what eq. 39 uses.
+    3. Stop when the relative L2 error of the unshadowed irradiance over the
+       normals of a 6x8^2 cubemap is <= ``tol``, or at ``max_lobes``.
+
+    Returns ``(axes (J, 3), lam (J,), mu (J, 3), rel_error)`` in the cube's
+    space (texture space for an unrotated world).  A black world gives J = 0.
+    """
+    L = _check_radiance(cube_radiance, cube)
+    dirs = np.asarray(cube.directions, dtype=np.float64)
+    w = np.asarray(cube.solid_angles, dtype=np.float64)
+    normals, C = _irradiance_operator(cube)
+    E = C @ L
+    En = math.sqrt(float(np.sum(E * E)))
+    empty = (np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), 0.0)
+    if En <= 0.0:
+        return empty
+    Y = L @ LUMINANCE
+    lam_cap = max(ENV_LAMBDA_CANDIDATES[0], (cube.resolution / math.pi) ** 2)
+    lams = np.array([x for x in ENV_LAMBDA_CANDIDATES if x <= lam_cap] or [ENV_LAMBDA_CANDIDATES[0]])
+    cand = cubemap(8).directions
+    dot_c = cand @ dirs.T                                      # (216, D)
+    axes, lamv = [], []
+
+    def solve_mu(G):
+        """RGB amplitudes minimising the irradiance error (clipped >= 0)."""
+        A = C @ G                                              # (Nn, J)
+        mu, *_ = np.linalg.lstsq(A, E, rcond=None)
+        mu = np.maximum(mu, 0.0)
+        return mu, A @ mu - E
+
+    def irr_resid(x, J):
+        ax = x[:3 * J].reshape(J, 3)
+        ax = ax / np.linalg.norm(ax, axis=1, keepdims=True)
+        lm = np.exp(np.clip(x[3 * J:], math.log(1e-3), math.log(lam_cap)))
+        G = _lobe_matrix(dirs, ax, lm)
+        A = C @ G
+        yl = E @ LUMINANCE
+        sw, *_ = np.linalg.lstsq(A, yl, rcond=None)
+        return A @ np.maximum(sw, 0.0) - yl
+
+    rel = 1.0
+    mu = np.zeros((0, 3))
+    residual = Y.copy()
+    while len(axes) < max_lobes:
+        # greedy candidate (radiance-space gain)
+        rw = residual * w
+        best = None
+        brightest = dirs[int(np.argmax(residual))]
+        cands = np.vstack([cand, brightest[None]])
+        dots = np.vstack([dot_c, (brightest @ dirs.T)[None]])
+        for lm in lams:
+            G = np.exp(lm * (dots - 1.0))                       # (Cn, D)
+            num = G @ rw
+            den = (G * G) @ w
+            gain = np.where(num > 0, num * num / den, 0.0)
+            k = int(np.argmax(gain))
+            if best is None or gain[k] > best[0]:
+                best = (gain[k], cands[k], lm)
+        if best is None or best[0] <= 0.0:
+            break
+        axes.append(best[1])
+        lamv.append(best[2])
+        J = len(axes)
+        # refine all lobes on the irradiance error
+        x = np.concatenate([np.array(axes).reshape(-1), np.log(np.array(lamv))])
+        r = irr_resid(x, J)
+        cost = float(r @ r)
+        damp = 1e-2
+        for _ in range(refine_iterations):
+            Jm = np.empty((r.size, x.size))
+            for j in range(x.size):
+                e = 1e-5
+                xp = x.copy()
+                xp[j] += e
+                Jm[:, j] = (irr_resid(xp, J) - r) / e
+            JTJ = Jm.T @ Jm
+            g = Jm.T @ r
+            improved = False
+            for _ in range(8):
+                step = np.linalg.solve(JTJ + damp * np.diag(np.diag(JTJ) + 1e-12), -g)
+                xn = x + step
+                rn = irr_resid(xn, J)
+                cn = float(rn @ rn)
+                if cn < cost:
+                    rel_gain = (cost - cn) / max(cost, 1e-300)
+                    x, r, cost = xn, rn, cn
+                    damp = max(damp / 3.0, 1e-9)
+                    improved = True
+                    break
+                damp *= 4.0
+            if not improved or rel_gain < 1e-6:
+                break
+        ax = x[:3 * J].reshape(J, 3)
+        ax /= np.linalg.norm(ax, axis=1, keepdims=True)
+        axes = list(ax)
+        lamv = list(np.exp(np.clip(x[3 * J:], math.log(1e-3), math.log(lam_cap))))
+        G = _lobe_matrix(dirs, ax, np.array(lamv))
+        mu, res_e = solve_mu(G)
+        rel = math.sqrt(float(np.sum(res_e * res_e))) / En
+        residual = Y - (G @ mu) @ LUMINANCE
+        if rel <= tol:
+            break
+    if not axes:
+        return empty
+    return np.array(axes), np.array(lamv), mu, rel
+
+
+# --------------------------------------------------------------------------- prefiltered environment
+
+def face_coordinates(dirs):
+    """(face, s, t) of directions (..., 3) in the cubemap convention of
+    :mod:`.directions` (s grows with the column, t with the row, both in [-1, 1])."""
+    d = np.asarray(dirs, dtype=np.float64)
+    ax = np.abs(d)
+    major = np.argmax(ax, axis=-1)
+    comp = np.take_along_axis(d, major[..., None], axis=-1)[..., 0]
+    face = 2 * major + (comp < 0)
+    m = np.take_along_axis(ax, major[..., None], axis=-1)[..., 0]
+    m = np.where(m > 0, m, 1.0)
+    axes = FACE_AXES[face]
+    s = np.einsum("...k,...k->...", d, axes[..., 1, :]) / m
+    t = np.einsum("...k,...k->...", d, axes[..., 2, :]) / m
+    return face, s, t
+
+
+def _downsample(L, N, Ns):
+    """Solid-angle weighted box filter of a (6N^2, 3) cube to Ns texels per edge:
+    ``(radiance (6Ns^2, 3), directions (6Ns^2, 3), solid angles)``.  Each coarse
+    texel's direction is the luminance-weighted mean of its children's centres
+    (so a one-texel sun keeps its place), its centre when dark."""
+    fine = cubemap(N)
+    if Ns == N:
+        return L, np.asarray(fine.directions), np.asarray(fine.solid_angles)
+    f = N // Ns
+    w = fine.solid_angles.reshape(6, N, N)
+    e = (L.reshape(6, N, N, 3) * w[..., None]).reshape(6, Ns, f, Ns, f, 3).sum(axis=(2, 4))
+    ws = w.reshape(6, Ns, f, Ns, f).sum(axis=(2, 4))
+    y = (L @ LUMINANCE).reshape(6, N, N) * w
+    m = (y[..., None] * np.asarray(fine.directions).reshape(6, N, N, 3)).reshape(
+        6, Ns, f, Ns, f, 3).sum(axis=(2, 4))
+    ysum = y.reshape(6, Ns, f, Ns, f).sum(axis=(2, 4))
+    coarse = cubemap(Ns)
+    dirs = np.asarray(coarse.directions).reshape(6, Ns, Ns, 3).copy()
+    lit = ysum > 0
+    md = m[lit] / ysum[lit][:, None]
+    dirs[lit] = md / np.linalg.norm(md, axis=1, keepdims=True)
+    return (e / ws[..., None]).reshape(-1, 3), dirs.reshape(-1, 3), ws.reshape(-1)
+
+
+def _bilinear(level, face, s, t):
+    """Bilinear lookup within a face (edge-clamped) of a (6, N, N, C) array --
+    the same arithmetic as ``shaders/sg_common.glsl``'s texelFetch version."""
+    N = level.shape[1]
+    x = np.clip((s + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0)
+    y = np.clip((t + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0)
+    x0 = np.minimum(np.floor(x).astype(np.int64), N - 1)
+    y0 = np.minimum(np.floor(y).astype(np.int64), N - 1)
+    x1 = np.minimum(x0 + 1, N - 1)
+    y1 = np.minimum(y0 + 1, N - 1)
+    fx = (x - x0)[..., None]
+    fy = (y - y0)[..., None]
+    a = level[face, y0, x0] * (1 - fx) + level[face, y0, x1] * fx
+    b = level[face, y1, x0] * (1 - fx) + level[face, y1, x1] * fx
+    return a * (1 - fy) + b * fy
+
+
+class PrefilteredEnvironment:
+    """``Gamma_L(p, lam)`` of eq. 34-35 tabulated as a pyramid of cubemaps.
+
+    Level ``l`` holds the environment convolved with the *normalised* kernel
+    ``G(i; p, lam_l, 1) / int G`` (the kernel-weighted mean radiance around ``p``):
+
+    * level 0: ``lam = 0`` (the mean radiance, constant),
+    * levels 1..n-2: ``lam = lam_1 r^(l-1)`` with ``lam_1 = 1/8`` and ratio
+      ``r = sqrt(2)`` up to the largest value <= ``(2N/pi)^2`` (a lobe about one
+      texel wide),
+    * level n-1: ``lam = inf``: the environment itself.
+
+    Each finite level is computed by brute force, ``sum_k G(w_k; p, lam) L_k dw_k
+    / sum_k G(w_k; p, lam) dw_k`` over the texels of the environment box-filtered to
+    ``Ns = min(N, 2^ceil(log2(pi sqrt(lam))))`` texels per face edge (>= 4;
+    texels at most ~1/pi of a lobe width), evaluated at all ``N x N`` texel
+    centres of the output.
+
+    :meth:`lookup` interpolates linearly in ``log lam`` between levels
+    (linearly in ``lam`` below ``lam_1`` and in ``1/lam`` above the last
+    finite level) and bilinearly within a face (edge-clamped, no filtering
+    across faces).  :meth:`inner_product` gives eq. 35: ``mu Gamma_L(p, lam)``.
+    """
+
+    def __init__(self, cube_radiance, cube: Cubemap, lambdas=None, lambda_first: float = 0.125,
+                 ratio: float = math.sqrt(2.0)):
+        L = _check_radiance(cube_radiance, cube)
+        N = cube.resolution
+        self.resolution = N
+        if lambdas is None:
+            top = (2.0 * N / math.pi) ** 2
+            k = int(math.floor(math.log(top / lambda_first) / math.log(ratio) + 1e-9))
+            finite = lambda_first * ratio ** np.arange(k + 1)
+        else:
+            finite = np.asarray(sorted(float(x) for x in lambdas if 0 < x < np.inf))
+            r = finite[1:] / finite[:-1] if finite.size > 1 else np.array([ratio])
+            if finite.size < 1 or not np.allclose(r, r[0]) or r[0] <= 1.0:
+                raise ValueError("lambdas must be a geometric ladder (positive, finite, increasing)")
+            ratio = float(r[0])
+        self.lambda_first = float(finite[0])
+        self.ratio = float(ratio)
+        self.lambdas = np.concatenate([[0.0], finite, [np.inf]])
+        n_levels = self.lambdas.size
+        levels = np.empty((n_levels, 6, N, N, 3), dtype=np.float32)
+        w = cube.solid_angles
+        mean = (L * w[:, None]).sum(axis=0) / w.sum()
+        levels[0] = mean.astype(np.float32)
+        out_dirs = np.asarray(cube.directions)
+        for li, lam in enumerate(finite, start=1):
+            Ns = 4
+            while Ns < N and Ns < math.pi * math.sqrt(lam):
+                Ns *= 2
+            Ns = min(Ns, N)
+            Ls, sdirs, sw = _downsample(L, N, Ns)
+            res = np.empty((cube.size, 3))
+            chunk = max(1, 4_000_000 // sw.size)
+            for a in range(0, cube.size, chunk):
+                G = np.exp(lam * (np.minimum(out_dirs[a:a + chunk] @ sdirs.T, 1.0) - 1.0))
+                G *= sw[None, :]
+                res[a:a + chunk] = (G @ Ls) / G.sum(axis=1, keepdims=True)
+            levels[li] = res.reshape(6, N, N, 3).astype(np.float32)
+        levels[-1] = L.reshape(6, N, N, 3).astype(np.float32)
+        self.levels = levels
+
+    @property
+    def n_levels(self) -> int:
+        return self.levels.shape[0]
+
+    def level_coordinate(self, lam):
+        """Fractional level index of sharpness ``lam`` (the GLSL twin computes the same)."""
+        lam = np.maximum(np.asarray(lam, dtype=np.float64), 0.0)
+        top = self.lambdas[-2]
+        nf = self.n_levels - 2                      # finite levels 1..nf
+        low = lam / self.lambda_first               # [0, 1) below lam_1
+        mid = 1.0 + np.log(np.maximum(lam, self.lambda_first) / self.lambda_first) / math.log(self.ratio)
+        high = nf + 1.0 - top / np.maximum(lam, top)  # in [nf, nf + 1)
+        return np.where(lam < self.lambda_first, low, np.where(lam <= top, mid, high))
+
+    def lookup(self, directions, lam, rotation=None):
+        """Kernel-weighted mean radiance ``Gamma_L(p, lam) / int G(.; p, lam, 1)`` (P, 3)
+        for world directions ``p`` (P, 3) and sharpnesses ``lam`` (P,).
+        ``rotation``: the world's ``R`` (texture direction = ``R p``)."""
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        if rotation is not None:
+            d = d @ np.asarray(rotation, dtype=np.float64).T
+        lam = np.broadcast_to(np.asarray(lam, dtype=np.float64), d.shape[:1])
+        if not (np.all(np.isfinite(d)) and np.all(np.isfinite(lam))):
+            raise ValueError("lookup directions/sharpnesses must be finite")
+        face, s, t = face_coordinates(d)
+        x = self.level_coordinate(lam)
+        l0 = np.minimum(np.floor(x).astype(np.int64), self.n_levels - 1)
+        l1 = np.minimum(l0 + 1, self.n_levels - 1)
+        f = (x - l0)[:, None]
+        out = np.zeros((d.shape[0], 3))
+        for l in np.unique(np.concatenate([l0, l1])):
+            wgt = np.where(l0 == l, 1.0 - f[:, 0], 0.0) + np.where(l1 == l, f[:, 0], 0.0)
+            sel = np.flatnonzero(wgt > 0.0)
+            if sel.size:
+                out[sel] += _bilinear(self.levels[l], face[sel], s[sel], t[sel]) * wgt[sel, None]
+        return out
+
+    def inner_product(self, axes, lam, mu, rotation=None):
+        """Eq. 35: ``G(i; p, lam, mu) . L = mu int G(.; p, lam, 1) * lookup(p, lam)`` (P, 3)."""
+        lam = np.asarray(lam, dtype=np.float64)
+        mean = self.lookup(axes, lam.reshape(-1), rotation)
+        k = core_sg.integral(lam.reshape(-1), 1.0)[:, None]
+        mu = np.asarray(mu, dtype=np.float64).reshape(-1, np.shape(mu)[-1] if np.ndim(mu) > 1 else 1)
+        return (mu * k * mean).reshape(np.shape(lam) + (3,))
+
+    def atlas(self):
+        """The levels as one RGBA32F image for the GPU: (n_levels * 6 * N, N, 4),
+        row ``(level * 6 + face) * N + row``, column ``col`` (alpha = 1)."""
+        n, N = self.n_levels, self.resolution
+        out = np.ones((n * 6 * N, N, 4), dtype=np.float32)
+        out[..., :3] = self.levels.reshape(n * 6 * N, N, 3)
+        return out
+
+
+# --------------------------------------------------------------------------- lamps (eq. 32-33)
+
+#: sharpness given to lamps of zero size (eq. 32 would be infinite).
+LAMP_LAMBDA_MAX = 1e5
+
+
+@dataclass
+class Lamp:
+    """A Blender lamp in Cycles' units.
+
+    kind:      "POINT", "SPOT" or "SUN".
+    color:     RGB colour times power (POINT/SPOT, watts) or strength (SUN, W/m^2
+               = irradiance at normal incidence).
+    position:  world position (POINT/SPOT).
+    direction: unit direction the lamp shines *towards* (SUN/SPOT: the object's -Z).
+    radius:    sphere radius (POINT/SPOT, ``shadow_soft_size``).
+    angle:     angular diameter (SUN).
+    spot_size, spot_blend: SPOT cone (full angle) and blend.
+    """
+
+    kind: str
+    color: tuple = (1.0, 1.0, 1.0)
+    position: tuple = (0.0, 0.0, 0.0)
+    direction: tuple = (0.0, 0.0, -1.0)
+    radius: float = 0.1
+    angle: float = 0.00918
+    spot_size: float = math.radians(45.0)
+    spot_blend: float = 0.15
+
+    def __post_init__(self):
+        self.kind = str(self.kind).upper()
+        if self.kind not in ("POINT", "SPOT", "SUN"):
+            raise ValueError(f"lamp kind must be POINT, SPOT or SUN, got {self.kind!r}")
+        vals = [*np.ravel(self.color), *np.ravel(self.position), *np.ravel(self.direction),
+                self.radius, self.angle, self.spot_size, self.spot_blend]
+        if not np.all(np.isfinite(np.asarray(vals, dtype=np.float64))):
+            raise ValueError("lamp has NaN/Inf parameters")
+        d = np.asarray(self.direction, dtype=np.float64)
+        self.direction = d / max(np.linalg.norm(d), 1e-300)
+
+
+def _spot_attenuation(lamp: Lamp, to_point):
+    """Cycles' ``spot_attenuation``: smoothstep over ``(cos - cos_half) / ((1 - cos_half) blend)``."""
+    cos_half = math.cos(0.5 * lamp.spot_size)
+    t = to_point @ lamp.direction
+    smooth = (1.0 - cos_half) * lamp.spot_blend
+    if smooth <= 0.0:
+        return (t > cos_half).astype(np.float64)
+    x = np.clip((t - cos_half) / smooth, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def lamp_sgs(lamps, positions=None):
+    """One SG per lamp (eq. 32-33) as seen from each shading point.
+
+    * POINT/SPOT at ``l`` with radius ``r`` seen from ``x``: axis ``(l - x)/|l - x|``,
+      sharpness ``f_a^{-1}(2 pi r^2 / |l - x|^2)`` (eq. 32; ``= -ln(0.1) |l-x|^2 / r^2``),
+      amplitude such that the lobe's integral is the lamp's irradiance at normal
+      incidence ``Phi / (4 pi |l - x|^2)`` (Cycles' point light of power ``Phi``)
+      -- times the spot cone attenuation for SPOT.
+    * SUN from direction ``-d`` with angular diameter ``a``: axis ``-d``, sharpness
+      ``f_a^{-1}(2 pi (a/2)^2)`` (eq. 33), lobe integral = strength.
+
+    Sharpness is capped at :data:`LAMP_LAMBDA_MAX`.  ``positions`` (P, 3) are
+    needed for POINT/SPOT.  Returns ``axes (P, J, 3)``, ``lam (P, J)``,
+    ``mu (P, J, 3)`` (P = 1 without positions).
+    """
+    lamps = list(lamps)
+    if positions is None:
+        if any(l.kind != "SUN" for l in lamps):
+            raise ValueError("point/spot lamps need shading positions")
+        x = np.zeros((1, 3))
+    else:
+        x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        if not np.all(np.isfinite(x)):
+            raise ValueError("positions have NaN/Inf values")
+    P, J = x.shape[0], len(lamps)
+    axes = np.zeros((P, J, 3))
+    lam = np.zeros((P, J))
+    mu = np.zeros((P, J, 3))
+    ln_eps = -math.log(core_sg.SUPPORT_EPSILON)
+    for j, lamp in enumerate(lamps):
+        col = np.asarray(lamp.color, dtype=np.float64).reshape(3)
+        if lamp.kind == "SUN":
+            axes[:, j] = -lamp.direction
+            half = 0.5 * max(lamp.angle, 0.0)
+            lj = ln_eps / (half * half) if half > 0 else LAMP_LAMBDA_MAX
+            lam[:, j] = min(lj, LAMP_LAMBDA_MAX)
+            mu[:, j] = col / core_sg.integral(lam[0, j], 1.0)
+            continue
+        v = np.asarray(lamp.position, dtype=np.float64)[None, :] - x
+        d2 = np.maximum(np.sum(v * v, axis=1), 1e-300)
+        axes[:, j] = v / np.sqrt(d2)[:, None]
+        r2 = max(lamp.radius, 0.0) ** 2
+        lj = np.where(r2 > 0, ln_eps * d2 / max(r2, 1e-300), LAMP_LAMBDA_MAX)
+        lam[:, j] = np.minimum(lj, LAMP_LAMBDA_MAX)
+        e = 1.0 / (4.0 * math.pi * d2)
+        if lamp.kind == "SPOT":
+            e = e * _spot_attenuation(lamp, -axes[:, j])
+        mu[:, j] = (e / core_sg.integral(lam[:, j], 1.0))[:, None] * col[None, :]
+    return axes, lam, mu
+
+
+def lamp_irradiance(lamp: Lamp, positions, normals, n_theta=48, n_phi=64):
+    """Exact irradiance ``int L max(0, n . i) di`` of one lamp (sphere of uniform
+    radiance for POINT/SPOT, disc of uniform radiance for SUN) at points with
+    ``normals``, by quadrature over the lamp's solid angle (for tests).  The spot
+    attenuation is taken at the lamp centre direction, as in Cycles."""
+    x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    col = np.asarray(lamp.color, dtype=np.float64).reshape(3)
+    if lamp.kind == "SUN":
+        axis = np.broadcast_to(-lamp.direction, x.shape)
+        half = np.full(x.shape[0], 0.5 * lamp.angle)
+        cap = 2.0 * math.pi * (1.0 - np.cos(half))
+        total = np.broadcast_to(col, (x.shape[0], 3))          # strength = E at normal incidence
+        radiance_scale = 1.0 / cap[:, None]
+    else:
+        v = np.asarray(lamp.position, dtype=np.float64)[None, :] - x
+        dist = np.linalg.norm(v, axis=1)
+        axis = v / dist[:, None]
+        half = np.arcsin(np.clip(lamp.radius / dist, 0.0, 1.0))
+        cap = 2.0 * math.pi * (1.0 - np.cos(half))
+        # sphere of radiance Lr: E_normal = Lr pi sin^2(half) = Phi / (4 pi d^2) (Cycles)
+        e_far = 1.0 / (4.0 * math.pi * dist * dist)
+        if lamp.kind == "SPOT":
+            e_far = e_far * _spot_attenuation(lamp, -axis)
+        radiance_scale = (e_far / (math.pi * np.sin(half) ** 2))[:, None]
+        total = col[None, :]
+    xg, wg = np.polynomial.legendre.leggauss(n_theta)
+    out = np.zeros((x.shape[0], 3))
+    for p in range(x.shape[0]):
+        th = 0.5 * half[p] * (xg + 1.0)
+        wt = 0.5 * half[p] * wg * np.sin(th)
+        ph = (np.arange(n_phi) + 0.5) * 2 * math.pi / n_phi
+        a = axis[p]
+        t = np.cross(a, [0.0, 0.0, 1.0] if abs(a[2]) < 0.9 else [1.0, 0.0, 0.0])
+        t /= np.linalg.norm(t)
+        b = np.cross(a, t)
+        dirs = (np.sin(th)[:, None, None] * (np.cos(ph)[None, :, None] * t + np.sin(ph)[None, :, None] * b)
+                + np.cos(th)[:, None, None] * a)
+        cosn = np.maximum(dirs @ n[p], 0.0)
+        val = np.sum(cosn * wt[:, None]) * (2 * math.pi / n_phi)
+        out[p] = val * radiance_scale[p] * (total[p] if total.ndim == 2 else total)
+    return out
