@@ -1,0 +1,347 @@
+"""SSDF_SG: per-pixel all-frequency shading with spherical Gaussians and SSDF
+visibility (Wang, Ren, Gong, Snyder, Guo 2009, paper 003).
+
+Precompute (``derive``): the SSDF of every shading point (``core.ssdf``, eq. 23)
+compressed by PCA (eq. 24) with as many terms as the error budget needs.
+``store`` writes, per object, one packed float image ``PRT SSDF <object>``
+(mean, eigen-images, per-point coefficients; metadata as the image's custom
+properties, keyed by the object's ``precompute_id``).  ``sync`` loads it, or
+derives it from the stored visibility when it is missing or was made with
+other SSDF settings (noted in the panel).
+
+Shading: eq. 39 (diffuse: the environment's SG fit times the clamped-cosine
+SG, visibility by eq. 30 at each product lobe's SSDF value) and eq. 41
+(specular: the BRDF's warped SG lobes times the clamped cosine, eq. 31
+visibility, eq. 35 inner product with the SG-prefiltered environment).
+``draw_objects`` does it per pixel on the GPU (``shaders/ssdf_sg_*.glsl``);
+``shade`` does it per vertex in numpy (``core.ssdf_sg``) for tests/benches.
+Lighting is fitted/prefiltered once per environment image; the world's
+rotation and strength are applied at draw time (eq. 7: rotating an SG rotates
+its axis), so neither they nor BRDF sliders need a new precompute.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core import directions, envmap, sg_brdf, sg_lighting, ssdf, ssdf_sg
+from ...core import brdf as core_brdf
+from .. import runtime
+from . import Method, register
+
+IMAGE_PREFIX = "PRT SSDF "
+# (ident, resolution) -> (diffuse SGs, PrefilteredEnvironment) of the unrotated image
+_LIGHTING_CACHE: dict = {}
+# SSDF PCA derived at draw time per (object, visibility, settings)
+_FIELD_CACHE: dict = {}
+
+
+def grid_from_settings(settings) -> ssdf.SSDFGrid:
+    return ssdf.SSDFGrid(int(settings.get("ssdf_resolution", 32)))
+
+
+def pca_settings(settings):
+    return (int(settings.get("ssdf_resolution", 32)), float(settings.get("ssdf_error_budget", 0.05)),
+            int(settings.get("ssdf_max_terms", 48)))
+
+
+def derive_object(bits, normals, cube, settings, cancel=None, progress=None):
+    """(basis, coefficients) of one object's SSDFs (eq. 23-24)."""
+    res, budget, max_terms = pca_settings(settings)
+    return ssdf.ssdf_pca(bits, normals, cube, ssdf.SSDFGrid(res), budget, max_terms,
+                         cancel=cancel, progress=progress)
+
+
+def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes: int = 8):
+    """``(axes, lam, mu)`` diffuse SG fit and the SG-prefiltered pyramid of the
+    world's image without rotation/strength (texture space), cached per image."""
+    ident = runtime.env_key(world, resolution)[0]
+    key = (ident, resolution, max_lobes)
+    hit = _LIGHTING_CACHE.get(key)
+    if hit is None:
+        base = envmap.WorldLighting(image=world.image, color=world.color, strength=1.0)
+        cube = directions.cubemap(resolution)
+        radiance = np.asarray(base.to_cubemap(resolution).radiance, np.float64)
+        axes, lam, mu, rel = sg_lighting.fit_environment_sgs(radiance, cube, max_lobes=max_lobes)
+        pre = sg_lighting.PrefilteredEnvironment(radiance, cube)
+        hit = ((axes, lam, mu, rel), pre)
+        _LIGHTING_CACHE.clear()
+        _LIGHTING_CACHE[key] = hit
+    return hit
+
+
+def world_sgs(world, fit):
+    """The diffuse SG fit in world space: ``L(d) = s E(R d)`` has axes ``R^T a``."""
+    axes, lam, mu, _ = fit
+    return axes @ world.rotation, lam, mu * float(world.strength)
+
+
+def sg_materials(materials):
+    return [sg_brdf.sg_material_from_brdf(m) for m in materials]
+
+
+def shade_object(field, normals, positions, materials_of_points, materials, world, fit, pre,
+                 eye=None, view_dir=None, chunk=4096):
+    """Per-point radiance (P, 3) by eq. 39 + 41 (numpy, per vertex)."""
+    P = len(normals)
+    out = np.zeros((P, 3))
+    axes, lam, mu = world_sgs(world, fit)
+    rot = world.rotation
+    strength = float(world.strength)
+
+    def env_lookup(d, lam_q):
+        return (pre.lookup(d, lam_q, rotation=rot) * strength
+                * ssdf_sg.sg.integral(lam_q)[:, None])
+
+    table = sg_materials(materials)
+    for slot in np.unique(materials_of_points):
+        sel_all = np.nonzero(materials_of_points == slot)[0]
+        mat = table[int(slot)] if 0 <= slot < len(table) else sg_brdf.sg_material_from_brdf(
+            core_brdf.Material())
+        kd = sg_brdf.diffuse_albedo(mat) / np.pi
+        glossy = bool(np.any(np.asarray(mat.specular) > 0) or np.any(np.asarray(mat.metallic) > 0))
+        for a in range(0, len(sel_all), chunk):
+            sel = sel_all[a:a + chunk]
+            n = normals[sel]
+            t, b = ssdf.ssdf_frames(n)
+            rd = ssdf_sg.diffuse_transfer(field, sel, n, axes, lam, mu, t, b)
+            out[sel] = rd * kd
+            if glossy:
+                if view_dir is not None:
+                    v = np.broadcast_to(np.asarray(view_dir, np.float64), n.shape)
+                else:
+                    v = positions[sel] - 0.0
+                    v = np.asarray(eye, np.float64)[None, :] - v
+                    v = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
+                la, ll, lm = sg_brdf.specular_lobes(mat, n, v)
+                out[sel] += ssdf_sg.specular_radiance(field, sel, n, la, ll, lm, env_lookup, t, b)
+    return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+class SSDFSGMethod(Method):
+    id = "SSDF_SG"
+    label = "SSDF + Spherical Gaussians"
+    description = ("Per-pixel all-frequency shading (Wang et al. 2009): spherical-Gaussian "
+                   "BRDF and lighting, visibility as PCA-compressed signed distance fields")
+    budget = ("ssdf_error_budget", [0.2, 0.1, 0.05, 0.025])
+
+    def scene_properties(self):
+        from bpy.props import FloatProperty, IntProperty
+        return {
+            "ssdf_resolution": IntProperty(
+                name="SSDF Resolution", default=32, min=8, max=64,
+                description="Texels per edge of each point's SSDF square (Shirley-Chiu map of "
+                            "the hemisphere); visibility is supersampled 2x inside it"),
+            "ssdf_error_budget": FloatProperty(
+                name="SSDF Error Budget", default=0.05, min=0.001, max=1.0, precision=3,
+                subtype="ANGLE",
+                description="RMS angular error allowed for the PCA-compressed SSDFs; decides "
+                            "the number of PCA terms per object (needs a precompute)"),
+            "ssdf_max_terms": IntProperty(
+                name="SSDF Max Terms", default=48, min=4, max=128,
+                description="Upper limit of PCA terms per object"),
+            "sg_environment_lobes": IntProperty(
+                name="Environment Lobes", default=8, min=1, max=16,
+                update=runtime.redraw_viewports,
+                description="SG lobes fitted to the environment for the diffuse term"),
+        }
+
+    def draw_settings(self, layout, prt):
+        for name in self.scene_properties():
+            layout.prop(prt, name)
+        for line in LAST_TERMS:
+            layout.label(text=line)
+
+    def view_dependent(self, state) -> bool:
+        return any(not m.is_diffuse_only for st in state.objects for m in st.materials)
+
+    # ------------------------------------------------------------- precompute
+    def derive(self, job):
+        cube = directions.cubemap(job.resolution)
+        out = {}
+        total = max(job.point_count, 1)
+        base = [0]
+
+        def cancel():
+            return job.cancel_requested
+
+        for o in job.objects:
+            def progress(done, count, start=base[0]):
+                job.progress_done = int(start + done * o.points.count / max(count, 1))
+
+            basis, coeffs = derive_object(o.bits, o.points.normals, cube, job.settings,
+                                          cancel=cancel, progress=progress)
+            out[o.name] = (basis, coeffs)
+            base[0] += o.points.count
+        job.progress_done = total
+        return out
+
+    def store(self, scene, job, derived):
+        import bpy
+        if not derived:
+            return
+        for o in job.objects:
+            if o.name not in derived:
+                continue
+            basis, coeffs = derived[o.name]
+            ob = bpy.data.objects[o.name]
+            write_image(o.name, basis, coeffs, ob.prt.precompute_id, job.resolution)
+
+    # ------------------------------------------------------------- sync
+    def sync(self, state):
+        cube = directions.cubemap(state.resolution)
+        res, budget, max_terms = pca_settings(state.settings)
+        derived_now = []
+        LAST_TERMS.clear()
+        for st in state.objects:
+            field = None
+            loaded = read_image(st.name, st.points.count, state.resolution, res, budget, max_terms)
+            if loaded is not None and st.status == "ok":
+                field = loaded
+            else:
+                key = (st.name, id(st.bits), res, budget, max_terms, state.resolution)
+                field = runtime.per_visibility(
+                    _FIELD_CACHE, key, st.bits,
+                    lambda: _field_from(derive_object(st.bits, st.points.normals, cube,
+                                                      state.settings)), limit=8)
+                if st.status == "ok":
+                    derived_now.append(st.name)
+            st.data["ssdf_sg"] = field
+            LAST_TERMS.append(f"{st.name}: {field.terms} PCA terms, RMS {field.rms:.3f} rad")
+        if derived_now:
+            state.note("SSDF_SG: SSDFs computed at draw time (precompute with SSDF_SG to "
+                       "store them): " + ", ".join(derived_now))
+        if LAST_TERMS:
+            state.note("SSDF_SG PCA: " + "; ".join(LAST_TERMS))
+
+    # ------------------------------------------------------------- shading
+    def _lighting(self, state):
+        lobes = int(state.settings.get("sg_environment_lobes", 8))
+        return environment_lighting(state.world, state.resolution, lobes)
+
+    def shade(self, state, eye, view_dir):
+        fit, pre = self._lighting(state)
+        out = []
+        for st in state.objects:
+            field = st.data.get("ssdf_sg")
+            if field is None:
+                self.sync(state)
+                field = st.data["ssdf_sg"]
+            pts = st.points
+            rad = shade_object(field.numpy, pts.normals, pts.positions, pts.materials,
+                               st.materials, state.world, fit, pre, eye, view_dir)
+            out.append(rad[pts.point_of_corner].astype(np.float32))
+        return out
+
+    def draw_objects(self, state, eye, view_dir):
+        return None
+
+
+#: "object: K terms, RMS" lines of the last sync (panel)
+LAST_TERMS: list = []
+
+
+class StoredField:
+    """One object's PCA SSDF as loaded/derived: numpy evaluator + raw arrays for the GPU."""
+
+    def __init__(self, basis_mean, eigen, coeffs, resolution, rms, precompute_id=""):
+        self.mean = np.asarray(basis_mean, np.float32)
+        self.eigen = np.asarray(eigen, np.float32)
+        self.coefficients = np.asarray(coeffs, np.float32)
+        self.resolution = int(resolution)
+        self.rms = float(rms)
+        self.precompute_id = precompute_id
+        self.numpy = ssdf_sg.PCAField(self.mean, self.eigen, self.coefficients, self.resolution)
+        self.gpu = None          # textures, built by the GPU path
+
+    @property
+    def terms(self):
+        return len(self.eigen)
+
+
+def _field_from(result):
+    basis, coeffs = result
+    return StoredField(basis.mean, basis.eigen, coeffs, basis.resolution, basis.rms_error)
+
+
+# ----------------------------------------------------------------- storage
+
+_ROW_FLOATS = 4096
+
+
+def write_image(name, basis, coeffs, precompute_id, cube_resolution):
+    """Store the PCA SSDF of one object in a packed RGBA float image."""
+    import bpy
+    flat = np.concatenate([basis.mean.ravel(), basis.eigen.ravel(),
+                           np.asarray(coeffs, np.float32).ravel()]).astype(np.float32)
+    height = max(1, -(-flat.size // _ROW_FLOATS))
+    data = np.zeros(height * _ROW_FLOATS, np.float32)
+    data[:flat.size] = flat
+    img = bpy.data.images.get(IMAGE_PREFIX + name)
+    if img is not None and tuple(img.size) != (_ROW_FLOATS // 4, height):
+        bpy.data.images.remove(img)
+        img = None
+    if img is None:
+        img = bpy.data.images.new(IMAGE_PREFIX + name, _ROW_FLOATS // 4, height, alpha=True,
+                                  float_buffer=True, is_data=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    img.use_fake_user = True
+    img.use_half_precision = False
+    img.pixels.foreach_set(data)
+    img.update()
+    img.pack()
+    img["prt_precompute_id"] = precompute_id
+    img["prt_ssdf_resolution"] = int(basis.resolution)
+    img["prt_terms"] = int(basis.terms)
+    img["prt_points"] = int(len(coeffs))
+    img["prt_budget"] = float(basis.budget)
+    img["prt_max_terms"] = int(-1)
+    img["prt_rms"] = float(basis.rms_error)
+    img["prt_cube_resolution"] = int(cube_resolution)
+    return img
+
+
+_READ_CACHE: dict = {}
+
+
+def read_image(name, points, cube_resolution, resolution, budget, max_terms):
+    """The stored StoredField of an object, or None when missing or made otherwise."""
+    import bpy
+    ob = bpy.data.objects.get(name)
+    img = bpy.data.images.get(IMAGE_PREFIX + name)
+    if ob is None or img is None:
+        return None
+    try:
+        meta = (img["prt_precompute_id"], int(img["prt_ssdf_resolution"]), int(img["prt_terms"]),
+                int(img["prt_points"]), float(img["prt_budget"]), int(img["prt_cube_resolution"]))
+    except (KeyError, TypeError, ValueError):
+        return None
+    pid, res, K, P, bud, cres = meta
+    if (pid != ob.prt.precompute_id or P != points or res != resolution or cres != cube_resolution
+            or abs(bud - budget) > 1e-9 or K > max(max_terms, 4) + 3):
+        return None
+    key = (img.name_full, pid, P, res, K)
+    hit = _READ_CACHE.get(key)
+    if hit is not None:
+        return hit
+    D = res * res
+    need = D + K * D + P * K
+    w, h = img.size
+    if w * h * 4 < need:
+        return None
+    flat = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(flat)
+    mean = flat[:D]
+    eigen = flat[D:D + K * D].reshape(K, D)
+    coeffs = flat[D + K * D:need].reshape(P, K)
+    if not (np.isfinite(mean).all() and np.isfinite(eigen).all() and np.isfinite(coeffs).all()):
+        return None
+    field = StoredField(mean, eigen, coeffs, res, float(img.get("prt_rms", 0.0)), pid)
+    if len(_READ_CACHE) >= 16:
+        _READ_CACHE.pop(next(iter(_READ_CACHE)))
+    _READ_CACHE[key] = field
+    return field
+
+
+register(SSDFSGMethod())

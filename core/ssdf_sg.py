@@ -1,0 +1,216 @@
+"""SSDF_SG shading: eq. 39, 41, 42, 43 of paper 003 (Wang, Ren, Gong, Snyder, Guo 2009)
+evaluated in numpy -- the reference for ``shaders/ssdf_sg_frag.glsl``.
+
+Per shading point with normal ``n`` (SSDF frame ``t, b, n`` from
+:func:`.ssdf.ssdf_frames`) and view ``o``:
+
+* eq. 39 (diffuse, environment)::
+
+      R_d = sum_j (C*(i; n) (x) L*_j(i)) . V^d(i)
+          = sum_j mu_j' f_h(theta_d(p_j'), lam_j')
+
+  ``C*`` is the clamped-cosine SG of eq. 40, ``L*_j`` the SG mixture fitted to
+  the environment, ``(p', lam', mu')`` their product lobe (eq. 5/45),
+  ``theta_d = V^d(p')`` the SSDF at the product lobe's axis (§5.3) and ``f_h``
+  eq. 30 through the eq. 47-49 fit (``sg.fh_hat_approx`` times
+  ``f_h(pi/2, lam)``).  Radiance ``kd R_d`` with ``kd = albedo / pi`` (eq. 36).
+
+* eq. 41 (specular, environment)::
+
+      R_s(o) = sum_k ((C*(i; n) (x) rho*_k(i; o)) (x) V^d(i)) . L(i)
+             = sum_k mu_k'' Gamma_L(p_k', lam_k')
+
+  ``rho*_k`` the view slice of ``ks rho_s`` (``core.sg_brdf.specular_lobes``),
+  product with ``C*`` (eq. 5), the visibility product of eq. 31 (same axis
+  and sharpness, amplitude times ``f_h(theta_d, lam)/f_h(pi/2, lam)``), and the
+  inner product with the environment from its SG-prefiltered pyramid
+  ``Gamma_L`` (eq. 34-35).
+
+* eq. 42/43 (local lights given as SG lobes ``L*_x``, e.g. eq. 32/33)::
+
+      R_d = (L*_x (x) C*(i; z+)) . V^d,     R_s = (L*_x (x) C* (x) rho*_s) . V^d
+
+  i.e. the triple product is one SG (eq. 5 twice) integrated against the SSDF
+  with eq. 30.  The scene export has no lamps yet; :func:`lamp_radiance`
+  implements and tests the formulas.
+
+The SSDF is read either from full per-point images or from the PCA form
+(eq. 24) ``mean + sum_j w_j E_j``, bilinearly in the Shirley-Chiu square (the
+GLSL texture lookups do the same arithmetic: bilinear filtering is linear, so
+interpolating each eigen-image and combining equals combining and
+interpolating).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import sg
+from .ssdf import bilinear, ssdf_frames, square_coordinates
+
+LAMBDA_C, MU_C = sg.clamped_cosine_sg()
+
+
+class PCAField:
+    """The SSDF of every point of one object in PCA form (eq. 24).
+
+    ``mean`` (D,), ``eigen`` (K, D), ``coefficients`` (P, K), ``resolution`` n
+    (``D = n * n``)."""
+
+    def __init__(self, mean, eigen, coefficients, resolution: int):
+        self.resolution = int(resolution)
+        self.images = np.concatenate([np.asarray(mean, np.float64)[None, :],
+                                      np.asarray(eigen, np.float64)], axis=0)     # (K+1, D)
+        c = np.asarray(coefficients, np.float64)
+        self.weights = np.concatenate([np.ones((len(c), 1)), c], axis=1)          # (P, K+1)
+
+    def theta_d(self, rows, local):
+        """SSDF of points ``rows`` at local directions ``local`` (len(rows), L, 3) -> (.., L)."""
+        u, v = square_coordinates(local)
+        val = bilinear(self.images, u, v, self.resolution)                        # (R, L, K+1)
+        val = np.einsum("rlk,rk->rl", val, self.weights[rows])
+        return val - np.arcsin(np.clip(-np.asarray(local)[..., 2], 0.0, 1.0))
+
+
+class ImageField:
+    """The SSDF of every point as full images (P, n*n) (no compression)."""
+
+    def __init__(self, images, resolution: int):
+        self.images = np.asarray(images, np.float64)
+        self.resolution = int(resolution)
+
+    def theta_d(self, rows, local):
+        u, v = square_coordinates(local)
+        val = bilinear(self.images[rows][:, None, :], u, v, self.resolution)[..., 0]
+        return val - np.arcsin(np.clip(-np.asarray(local)[..., 2], 0.0, 1.0))
+
+
+def _local(dirs, n, t, b):
+    return np.stack([np.einsum("plk,pk->pl", dirs, t), np.einsum("plk,pk->pl", dirs, b),
+                     np.einsum("plk,pk->pl", dirs, n)], axis=-1)
+
+
+def visibility_integral(theta_d, lam, exact=False):
+    """Eq. 30 ``f_h(theta_d, lam)`` (``exact``: quadrature; else eq. 47-49)."""
+    if exact:
+        return sg.visibility_integral_fh(theta_d, lam)
+    return sg.fh_hat_approx(theta_d, lam) * sg.hemisphere_integral(lam)
+
+
+def visibility_ratio(theta_d, lam, exact=False):
+    """Eq. 31 amplitude factor ``f_h(theta_d, lam) / f_h(pi/2, lam)``."""
+    return sg.fh_hat(theta_d, lam) if exact else sg.fh_hat_approx(theta_d, lam)
+
+
+def diffuse_transfer(field, rows, normals, light_axes, light_lam, light_mu,
+                     tangents=None, bitangents=None, exact_fh=False):
+    """Eq. 39 (and eq. 42 with per-point light lobes): ``R_d`` (R, 3).
+
+    ``light_axes`` (J, 3) or (R, J, 3) world, ``light_lam`` (J,)/(R, J),
+    ``light_mu`` (J, 3)/(R, J, 3) RGB amplitudes; ``normals`` (R, 3) of the
+    points ``rows`` of ``field``.
+    """
+    n = np.asarray(normals, np.float64)
+    R = len(n)
+    if tangents is None:
+        tangents, bitangents = ssdf_frames(n)
+    ax = np.broadcast_to(np.asarray(light_axes, np.float64), (R,) + np.shape(light_axes)[-2:])
+    lam = np.broadcast_to(np.asarray(light_lam, np.float64), ax.shape[:2])
+    mu = np.broadcast_to(np.asarray(light_mu, np.float64), ax.shape[:2] + (3,))
+    if ax.shape[1] == 0:
+        return np.zeros((R, 3))
+    cn = np.broadcast_to(n[:, None, :], ax.shape)
+    p, lam_m, amp = sg.product(cn, np.full(ax.shape[:2], LAMBDA_C), np.full(ax.shape[:2], MU_C),
+                               ax, lam, 1.0)
+    theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
+    f = visibility_integral(theta, lam_m, exact_fh) * amp                         # (R, J)
+    return np.einsum("rj,rjc->rc", f, mu)
+
+
+def specular_radiance(field, rows, normals, lobe_axes, lobe_lam, lobe_mu, env_lookup,
+                      tangents=None, bitangents=None, exact_fh=False):
+    """Eq. 41: ``R_s(o)`` (R, 3) from the view slice ``(lobe_axes (R, K, 3), lobe_lam (R, K),
+    lobe_mu (R, K, 3))`` of ``ks rho_s`` (world space, no cosine) and ``env_lookup(dirs
+    (M, 3), lam (M,)) -> (M, 3)``, the SG-prefiltered environment ``Gamma_L`` (eq. 35)."""
+    n = np.asarray(normals, np.float64)
+    R = len(n)
+    ax = np.asarray(lobe_axes, np.float64)
+    if ax.shape[1] == 0:
+        return np.zeros((R, 3))
+    if tangents is None:
+        tangents, bitangents = ssdf_frames(n)
+    cn = np.broadcast_to(n[:, None, :], ax.shape)
+    p, lam_m, amp = sg.product(cn, np.full(ax.shape[:2], LAMBDA_C), np.full(ax.shape[:2], MU_C),
+                               ax, np.asarray(lobe_lam, np.float64), 1.0)
+    theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
+    scale = amp * visibility_ratio(theta, lam_m, exact_fh)                        # (R, K)
+    gamma = np.asarray(env_lookup(p.reshape(-1, 3), lam_m.reshape(-1)), np.float64)
+    gamma = gamma.reshape(p.shape[:2] + (3,))
+    return np.einsum("rk,rkc,rkc->rc", scale, np.asarray(lobe_mu, np.float64), gamma)
+
+
+def lamp_radiance(field, rows, normals, lamp_axes, lamp_lam, lamp_mu, kd, lobe_axes=None,
+                  lobe_lam=None, lobe_mu=None, tangents=None, bitangents=None, exact_fh=False):
+    """Eq. 42 + 43 for SG lights ``(lamp_axes (R, J, 3), lamp_lam (R, J), lamp_mu (R, J, 3))``:
+    ``kd R_d + R_s`` (R, 3); ``kd`` (3,) or (R, 3) is ``albedo / pi``."""
+    out = diffuse_transfer(field, rows, normals, lamp_axes, lamp_lam, lamp_mu, tangents,
+                           bitangents, exact_fh) * np.asarray(kd, np.float64)
+    if lobe_axes is None or np.shape(lobe_axes)[1] == 0:
+        return out
+    n = np.asarray(normals, np.float64)
+    if tangents is None:
+        tangents, bitangents = ssdf_frames(n)
+    la = np.asarray(lamp_axes, np.float64)
+    R, J = la.shape[:2]
+    K = np.shape(lobe_axes)[1]
+    # L* (x) C*: (R, J); then (x) rho*_k: (R, J, K)
+    cn = np.broadcast_to(n[:, None, :], la.shape)
+    p1, l1, a1 = sg.product(la, np.asarray(lamp_lam, np.float64), 1.0, cn,
+                            np.full((R, J), LAMBDA_C), MU_C)
+    p2, l2, a2 = sg.product(p1[:, :, None, :], l1[:, :, None], a1[:, :, None],
+                            np.asarray(lobe_axes, np.float64)[:, None, :, :],
+                            np.asarray(lobe_lam, np.float64)[:, None, :], 1.0)
+    theta = field.theta_d(rows, _local(p2.reshape(R, J * K, 3), n, tangents, bitangents))
+    f = (visibility_integral(theta, l2.reshape(R, J * K), exact_fh) * a2.reshape(R, J * K))
+    f = f.reshape(R, J, K)
+    return out + np.einsum("rjk,rjc,rkc->rc", f, np.asarray(lamp_mu, np.float64),
+                           np.asarray(lobe_mu, np.float64))
+
+
+def analytic_sg_environment(axes, lam, mu):
+    """``Gamma_L(p, lam)`` of eq. 35 for an environment that *is* an SG mixture
+    (exact inner products, eq. 4): a lookup for tests."""
+    axes = np.asarray(axes, np.float64)
+    lam_e = np.asarray(lam, np.float64)
+    mu_e = np.asarray(mu, np.float64)
+
+    def lookup(dirs, lam_q):
+        d = np.asarray(dirs, np.float64)[:, None, :]
+        ip = sg.inner_product(d, np.asarray(lam_q, np.float64)[:, None], 1.0,
+                              axes[None], lam_e[None], 1.0)                       # (M, J)
+        return ip @ mu_e
+
+    return lookup
+
+
+def sg_mixture_radiance(dirs, axes, lam, mu):
+    """Radiance (M, 3) of an SG mixture at unit directions ``dirs`` (M, 3)."""
+    g = sg.evaluate(np.asarray(dirs, np.float64)[:, None, :], np.asarray(axes)[None],
+                    np.asarray(lam)[None], 1.0)
+    return g @ np.asarray(mu, np.float64)
+
+
+def equirect_from_sgs(height, axes, lam, mu):
+    """An equirect image (H, 2H, 3) of an SG mixture (texture orientation of
+    ``core.envmap``): lighting whose diffuse SG fit is exact, for tests."""
+    from .envmap import equirect_directions
+    dirs, _ = equirect_directions(height, 2 * height, 1)
+    return sg_mixture_radiance(dirs.reshape(-1, 3), axes, lam, mu).reshape(
+        height, 2 * height, 3).astype(np.float32)
+
+
+__all__ = ["PCAField", "ImageField", "diffuse_transfer", "specular_radiance", "lamp_radiance",
+           "visibility_integral", "visibility_ratio", "analytic_sg_environment",
+           "sg_mixture_radiance", "equirect_from_sgs", "LAMBDA_C", "MU_C"]
