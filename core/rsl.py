@@ -49,8 +49,9 @@ class SquareLights:
     ``solid_angles`` (K,): ``|S_i|`` (the square has this solid angle, i.e. area
     ``|S_i|/2`` in the disk map); ``energy`` (K, 3): ``integral of L over S_i``, so the
     intensity ``I_i = energy_i / |S_i|`` preserves each subregion's energy (§4.1.1).
-    ``labels`` (6N²,): the subregion of every cubemap texel.  ``fit_error``: sum of the
-    RSL fitting errors relative to ``integral of Y²`` (see :func:`decompose`).
+    ``labels`` (6N²,): the subregion of every cubemap texel.  ``fit_error``: the
+    intensity part of the RSL fitting error, ``sum_i integral_{S_i} (L - I_i)²`` in
+    luminance (grows with every merge), relative to ``integral of Y² dw`` (see :func:`decompose`).
     """
 
     centres: np.ndarray
@@ -125,7 +126,8 @@ def _fit_error(A, E, Q, M):
 
 
 def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
-              error_budget: float | None = None, area_power: float = 1.0) -> SquareLights:
+              error_budget: float | None = None, area_power: float = 1.0,
+              _history: list | None = None) -> SquareLights:
     """Bottom-up merging of cubemap texels into ``count`` subregions (§4.1.2, Fig. 5).
 
     Each step merges the pair of adjacent subregions (across cube faces too) whose
@@ -133,10 +135,19 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
     (eq. 7, ``p = area_power``) the least; costs are incremental (moments add) and
     kept in a priority queue with lazy invalidation, so 6x32² texels -> 30 lights
     takes about a second instead of the paper's two minutes.  With ``error_budget``
-    merging also stops before the summed fitting error exceeds ``error_budget``
-    times ``integral Y² dw`` (whichever limit comes first; ``count=None`` means
-    the budget alone decides).
+    the count is the smallest one (not below ``count``; ``None``: 1) whose intensity
+    fitting error ``sum_i integral_{S_i} (L - I_i)²`` is at most ``error_budget`` times
+    ``(integral Y dw)² / 4 pi`` (the squared luminance integral of a uniform
+    environment of the same power); the merge order does not depend on the budget.
     """
+    if error_budget is not None:
+        history = []
+        decompose(lighting, cube, 1, None, area_power, _history=history)
+        allowed = float(error_budget)
+        floor_count = 1 if count is None else max(1, int(count))
+        fits = [n for n, err in history if err <= allowed and n >= floor_count]
+        best = min(fits) if fits else cube.size
+        return decompose(lighting, cube, best, None, area_power)
     import time
     t0 = time.perf_counter()
     rad = np.asarray(lighting.radiance, dtype=np.float64)
@@ -163,9 +174,9 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
     for a, b in _texel_neighbours(cube).tolist():
         neigh[a].add(b)
         neigh[b].add(a)
-    q_total = max(float(np.sum(Y * Y * dw)), 1e-300)
-    budget = None if error_budget is None else float(error_budget) * q_total
-    total_eta = float(sum(eta))
+    # scale: integral of Y² of a uniform environment with the same power
+    q_total = max(float(np.sum(Y * dw)) ** 2 / (4.0 * np.pi), 1e-300)
+    total_var = 0.0               # sum of Q - E²/A over subregions (0 for single texels)
 
     def merged(a, b):
         Am = A[a] + A[b]
@@ -187,11 +198,10 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
         if not (alive[a] and alive[b]) or stamp[a] != sa or stamp[b] != sb:
             continue
         e, c, Mm = merged(a, b)
-        if budget is not None and total_eta - eta[a] - eta[b] + e > budget:
-            break
         if len(neigh[a]) < len(neigh[b]):
             a, b = b, a
-        total_eta += e - eta[a] - eta[b]
+        total_var += (Q[a] + Q[b] - (E[a] + E[b]) ** 2 / (A[a] + A[b])
+                      - (Q[a] - E[a] ** 2 / A[a]) - (Q[b] - E[b] ** 2 / A[b]))
         A[a] += A[b]
         E[a] += E[b]
         Q[a] += Q[b]
@@ -211,6 +221,8 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
         neigh[b] = set()
         parent[b] = a
         regions -= 1
+        if _history is not None:
+            _history.append((regions, max(total_var, 0.0) / q_total))
         sa = stamp[a]
         for x in na:
             e2, c2, _ = merged(a, x)
@@ -243,7 +255,7 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
     bad = nrm[:, 0] < 1e-12
     centre = np.where(bad[:, None], geo, centre)
     centre /= np.maximum(np.linalg.norm(centre, axis=1, keepdims=True), 1e-300)
-    return SquareLights(centre, sa_k, energy, lab, total_eta / q_total,
+    return SquareLights(centre, sa_k, energy, lab, max(total_var, 0.0) / q_total,
                         time.perf_counter() - t0)
 
 

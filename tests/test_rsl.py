@@ -1,0 +1,277 @@
+"""Rotatable square lights (core/rsl.py, seed 000) against brute force and REFERENCE."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from prt_relight.core import brdf, directions, envmap, mesh, reference, rsl, visibility
+
+CUBE = directions.cubemap(32)
+
+
+def _sky_with_sun(h=64, w=128, sun=(20, 37), sun_value=5.0e4):
+    rng = np.random.default_rng(3)
+    img = np.full((h, w, 3), 0.3, dtype=np.float32) + 0.2 * rng.random((h, w, 3)).astype(np.float32)
+    img[h // 2:] *= 0.2                                       # darker ground
+    img[sun] = sun_value
+    return img
+
+
+def test_decomposition_preserves_energy_and_partitions_the_sphere():
+    img = _sky_with_sun()
+    lighting = envmap.WorldLighting(image=img).to_cubemap(32)
+    total = (lighting.radiance.astype(np.float64) * CUBE.solid_angles[:, None]).sum(0)
+    for K in (10, 30, 100):
+        lights = rsl.decompose(lighting, CUBE, K)
+        assert lights.count == K
+        np.testing.assert_allclose(lights.energy.sum(0), total, rtol=1e-10)
+        assert lights.solid_angles.sum() == pytest.approx(4 * np.pi, rel=1e-12)
+        assert set(np.unique(lights.labels)) == set(range(K))
+        np.testing.assert_allclose(np.linalg.norm(lights.centres, axis=1), 1.0)
+        # intensity * |S| is the region's energy (I = integral L / 2r², §4.1.1)
+        np.testing.assert_allclose(lights.intensity * lights.solid_angles[:, None],
+                                   lights.energy)
+
+
+def test_subregions_are_connected():
+    lighting = envmap.WorldLighting(image=_sky_with_sun()).to_cubemap(32)
+    lights = rsl.decompose(lighting, CUBE, 30)
+    pairs = rsl._texel_neighbours(CUBE)
+    for k in range(lights.count):
+        members = np.nonzero(lights.labels == k)[0]
+        inside = np.zeros(CUBE.size, bool)
+        inside[members] = True
+        edges = pairs[inside[pairs[:, 0]] & inside[pairs[:, 1]]]
+        seen = {members[0]}
+        frontier = [members[0]]
+        adj = {}
+        for a, b in edges:
+            adj.setdefault(a, []).append(b)
+            adj.setdefault(b, []).append(a)
+        while frontier:
+            x = frontier.pop()
+            for y in adj.get(x, []):
+                if y not in seen:
+                    seen.add(y)
+                    frontier.append(y)
+        assert len(seen) == len(members)
+
+
+def test_one_pixel_sun_becomes_one_tiny_light():
+    h, w = 256, 512
+    row, col = 70, 150
+    sun_only = np.zeros((h, w, 3), np.float32)
+    sun_only[row, col] = 1.0
+    # the chosen pixel lies inside one cubemap texel (else "one texel" is not possible)
+    assert np.count_nonzero(envmap.WorldLighting(image=sun_only).to_cubemap(32).radiance[:, 0]) == 1
+    img = _sky_with_sun(h, w, sun=(row, col), sun_value=5.0e5)
+    lighting = envmap.WorldLighting(image=img).to_cubemap(32)
+    lights = rsl.decompose(lighting, CUBE, 30)
+    brightest = int(np.argmax(lights.intensity @ envmap.LUMINANCE))
+    assert np.count_nonzero(lights.labels == brightest) == 1
+    assert lights.solid_angles[brightest] < 1.5 * 4 * np.pi / CUBE.size
+    # at the sun's true direction (pixel centre), not the texel centre's
+    theta = (row + 0.5) / h * np.pi
+    phi = (0.5 - (col + 0.5) / w) * 2 * np.pi
+    sun = np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+    assert np.degrees(np.arccos(np.clip(lights.centres[brightest] @ sun, -1, 1))) < 0.2
+    sun_energy = 5.0e5 * (np.cos(row * np.pi / h) - np.cos((row + 1) * np.pi / h)) * 2 * np.pi / w
+    assert lights.energy[brightest, 0] == pytest.approx(sun_energy, rel=0.01)
+
+
+def test_error_budget_mode_stops_at_the_budget():
+    lighting = envmap.WorldLighting(image=_sky_with_sun()).to_cubemap(32)
+    f30 = rsl.decompose(lighting, CUBE, 30).fit_error
+    loose = rsl.decompose(lighting, CUBE, None, error_budget=f30)
+    tight = rsl.decompose(lighting, CUBE, None, error_budget=f30 / 4)
+    assert loose.fit_error <= f30 and tight.fit_error <= f30 / 4
+    assert tight.count > loose.count >= 1
+    assert loose.count <= 30
+    assert rsl.decompose(lighting, CUBE, 10, error_budget=1e9).count == 10
+
+
+def test_decomposition_is_fast():
+    """6x32² -> 30 lights; the bench prints the time, here only a generous bound."""
+    lighting = envmap.WorldLighting(image=_sky_with_sun()).to_cubemap(32)
+    t0 = time.perf_counter()
+    rsl.decompose(lighting, CUBE, 30)
+    assert time.perf_counter() - t0 < 10.0
+
+
+def _brute_box(values, x0, x1, y0, y1):
+    """Exact integral of the piecewise-constant grid function over a box (disk units)."""
+    n = values.shape[-1]
+    edges = np.linspace(-1, 1, n + 1)
+    ox = np.clip(np.minimum(edges[1:], x1) - np.maximum(edges[:-1], x0), 0, None)
+    oy = np.clip(np.minimum(edges[1:], y1) - np.maximum(edges[:-1], y0), 0, None)
+    return float(oy @ values @ ox) / (2.0 / n) ** 2
+
+
+def test_sat_box_integrals_equal_brute_force_sums():
+    rng = np.random.default_rng(1)
+    vals = rng.random((16, 16))                              # per-texel integrals
+    S = rsl.summed_area(vals)
+    for _ in range(200):
+        px, py = rng.uniform(-1.2, 1.2, 2)
+        half = rng.uniform(0.01, 0.6)
+        got = rsl.box_integral(S, np.array(px), np.array(py), np.array(half))
+        want = _brute_box(vals, px - half, px + half, py - half, py + half)
+        assert got == pytest.approx(want, abs=1e-12)
+
+
+@pytest.mark.parametrize("material", [
+    brdf.Material(specular_color=(1, 1, 1), roughness=0.4, distribution="GGX"),
+    brdf.principled_material(roughness=0.5),
+])
+def test_brdf_sat_matches_quadrature(material):
+    """Square averages of the SAT equal a fine quadrature of BRDF x cosine (eq. 8)."""
+    tables = rsl.brdf_tables(material, 32, 32, sub=4)
+    rng = np.random.default_rng(2)
+    theta = 0.5 * np.pi * 10 / 31                             # on a view node
+    view = np.array([[np.sin(theta), 0.0, np.cos(theta)]])
+    for _ in range(6):
+        px, py = rng.uniform(-0.6, 0.6, 2)
+        half = rng.uniform(0.08, 0.25)
+        m = 96
+        c = (np.arange(m) + 0.5) / m * 2 - 1
+        qy, qx = np.meshgrid(py + half * c, px + half * c, indexing="ij")
+        inside = (qx ** 2 + qy ** 2 < 1).reshape(-1)
+        dirs = directions.rsl_disk_to_hemisphere(qx, qy).reshape(-1, 3)[inside]
+        f = brdf.reflectance_cosine(material, np.array([[0, 0, 1.0]]), view, dirs)[0]
+        want = f.sum(0) / (m * m)
+        diffuse = np.asarray(material.diffuse_albedo) / np.pi * brdf.diffuse_view_weight(
+            material, np.array([[0, 0, 1.0]]), view)[0]
+        got = diffuse * rsl.brdf_box(tables, None, None, px, py, half)
+        weights = [w[0] for _, w in brdf.specular_terms(material, np.array([[0, 0, 1.0]]), view,
+                                                        np.array([[0, 0, 1.0]]))]
+        for k, wk in enumerate(weights):
+            got = got + wk * rsl.brdf_box(tables, k, np.array(theta), px, py, half)
+        np.testing.assert_allclose(got, want, rtol=0.03, atol=1e-3 * want.max())
+
+
+def test_vdt_equals_box_integral_for_straight_boundaries():
+    n = 32
+    h = 2.0 / n
+    rng = np.random.default_rng(4)
+    for edge in (7, 16, 23):
+        x_b = -1 + edge * h                                   # boundary on a texel edge
+        maps = np.zeros((2, n, n), np.float32)
+        maps[0, :, edge:] = 1.0                               # visible for x > x_b
+        maps[1, :edge, :] = 1.0                               # visible for y < y_b (rows)
+        vdt = rsl.visibility_distance_table(maps)
+        for _ in range(50):
+            half = rng.uniform(0.02, 0.3)
+            px, py = rng.uniform(-1 + half, 1 - half, 2)      # inside the domain
+            want0 = np.clip((px + half - x_b) / (2 * half), 0, 1)
+            want1 = np.clip((x_b - (py - half)) / (2 * half), 0, 1)
+            got = rsl.vdt_box(vdt, np.array([px, px]), np.array([py, py]), half,
+                              lead=np.arange(2))
+            np.testing.assert_allclose(got, [want0, want1], atol=1e-6)
+            sat = rsl.visibility_sat(maps)
+            got_sat = rsl.visible_fraction("SAT", sat, np.array([[px], [px]]),
+                                           np.array([[py], [py]]), half)[:, 0]
+            np.testing.assert_allclose(got_sat, [want0, want1], atol=1e-5)
+
+
+def test_vdt_is_the_signed_distance():
+    n = 32
+    maps = np.zeros((1, n, n), np.float32)
+    yy, xx = np.mgrid[0:n, 0:n]
+    maps[0][(xx - 15.5) ** 2 + (yy - 15.5) ** 2 < 8 ** 2] = 1.0  # a disc of radius ~8 texels
+    vdt = rsl.visibility_distance_table(maps)[0]
+    h = 2.0 / n
+    r = np.hypot(xx - 15.5, yy - 15.5) * h
+    # true signed distance to the circle, up to the texel staircase (< one texel)
+    assert np.max(np.abs(vdt - (8 * h - r))) < 0.8 * h
+    assert np.all((vdt > 0) == (maps[0] > 0.5))
+
+
+def _scene(cuts=10):
+    g = mesh.grid(size=2.0, cuts=cuts)
+    sp = mesh.shading_points(g)
+    box = np.array([[[0.2, -0.5, 0.0], [0.8, -0.5, 0.0], [0.8, -0.5, 0.8]],
+                    [[0.2, -0.5, 0.0], [0.8, -0.5, 0.8], [0.2, -0.5, 0.8]],
+                    [[0.2, -0.5, 0.8], [0.8, -0.5, 0.8], [0.8, 0.5, 0.8]],
+                    [[0.2, -0.5, 0.8], [0.8, 0.5, 0.8], [0.2, 0.5, 0.8]]])
+    rng = np.random.default_rng(0)
+    nrm = sp.normals + 0.3 * rng.normal(size=sp.normals.shape)
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    scene = visibility.build_occluder_scene(np.concatenate([g.triangle_positions, box]))
+    bits = visibility.trace_visibility(scene, sp.positions, nrm, CUBE, 1e-4)
+    return sp.positions, nrm, bits
+
+
+def test_visibility_maps_read_the_cubemap_bits():
+    """Fully visible upper hemispheres read 1 inside the disk, 0 outside."""
+    nrm = directions.fibonacci_sphere(20)
+    bits = np.packbits(visibility.hemisphere_mask(nrm, CUBE), axis=1)
+    maps = rsl.visibility_maps(bits, nrm, CUBE, 32, sub=1)
+    _, sa = directions.rsl_hemisphere(32)
+    inner = (sa.reshape(32, 32) >= 2 * (2 / 32) ** 2 * 0.999)
+    # texels well inside the disk see their cube texel (centre above the horizon)
+    px, py, _, _ = rsl.disk_texel_samples(32, 1)
+    deep = (px ** 2 + py ** 2 < 0.8)
+    assert np.all(maps[:, deep] == 1.0)
+    assert np.all(maps[:, ~inner & ~(px ** 2 + py ** 2 < 1)] == 0.0)
+
+
+@pytest.mark.parametrize("kind", ["VDT", "SAT"])
+def test_rsl_converges_to_reference(kind):
+    """eq. 5 with more lights approaches REFERENCE; with a light per texel only the
+    square/box approximations are left."""
+    pos, nrm, bits = _scene()
+    img = envmap.load_equirect(str(_hdri("forest"))) if _hdri("forest") else _sky_with_sun()
+    lighting = envmap.WorldLighting(image=img).to_cubemap(32)
+    mat = brdf.principled_material(roughness=0.5)
+    eye = np.array([3.0, -4.0, 2.5])
+    ref = reference.shade_points(bits, pos, nrm, np.zeros(len(nrm), int), [mat], eye, CUBE,
+                                 lighting)
+    maps = rsl.visibility_maps(bits, nrm, CUBE, 32)
+    table = rsl.visibility_distance_table(maps) if kind == "VDT" else rsl.visibility_sat(maps)
+    tables = rsl.brdf_tables(mat)
+    views = reference.view_directions(pos, eye)
+    errs = []
+    for K in (10, 100, CUBE.size):
+        ev = rsl.Evaluator(rsl.decompose(lighting, CUBE, K))
+        V, C = ev.diffuse_factors(nrm, kind, table, tables)
+        out = ev.shade(mat, tables, nrm, views, V, C)
+        errs.append(np.linalg.norm(out - ref) / np.linalg.norm(ref))
+    assert errs[0] > errs[1] > errs[2] * 0.9
+    assert errs[1] < 0.04
+    assert errs[2] < 0.02
+
+
+def test_world_rotation_rotates_the_lights():
+    """Rotating the lighting (Mapping node) = rotating the RSL centres: RSL with rotated
+    centres stays as close to the rotated REFERENCE as unrotated RSL to REFERENCE."""
+    pos, nrm, bits = _scene(8)
+    img = _sky_with_sun()
+    R = envmap.euler_xyz_matrix(0.3, -0.2, 1.1)
+    mat = brdf.Material()
+    lights = rsl.decompose(envmap.WorldLighting(image=img).to_cubemap(32), CUBE, 100)
+    maps = rsl.visibility_maps(bits, nrm, CUBE, 32)
+    sat = rsl.visibility_sat(maps)
+    tables = rsl.brdf_tables(mat)
+    ref = reference.shade_points(bits, pos, nrm, np.zeros(len(nrm), int), [mat], None, CUBE,
+                                 envmap.WorldLighting(image=img, rotation=R).to_cubemap(32))
+    ev = rsl.Evaluator(lights, R)
+    V, C = ev.diffuse_factors(nrm, "SAT", sat, tables)
+    out = ev.shade(mat, tables, nrm, None, V, C)
+    rotated_error = np.linalg.norm(out - ref) / np.linalg.norm(ref)
+    assert rotated_error < 0.1       # the sun's shadow edges in a 32² disk map: about 6 %
+    ev0 = rsl.Evaluator(lights)
+    V0, C0 = ev0.diffuse_factors(nrm, "SAT", sat, tables)
+    unrotated = ev0.shade(mat, tables, nrm, None, V0, C0)
+    assert np.linalg.norm(unrotated - ref) / np.linalg.norm(ref) > 3 * rotated_error
+
+
+def _hdri(name):
+    import pathlib
+    import prt_relight
+    root = pathlib.Path(prt_relight.__file__).parent
+    hits = list((root / ".venv/lib").glob(f"python3*/site-packages/bpy/*/datafiles/studiolights/"
+                                           f"world/{name}.exr"))
+    return hits[0] if hits else None
