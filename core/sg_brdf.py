@@ -592,7 +592,7 @@ def _fresnel(material, c):
     out = a + 0.0 * c[..., None]
     if np.any(bd):
         eta = np.asarray(material.ior, dtype=np.float64)
-        out = out + bd * fresnel_eq14(c, eta if eta.ndim == 0 else eta[..., None])[..., None]
+        out = out + bd * fresnel_eq14(c, eta)[..., None]
     if np.any(bs):
         out = out + bs * ((1.0 - c) ** 5)[..., None]
     if material.fresnel == "PRINCIPLED":
@@ -785,7 +785,7 @@ def _principled_brdf_material(material, rough_r=None, f0=None):
     eta = float(np.mean(material.ior))
     ks = np.asarray(material.specular, dtype=np.float64).reshape(-1, 3).mean(axis=0)
     return core_brdf.Material(diffuse_albedo=(1.0, 1.0, 1.0), specular_color=tuple(ks),
-                              roughness=r, distribution="GGX", fresnel="DIELECTRIC", ior=eta,
+                              roughness=r, distribution="MULTI_GGX", fresnel="DIELECTRIC", ior=eta,
                               metallic=0.0)
 
 

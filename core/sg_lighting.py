@@ -498,7 +498,7 @@ def lamp_irradiance(lamp: Lamp, positions, normals, n_theta=48, n_phi=64):
         half = np.full(x.shape[0], 0.5 * lamp.angle)
         cap = 2.0 * math.pi * (1.0 - np.cos(half))
         total = np.broadcast_to(col, (x.shape[0], 3))          # strength = E at normal incidence
-        radiance_scale = 1.0 / cap[:, None]
+        radiance_scale = 1.0 / np.maximum(cap, 1e-300)[:, None]
     else:
         v = np.asarray(lamp.position, dtype=np.float64)[None, :] - x
         dist = np.linalg.norm(v, axis=1)
@@ -509,11 +509,15 @@ def lamp_irradiance(lamp: Lamp, positions, normals, n_theta=48, n_phi=64):
         e_far = 1.0 / (4.0 * math.pi * dist * dist)
         if lamp.kind == "SPOT":
             e_far = e_far * _spot_attenuation(lamp, -axis)
-        radiance_scale = (e_far / (math.pi * np.sin(half) ** 2))[:, None]
-        total = col[None, :]
+        radiance_scale = (e_far / np.maximum(math.pi * np.sin(half) ** 2, 1e-300))[:, None]
+        total = np.broadcast_to(col, (x.shape[0], 3))
     xg, wg = np.polynomial.legendre.leggauss(n_theta)
     out = np.zeros((x.shape[0], 3))
     for p in range(x.shape[0]):
+        if half[p] <= 1e-9:               # zero-size lamp: the limit E_normal * max(0, n . axis)
+            e_normal = total[p] if lamp.kind == "SUN" else total[p] * e_far[p]
+            out[p] = e_normal * max(float(axis[p] @ n[p]), 0.0)
+            continue
         th = 0.5 * half[p] * (xg + 1.0)
         wt = 0.5 * half[p] * wg * np.sin(th)
         ph = (np.arange(n_phi) + 0.5) * 2 * math.pi / n_phi
@@ -525,5 +529,5 @@ def lamp_irradiance(lamp: Lamp, positions, normals, n_theta=48, n_phi=64):
                 + np.cos(th)[:, None, None] * a)
         cosn = np.maximum(dirs @ n[p], 0.0)
         val = np.sum(cosn * wt[:, None]) * (2 * math.pi / n_phi)
-        out[p] = val * radiance_scale[p] * (total[p] if total.ndim == 2 else total)
+        out[p] = val * radiance_scale[p] * total[p]
     return out
