@@ -171,6 +171,48 @@ def add_camera(target=(0.0, 0.0, 0.75), distance: float = 5.5, elevation_deg: fl
     return cam
 
 
+def add_bsdf_material(ob, name: str, node_type: str = "ShaderNodeBsdfGlossy", **inputs):
+    """Give ``ob`` a material whose surface is one BSDF node (``inputs`` by socket name;
+    ``distribution=`` sets the node's distribution), e.g. a Beckmann Glossy BSDF::
+
+        add_bsdf_material(ob, "Glossy", "ShaderNodeBsdfGlossy", distribution="BECKMANN",
+                          Roughness=0.25)
+    """
+    import bpy
+    mat = bpy.data.materials.new(name)
+    nt = mat.node_tree
+    for node in list(nt.nodes):
+        if node.type == "BSDF_PRINCIPLED":
+            nt.nodes.remove(node)
+    node = nt.nodes.new(node_type)
+    for key, value in inputs.items():
+        if key == "distribution":
+            node.distribution = value
+        else:
+            node.inputs[key].default_value = value
+    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    ob.data.materials.clear()
+    ob.data.materials.append(mat)
+    return mat
+
+
+def glossy_bunny_scene(hdri: str = "city", roughness: float = 0.25, cuts: int = 96,
+                       mesh=None, rotation_z: float = 0.6):
+    """Held-out glossy scene (BLOCKS bench): the Stanford bunny with a Beckmann Glossy BSDF
+    (white, ``roughness``) on a diffuse (0.8) ground grid, lit by a bundled HDRI."""
+    reset()
+    add_world(hdri, rotation_z=rotation_z)
+    ground = add_ground(cuts=cuts)
+    add_bsdf_material(ground, "Ground Diffuse", "ShaderNodeBsdfDiffuse",
+                      Color=(0.8, 0.8, 0.8, 1.0))
+    mesh = pathlib.Path(mesh) if mesh else ROOT.parent / "shared/data/meshes/stanford-bunny.obj"
+    ob = add_obj(mesh) if mesh.is_file() else add_suzanne()
+    add_bsdf_material(ob, "Bunny Glossy", "ShaderNodeBsdfGlossy", distribution="BECKMANN",
+                      Roughness=roughness, Color=(1.0, 1.0, 1.0, 1.0))
+    add_camera()
+    return ob
+
+
 # ------------------------------------------------------------------ rendering
 
 def _save_render(path):
@@ -226,7 +268,7 @@ def render_workbench(path=None) -> float:
     return _render("BLENDER_WORKBENCH", [path] if path else [])
 
 
-def precompute(resolution: int = 32, threads=None) -> dict:
+def precompute(resolution: int = 32, threads=None, method: str = "REFERENCE") -> dict:
     """Run the add-on's gather/run/commit (what ``prt.precompute`` does) and return timings.
 
     Keys: export, build_bvh, rays, storage, ray_count, rays_per_second, points, total.
@@ -234,7 +276,7 @@ def precompute(resolution: int = 32, threads=None) -> dict:
     import bpy
     from prt_relight.addon import precompute as pc
     scene = bpy.context.scene
-    scene.prt.method = "REFERENCE"
+    scene.prt.method = method          # derive/store run for the active method only
     scene.prt.resolution = str(resolution)
     t0 = time.perf_counter()
     job = pc.gather(bpy.context.evaluated_depsgraph_get(), scene.prt)
