@@ -676,6 +676,8 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
 
     * warp (eq. 18-21): ``p_W = 2 (o.p) p - o``, ``lam_W = lam_D / (4 |o.p|)``
       (capped at :data:`LAMBDA_MAX`), ``mu_W = mu_D``;
+    * views below the horizon (``n.o < 1e-4``) are bent up to it as in
+      :func:`.brdf.reflectance_cosine`;
     * ``mu = mu_W ks F(o.p) M_o(p_W)`` (eq. 22) with ``M_o`` of the model
       (cosines floored at :data:`COS_MIN`, or :data:`COS_MIN_SINGULAR` for the
       ``1/sqrt(cos)`` models) and the Fresnel of :func:`fresnel_coefficients`;
@@ -690,6 +692,7 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     if o.shape != n.shape:
         raise ValueError(f"views {o.shape} must match normals {n.shape}")
     P = n.shape[0]
+    o = _bend_view(n, o)
     ax_l, lam_d, mu_d = _local_ndf_lobes(material, P)
     K = ax_l.shape[1]
     if K > MAX_LOBES:
@@ -714,6 +717,20 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
         fres = _fresnel(mat, c)
     mu = np.broadcast_to(mu_d, (P, K))[..., None] * (m * (c > 0.0))[..., None] * fres
     return pw, lam, mu
+
+
+def _bend_view(n, o):
+    """Views with ``n.o < COS_VIEW_MIN`` raised to just above the horizon, as
+    :func:`.brdf._bend_views` (Cycles bends the normal instead):
+    ``o' = normalize(o + (COS_VIEW_MIN - n.o) n)``."""
+    c = np.sum(n * o, axis=1)
+    low = c < core_brdf.COS_VIEW_MIN
+    if np.any(low):
+        o = o.copy()
+        o[low] += (core_brdf.COS_VIEW_MIN - c[low])[:, None] * n[low]
+        ln = np.linalg.norm(o[low], axis=1, keepdims=True)
+        o[low] /= np.where(ln > 0, ln, 1.0)
+    return o
 
 
 def _fresnel_pointwise(material, c, P):
