@@ -574,21 +574,32 @@ class Evaluator:
         :meth:`diffuse_factors`; ``views`` (P, 3) unit toward the eye (None is
         allowed for diffuse-only, non-layered materials)."""
         normals = np.asarray(normals, dtype=np.float64)
-        P = len(normals)
-        out = np.zeros((P, 3))
-        if material.has_diffuse:
-            irr = (C * V) @ self.energy
-            out += irr * (np.asarray(material.diffuse_albedo) / np.pi)
-            if material.fresnel == "DIELECTRIC":
-                out *= brdf.diffuse_view_weight(material, normals, views)
-        if material.is_diffuse_only or P == 0:
+        weights = point_weights(material, normals, views)
+        out = ((C * V) @ self.energy) * weights[0]
+        if len(weights) == 1:
             return out
         tp, bp, theta_o = view_frames(normals, views)
         px, py = disk_coordinates(self.centres, tp, bp, normals)
-        weights = [w for _, w in brdf.specular_terms(material, normals, views,
-                                                     np.array([[0.0, 0.0, 1.0]]))]
         th = np.broadcast_to(theta_o[:, None], px.shape)
-        for k, w in enumerate(weights):
+        for k, w in enumerate(weights[1:]):
             G = brdf_box(tables, k, th, px, py, self.half)
             out += ((G * V) @ self.energy) * w
         return out
+
+
+def point_weights(material: brdf.Material, normals, views) -> list:
+    """Per-point RGB weights (P, 3) of the tabulated sums: ``albedo/pi * W(n, wo)`` for
+    the cosine table (Principled layering weight ``W``, 1 otherwise), then one per
+    glossy term of :func:`..brdf.specular_terms` (Fresnel, colour, multiscatter; they
+    depend on the view elevation only, so they stay outside the SATs)."""
+    normals = np.asarray(normals, dtype=np.float64)
+    P = len(normals)
+    diffuse = np.zeros((P, 3))
+    if material.has_diffuse:
+        diffuse += np.asarray(material.diffuse_albedo) / np.pi
+        if material.fresnel == "DIELECTRIC":
+            diffuse *= brdf.diffuse_view_weight(material, normals, views)
+    if material.is_diffuse_only or P == 0:
+        return [diffuse]
+    return [diffuse] + [w.astype(np.float64) for _, w in brdf.specular_terms(
+        material, normals, views, np.array([[0.0, 0.0, 1.0]]))]

@@ -90,7 +90,7 @@ class RSLMethod(Method):
     budget = ("rsl_lights", [10, 30, 60, 100])
 
     def scene_properties(self):
-        from bpy.props import EnumProperty, FloatProperty, IntProperty
+        from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
         upd = runtime.redraw_viewports
         return {
             "rsl_lights": IntProperty(
@@ -111,6 +111,10 @@ class RSLMethod(Method):
                 items=[("VDT", "Distance Table", "One look-up per light (eq. 9)"),
                        ("SAT", "Summed-Area Table", "Exact box integral, four look-ups")],
                 default="VDT"),
+            "rsl_gpu": BoolProperty(
+                name="GPU Pass", default=True, update=upd,
+                description="Shade the vertices in a GLSL pass (one texel per vertex) when a GPU "
+                            "context is available; numpy otherwise"),
         }
 
     def draw_settings(self, layout, prt):
@@ -120,6 +124,7 @@ class RSLMethod(Method):
         else:
             layout.prop(prt, "rsl_lights")
         layout.prop(prt, "rsl_visibility")
+        layout.prop(prt, "rsl_gpu")
 
     def view_dependent(self, state) -> bool:
         return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
@@ -130,29 +135,207 @@ class RSLMethod(Method):
         R = state.world.rotation
         evaluator = rsl.Evaluator(lights, R)
         kind = state.settings.get("rsl_visibility", "VDT")
+        use_gpu = bool(state.settings.get("rsl_gpu", True)) and gpu_available()
         cos_tables = brdf_tables(brdf.Material())
         out = []
         for st in state.objects:
             pts = st.points
             vis = object_visibility(st, state.resolution)[kind]
-            V, C = runtime.per_visibility(
-                _FACTORS, (st.name, id(st.bits), lkey, kind, R.round(9).tobytes()), st.bits,
-                lambda: evaluator.diffuse_factors(pts.normals, kind, vis, cos_tables), limit=8)
-            radiance = np.zeros((pts.count, 3))
-            for slot in np.unique(pts.materials):
-                sel = np.nonzero(pts.materials == slot)[0]
-                mat = st.materials[int(slot)] if 0 <= slot < len(st.materials) else brdf.Material()
-                vd = None
-                if not mat.is_diffuse_only or mat.fresnel == "DIELECTRIC":
-                    if view_dir is not None:
-                        vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
-                    else:
-                        vd = reference.view_directions(pts.positions[sel], eye)
-                radiance[sel] = evaluator.shade(mat, brdf_tables(mat), pts.normals[sel], vd,
-                                                V[sel], C[sel])
+            radiance = None
+            if use_gpu:
+                try:
+                    radiance = self._shade_gpu(st, evaluator, kind, vis, eye, view_dir)
+                except Exception as exc:                  # numpy below gives the same sums
+                    state.note(f"RSL GPU pass failed ({exc}); shading with numpy")
+                    use_gpu = False
+            if radiance is None:
+                V, C = runtime.per_visibility(
+                    _FACTORS, (st.name, id(st.bits), lkey, kind, R.round(9).tobytes()), st.bits,
+                    lambda: evaluator.diffuse_factors(pts.normals, kind, vis, cos_tables),
+                    limit=8)
+                radiance = np.zeros((pts.count, 3))
+                for mat, sel, vd in _groups(st, eye, view_dir):
+                    radiance[sel] = evaluator.shade(mat, brdf_tables(mat), pts.normals[sel], vd,
+                                                    V[sel], C[sel])
             radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
             out.append(radiance[pts.point_of_corner].astype(np.float32))
         return out
 
+    @staticmethod
+    def _shade_gpu(st, evaluator, kind, vis, eye, view_dir):
+        key = ("vis", st.name, kind)
+        got = _GPU.get(key)
+        if got is None or got[0] is not vis:
+            _GPU[key] = got = (vis, _texture(_tiles(vis), "R32F"))
+        pts = st.points
+        radiance = np.zeros((pts.count, 3))
+        for mat, sel, vd in _groups(st, eye, view_dir):
+            normals = pts.normals[sel]
+            radiance[sel] = gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
+                                      brdf_tables(mat), normals, vd,
+                                      rsl.point_weights(mat, normals, vd), kind, got[1],
+                                      vis.shape[-1] - (kind == "SAT"), sel)
+        return radiance
+
+
+def _groups(st, eye, view_dir):
+    """(material, point indices, view directions or None) per material slot."""
+    pts = st.points
+    for slot in np.unique(pts.materials):
+        sel = np.nonzero(pts.materials == slot)[0]
+        mat = st.materials[int(slot)] if 0 <= slot < len(st.materials) else brdf.Material()
+        vd = None
+        if not mat.is_diffuse_only or mat.fresnel == "DIELECTRIC":
+            if view_dir is not None:
+                vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
+            else:
+                vd = reference.view_directions(pts.positions[sel], eye)
+        yield mat, sel, vd
+
 
 register(RSLMethod())
+
+
+# --------------------------------------------------------------------------- #
+# GLSL per-vertex pass (§5.2: one texel per vertex, rendered to a float target)
+# --------------------------------------------------------------------------- #
+
+MAX_TERMS = 8
+TEXTURE_WIDTH = 8192
+_GPU: dict = {}             # shader, cached textures (per object tables, per material SATs)
+
+
+def gpu_available() -> bool:
+    """The GPU pass runs on the main thread of a Blender with a GPU context."""
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    try:
+        import gpu
+        return gpu.platform.backend_type_get() != "NONE"
+    except Exception:
+        return False
+
+
+def _shader():
+    sh = _GPU.get("shader")
+    if sh is None:
+        import gpu
+        from .. import drawing
+        info = gpu.types.GPUShaderCreateInfo()
+        for ident in ("width", "pointCount", "lightCount", "termCount", "visMode", "visRes",
+                      "visTile", "brdfRes", "viewNodes"):
+            info.push_constant("INT", ident)
+        info.push_constant("FLOAT", "viewStep")
+        for slot, ident in enumerate(("pointData", "weights", "lights", "visTable",
+                                      "brdfTables")):
+            info.sampler(slot, "FLOAT_2D", ident)
+        info.vertex_in(0, "VEC2", "ndc")
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.define("MAX_TERMS", str(MAX_TERMS))
+        info.vertex_source(drawing._source("rsl_vertex_vert.glsl"))
+        info.fragment_source(drawing._source("rsl_vertex_frag.glsl"))
+        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
+    return sh
+
+
+def _texture(values: np.ndarray, fmt: str):
+    """GPU texture from (H, W, C) float32 (C = 1 for R32F, 4 for RGBA32F)."""
+    import gpu
+    h, w = values.shape[:2]
+    flat = np.ascontiguousarray(values, dtype=np.float32).reshape(-1)
+    return gpu.types.GPUTexture((w, h), format=fmt,
+                                data=gpu.types.Buffer("FLOAT", flat.size, flat))
+
+
+def _tiles(tables: np.ndarray):
+    """(P, n, n) per-vertex tables packed as n x n tiles in rows of an R32F texture."""
+    P, n, _ = tables.shape
+    per_row = max(1, TEXTURE_WIDTH // n)
+    rows = -(-P // per_row)
+    img = np.zeros((rows * per_row, n, n), np.float32)
+    img[:P] = tables
+    img = img.reshape(rows, per_row, n, n).transpose(0, 2, 1, 3).reshape(rows * n, per_row * n)
+    return img[..., None]
+
+
+def brdf_texture_blocks(tables: rsl.BrdfTables) -> np.ndarray:
+    """The cosine SAT then every glossy term's SAT per view node, each an
+    (N+1) x (N+2) block whose last column holds the block's offset in row 0."""
+    n = tables.resolution
+    blocks = [(tables.cosine, tables.cosine_offset)]
+    for S, off in zip(tables.glossy, tables.glossy_offsets):
+        blocks += list(zip(S, off))
+    out = np.zeros((len(blocks) * (n + 1), n + 2), np.float32)
+    for i, (S, off) in enumerate(blocks):
+        out[i * (n + 1):(i + 1) * (n + 1), :n + 1] = S
+        out[i * (n + 1), n + 1] = off
+    return out[..., None]
+
+
+def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, normals, views,
+              weights, vis_kind: str, vis_texture, vis_res: int, indices):
+    """Per-vertex radiance (P, 3) of points sharing one material by the GLSL pass
+    (``indices``: their tiles in the object's visibility texture ``vis_texture``).
+    ``weights``: list of (P, 3), the diffuse weight ``albedo/pi * W`` then each glossy
+    term's weight (:func:`..core.rsl.point_weights`)."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+    P = len(normals)
+    terms = len(weights) - 1
+    if terms > MAX_TERMS:
+        raise ValueError(f"{terms} BRDF terms; the GPU pass takes {MAX_TERMS}")
+    width = min(P, 1024)
+    rows = -(-P // width)
+    pd = np.zeros((3 * rows * width, 4), np.float32)
+    pd[:P, :3] = normals
+    pd[rows * width:rows * width + P, :3] = views if views is not None else normals
+    pd[2 * rows * width:2 * rows * width + P, 0] = indices        # exact below 2**24
+    pd = pd.reshape(3 * rows, width, 4)
+    wt = np.zeros(((terms + 1) * rows * width, 4), np.float32)
+    for k, w in enumerate(weights):
+        wt[k * rows * width:k * rows * width + P, :3] = w
+    wt = wt.reshape((terms + 1) * rows, width, 4)
+    K = len(lights_half)
+    lt = np.zeros((2, K, 4), np.float32)
+    lt[0, :, :3] = lights_centres
+    lt[0, :, 3] = lights_half
+    lt[1, :, :3] = energy
+    key = ("brdf", id(tables))
+    got = _GPU.get(key)
+    if got is None or got[0] is not tables:
+        _GPU[key] = got = (tables, _texture(brdf_texture_blocks(tables), "R32F"))
+    sh = _shader()
+    offscreen = gpu.types.GPUOffScreen(width, rows, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
+            gpu.state.depth_test_set("NONE")
+            gpu.state.blend_set("NONE")
+            sh.bind()
+            for name, value in (("width", width), ("pointCount", P), ("lightCount", K),
+                                ("termCount", terms), ("visMode", 0 if vis_kind == "VDT" else 1),
+                                ("visRes", vis_res),
+                                ("visTile", vis_res if vis_kind == "VDT" else vis_res + 1),
+                                ("brdfRes", tables.resolution),
+                                ("viewNodes", len(tables.view_angles))):
+                sh.uniform_int(name, value)
+            sh.uniform_float("viewStep", float(tables.view_angles[1] - tables.view_angles[0]))
+            # keep the textures referenced until the draw is done
+            point_tex, weight_tex = _texture(pd, "RGBA32F"), _texture(wt, "RGBA32F")
+            light_tex = _texture(lt, "RGBA32F")
+            sh.uniform_sampler("pointData", point_tex)
+            sh.uniform_sampler("weights", weight_tex)
+            sh.uniform_sampler("lights", light_tex)
+            sh.uniform_sampler("visTable", vis_texture)
+            sh.uniform_sampler("brdfTables", got[1])
+            batch = batch_for_shader(sh, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+                                     indices=[(0, 1, 2), (0, 2, 3)])
+            batch.draw(sh)
+            buf = fb.read_color(0, 0, width, rows, 4, 0, "FLOAT")
+        buf.dimensions = width * rows * 4
+        out = np.array(buf, dtype=np.float32).reshape(rows * width, 4)
+    finally:
+        offscreen.free()
+    return out[:P, :3].astype(np.float64)

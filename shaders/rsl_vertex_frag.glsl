@@ -1,0 +1,151 @@
+/* RSL per-vertex shading (seed 000 Fig. 8, eq. 5): one texel per shading point.
+ *
+ * For every rotatable square light: its centre in the vertex frame (t, b, n) gives the
+ * square in the disk map p = sqrt(1 - cos) (sin f, cos f); the visibility average comes
+ * from the vertex's distance table (eq. 9) or visibility SAT, the cosine and BRDF
+ * averages from the summed-area tables (4 look-ups each, linear between view nodes)
+ * in the frame whose x axis is the projected view.  Output: diffuse and per-term
+ * glossy sums weighted by per-vertex view-dependent weights (Fresnel/layering).
+ *
+ * Textures (texelFetch only, so the sums equal the numpy evaluator's):
+ *   pointData  RGBA32F  rows of `width`: [normal, 0] at (x, y), view dir at (x, y + rows),
+ *                       the point's visibility tile index at (x, y + 2 rows)
+ *   weights    RGBA32F  (width, rows * (terms + 1)): diffuse weight, then term weights
+ *   lights     RGBA32F  (lightCount, 2): [centre, half side], [energy, 0]
+ *   visTable   RGBA32F  per-vertex N x N (VDT) or (N+1) x (N+1) (SAT) tiles, R channel
+ *   brdfTables RGBA32F  (N+2) x (N+1) blocks: cosine table, then terms x view nodes;
+ *                       column N+1, row 0 holds the block's offset (mean per area)
+ */
+
+float sat_at(sampler2D tex, ivec2 origin, int n, float x, float y)
+{
+  /* bilinear sample of an (n+1) x (n+1) corner table at grid coordinates (x, y) */
+  x = clamp(x, 0.0, float(n));
+  y = clamp(y, 0.0, float(n));
+  int x0 = min(int(x), n - 1);
+  int y0 = min(int(y), n - 1);
+  float fx = x - float(x0);
+  float fy = y - float(y0);
+  float a = texelFetch(tex, origin + ivec2(x0, y0), 0).r;
+  float b = texelFetch(tex, origin + ivec2(x0 + 1, y0), 0).r;
+  float c = texelFetch(tex, origin + ivec2(x0, y0 + 1), 0).r;
+  float d = texelFetch(tex, origin + ivec2(x0 + 1, y0 + 1), 0).r;
+  float top = a * (1.0 - fx) + b * fx;
+  float bot = c * (1.0 - fx) + d * fx;
+  return top * (1.0 - fy) + bot * fy;
+}
+
+float box(sampler2D tex, ivec2 origin, int n, vec2 p, float half_side)
+{
+  float k = 0.5 * float(n);
+  float x0 = (p.x - half_side + 1.0) * k, x1 = (p.x + half_side + 1.0) * k;
+  float y0 = (p.y - half_side + 1.0) * k, y1 = (p.y + half_side + 1.0) * k;
+  return sat_at(tex, origin, n, x1, y1) - sat_at(tex, origin, n, x0, y1) -
+         sat_at(tex, origin, n, x1, y0) + sat_at(tex, origin, n, x0, y0);
+}
+
+float clipped_area(vec2 p, float h)
+{
+  float wx = clamp(p.x + h, -1.0, 1.0) - clamp(p.x - h, -1.0, 1.0);
+  float wy = clamp(p.y + h, -1.0, 1.0) - clamp(p.y - h, -1.0, 1.0);
+  return wx * wy;
+}
+
+float table_box(int block, vec2 p, float h)
+{
+  /* average of block's function over the square, offset added back */
+  ivec2 origin = ivec2(0, block * (brdfRes + 1));
+  float off = texelFetch(brdfTables, origin + ivec2(brdfRes + 1, 0), 0).r;
+  return (box(brdfTables, origin, brdfRes, p, h) + off * clipped_area(p, h)) / (4.0 * h * h);
+}
+
+vec2 disk(vec3 l)
+{
+  float r = sqrt(max(0.0, 1.0 - clamp(l.z, -1.0, 1.0)));
+  float rho = length(l.xy);
+  return rho > 0.0 ? r * vec2(l.y, l.x) / rho : vec2(0.0, r);
+}
+
+float visibility(ivec2 tile, vec2 p, float h)
+{
+  if (visMode == 0) { /* VDT, eq. 9 */
+    int n = visRes;
+    float k = 0.5 * float(n);
+    float x = clamp((p.x + 1.0) * k - 0.5, 0.0, float(n - 1));
+    float y = clamp((p.y + 1.0) * k - 0.5, 0.0, float(n - 1));
+    int x0 = min(int(x), n - 2);
+    int y0 = min(int(y), n - 2);
+    float fx = x - float(x0), fy = y - float(y0);
+    float a = texelFetch(visTable, tile + ivec2(x0, y0), 0).r;
+    float b = texelFetch(visTable, tile + ivec2(x0 + 1, y0), 0).r;
+    float c = texelFetch(visTable, tile + ivec2(x0, y0 + 1), 0).r;
+    float d = texelFetch(visTable, tile + ivec2(x0 + 1, y0 + 1), 0).r;
+    float D = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
+    return clamp((h + D) / (2.0 * h), 0.0, 1.0);
+  }
+  return box(visTable, tile, visRes, p, h) / (4.0 * h * h);
+}
+
+void main()
+{
+  ivec2 pix = ivec2(gl_FragCoord.xy);
+  int index = pix.y * width + pix.x;
+  if (index >= pointCount) {
+    fragColor = vec4(0.0);
+    return;
+  }
+  int rows = (pointCount + width - 1) / width;
+  vec3 n = texelFetch(pointData, pix, 0).xyz;
+  vec3 v = texelFetch(pointData, pix + ivec2(0, rows), 0).xyz;
+  /* Duff et al. 2017 frame, as core.directions.orthonormal_frame */
+  float s = n.z >= 0.0 ? 1.0 : -1.0;
+  float a = -1.0 / (s + n.z);
+  float bb = n.x * n.y * a;
+  vec3 t = vec3(1.0 + s * n.x * n.x * a, s * bb, -s * n.x);
+  vec3 b = vec3(bb, s + n.y * n.y * a, -n.y);
+  /* view frame: x axis = view projected on the tangent plane */
+  float cos_o = dot(n, v);
+  vec3 tp = v - cos_o * n;
+  float ln = length(tp);
+  tp = ln > 1e-9 ? tp / ln : t;
+  vec3 bp = cross(n, tp);
+  float theta = acos(clamp(cos_o, 0.0, 1.0));
+  float node = clamp(theta / viewStep, 0.0, float(viewNodes - 1));
+  int j0 = min(int(node), viewNodes - 2);
+  float fj = node - float(j0);
+
+  int tiles_per_row = textureSize(visTable, 0).x / visTile;
+  int vis_index = int(texelFetch(pointData, pix + ivec2(0, 2 * rows), 0).x + 0.5);
+  ivec2 tile = ivec2((vis_index % tiles_per_row) * visTile,
+                     (vis_index / tiles_per_row) * visTile);
+
+  vec3 diffuse = vec3(0.0);
+  vec3 glossy[MAX_TERMS];
+  for (int k = 0; k < MAX_TERMS; k++) {
+    glossy[k] = vec3(0.0);
+  }
+  for (int i = 0; i < lightCount; i++) {
+    vec4 cl = texelFetch(lights, ivec2(i, 0), 0);
+    vec3 E = texelFetch(lights, ivec2(i, 1), 0).rgb;
+    float h = cl.w;
+    vec2 p = disk(vec3(dot(cl.xyz, t), dot(cl.xyz, b), dot(cl.xyz, n)));
+    float V = visibility(tile, p, h);
+    if (V <= 0.0) {
+      continue;
+    }
+    diffuse += E * (V * table_box(0, p, h));
+    if (termCount > 0) {
+      vec2 q = disk(vec3(dot(cl.xyz, tp), dot(cl.xyz, bp), dot(cl.xyz, n)));
+      for (int k = 0; k < termCount; k++) {
+        int blk = 1 + k * viewNodes + j0;
+        float g = (1.0 - fj) * table_box(blk, q, h) + fj * table_box(blk + 1, q, h);
+        glossy[k] += E * (V * g);
+      }
+    }
+  }
+  vec3 color = diffuse * texelFetch(weights, pix, 0).rgb;
+  for (int k = 0; k < termCount; k++) {
+    color += glossy[k] * texelFetch(weights, pix + ivec2(0, (k + 1) * rows), 0).rgb;
+  }
+  fragColor = vec4(color, 1.0);
+}

@@ -1,0 +1,5 @@
+/* RSL per-vertex pass (seed 000 §5.2): a full-screen quad over the point texture. */
+void main()
+{
+  gl_Position = vec4(ndc, 0.0, 1.0);
+}
