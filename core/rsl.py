@@ -603,3 +603,124 @@ def point_weights(material: brdf.Material, normals, views) -> list:
         return [diffuse]
     return [diffuse] + [w.astype(np.float64) for _, w in brdf.specular_terms(
         material, normals, views, np.array([[0.0, 0.0, 1.0]]))]
+
+
+# --------------------------------------------------------------------------- #
+# §5.1  Clustered PCA of the self-visibility distance field
+# --------------------------------------------------------------------------- #
+
+@dataclass
+class ClusteredPCA:
+    """``x_p ~= means[labels[p]] + coeffs[p] @ bases[labels[p]]`` (CPCA, Sloan 2003)."""
+
+    labels: np.ndarray        # (P,) int
+    means: np.ndarray         # (C, D) float32
+    bases: np.ndarray         # (C, E, D) float32, orthonormal rows
+    coeffs: np.ndarray        # (P, E) float32
+
+    def reconstruct(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        lab = self.labels[start:stop]
+        out = self.means[lab].copy()
+        out += np.einsum("pe,ped->pd", self.coeffs[start:stop], self.bases[lab])
+        return out
+
+    @property
+    def stored_floats(self) -> int:
+        C, E, D = self.bases.shape
+        return C * (E + 1) * D + len(self.labels) * (E + 1)
+
+
+def _top_components(X: np.ndarray, count: int, rng) -> np.ndarray:
+    """(count, D) leading right singular vectors of X (randomized range finder, 2 power
+    iterations; exact when count >= rank)."""
+    n, d = X.shape
+    k = min(count, n, d)
+    if k == 0:
+        return np.zeros((0, d), np.float32)
+    if min(n, d) <= count + 8:
+        _, _, vt = np.linalg.svd(X, full_matrices=False)
+        return vt[:k]
+    omega = rng.standard_normal((d, k + 8)).astype(X.dtype)
+    Y = X @ omega
+    for _ in range(2):
+        Y, _ = np.linalg.qr(Y)
+        Y = X @ (X.T @ Y)
+    Q, _ = np.linalg.qr(Y)
+    _, _, vt = np.linalg.svd(Q.T @ X, full_matrices=False)
+    return vt[:k]
+
+
+def clustered_pca(vectors: np.ndarray, clusters: int, eigen: int, iterations: int = 8,
+                  seed: int = 0) -> ClusteredPCA:
+    """Cluster with k-means (in a global 32-D PCA space), then a PCA basis of ``eigen``
+    vectors per cluster; a few CPCA refinements reassign each vector to the cluster
+    that reconstructs it best."""
+    X = np.asarray(vectors, dtype=np.float32)
+    P, D = X.shape
+    C = max(1, min(int(clusters), P))
+    E = max(0, min(int(eigen), D))
+    rng = np.random.default_rng(seed)
+    mu = X.mean(0)
+    sample = X[rng.choice(P, min(P, 4096), replace=False)] - mu
+    red_basis = _top_components(sample, 32, rng)
+    Z = (X - mu) @ red_basis.T
+    centres = Z[rng.choice(P, C, replace=False)]
+    labels = np.zeros(P, np.int64)
+    for _ in range(iterations):
+        d2 = (Z * Z).sum(1)[:, None] - 2 * Z @ centres.T + (centres * centres).sum(1)[None]
+        labels = np.argmin(d2, axis=1)
+        for c in range(C):
+            m = labels == c
+            centres[c] = Z[m].mean(0) if m.any() else Z[rng.integers(P)]
+    for refine in range(2):
+        means = np.zeros((C, D), np.float32)
+        bases = np.zeros((C, E, D), np.float32)
+        for c in range(C):
+            m = labels == c
+            if not m.any():
+                continue
+            means[c] = X[m].mean(0)
+            B = _top_components(X[m] - means[c], E, rng)
+            bases[c, :len(B)] = B
+        if refine == 1 or C == 1:
+            break
+        # CPCA step: assign each vector to the cluster with the least residual
+        err = np.empty((P, C), np.float32)
+        for c in range(C):
+            R = X - means[c]
+            proj = R @ bases[c].T
+            err[:, c] = (R * R).sum(1) - (proj * proj).sum(1)
+        labels = np.argmin(err, axis=1)
+    coeffs = np.einsum("pd,ped->pe", X - means[labels], bases[labels]) if E else \
+        np.zeros((P, 0), np.float32)
+    return ClusteredPCA(labels, means, bases, coeffs.astype(np.float32))
+
+
+def relative_error(vectors: np.ndarray, model: ClusteredPCA, chunk: int = 4096) -> float:
+    num = den = 0.0
+    for a in range(0, len(vectors), chunk):
+        x = np.asarray(vectors[a:a + chunk], np.float64)
+        num += float(((x - model.reconstruct(a, a + chunk)) ** 2).sum())
+        den += float((x * x).sum())
+    return float(np.sqrt(num / max(den, 1e-300)))
+
+
+#: (clusters, eigenvectors) tried by :func:`compress_by_budget`, cheapest first
+CPCA_CANDIDATES = ((1, 4), (4, 4), (16, 4), (16, 8), (64, 8), (256, 8), (256, 16), (256, 32))
+
+
+def compress_by_budget(vectors: np.ndarray, budget: float, seed: int = 0):
+    """The first (clusters, eigenvectors) of :data:`CPCA_CANDIDATES` whose relative
+    RMS error is within ``budget`` (the last one otherwise).  Returns
+    ``(model, error, compression ratio)``; the ratio counts stored floats (§5.1)."""
+    X = np.asarray(vectors, np.float32)
+    P = len(X)
+    model = err = None
+    for C, E in CPCA_CANDIDATES:
+        if C > P:
+            continue
+        model = clustered_pca(X, C, E, seed=seed)
+        err = relative_error(X, model)
+        if err <= budget:
+            break
+    return model, err, X.size / model.stored_floats

@@ -275,3 +275,16 @@ def _hdri(name):
     hits = list((root / ".venv/lib").glob(f"python3*/site-packages/bpy/*/datafiles/studiolights/"
                                            f"world/{name}.exr"))
     return hits[0] if hits else None
+
+
+def test_clustered_pca_is_exact_with_full_rank_and_meets_its_budget():
+    rng = np.random.default_rng(5)
+    groups = [rng.normal(size=(1, 64)) + 0.1 * rng.normal(size=(40, 3)) @ rng.normal(size=(3, 64))
+              for _ in range(4)]
+    X = np.concatenate(groups).astype(np.float32)
+    exact = rsl.clustered_pca(X, 4, 3)
+    assert rsl.relative_error(X, exact) < 1e-5
+    model, err, ratio = rsl.compress_by_budget(X, 0.05)
+    assert err <= 0.05 and err == pytest.approx(rsl.relative_error(X, model))
+    assert ratio > 1.0
+    np.testing.assert_allclose(model.reconstruct(), X, atol=0.2 * np.abs(X).max())

@@ -100,12 +100,21 @@ def test_method_renders_and_follows_world_rotation(registered_addon):
         return np.concatenate(state.shade(np.array(cam.location)))
 
     a = shaded()
+    # the precompute stored the CPCA-compressed VDT; sync reconstructs it
+    from prt_relight.addon.methods import rsl as method
+    state = FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    for st in state.objects:
+        stored = st.data["rsl"]
+        derived = method.derive_visibility(st.bits, st.points.normals, 32)["VDT"]
+        assert stored.shape == derived.shape
+        err = np.linalg.norm(stored - derived) / np.linalg.norm(derived)
+        assert err <= scene.prt.rsl_cpca_error * 1.001
     scene.prt.method = "REFERENCE"
     ref = shaded()
     scene.prt.method = "RSL"
     assert np.isfinite(a).all()
     assert np.linalg.norm(a - ref) / np.linalg.norm(ref) < 0.1
-    from prt_relight.addon.methods import rsl as method
     decompositions = len(method._LIGHTS)
     mapping.inputs["Rotation"].default_value = (0.0, 0.0, 1.3)
     b = shaded()

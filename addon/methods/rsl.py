@@ -23,6 +23,7 @@ _LIGHTS: dict = {}          # SquareLights per (lighting key, K / budget)
 _TABLES: dict = {}          # BrdfTables per material
 _VISIBILITY: dict = {}      # per-vertex VDT / SAT per (object, bits)
 _FACTORS: dict = {}         # view-independent (V, C) per (object, bits, lights, rotation)
+_STORED: dict = {}          # VDT reconstructed from the stored CPCA per (image, run, points)
 
 
 def _unrotated_lighting(world: envmap.WorldLighting, resolution: int):
@@ -73,13 +74,71 @@ def derive_visibility(bits, normals, resolution: int) -> dict:
     return {"VDT": rsl.visibility_distance_table(maps), "SAT": rsl.visibility_sat(maps)}
 
 
-def object_visibility(st, resolution: int) -> dict:
+def object_visibility(st, resolution: int, kind: str) -> np.ndarray:
+    """The object's VDT (stored CPCA reconstruction when synced, else derived from the
+    visibility bits) or visibility SAT (always derived: the exact option)."""
     stored = st.data.get("rsl")
-    if stored is not None:
+    if kind == "VDT" and stored is not None:
         return stored
     return runtime.per_visibility(
         _VISIBILITY, (st.name, id(st.bits), resolution), st.bits,
-        lambda: derive_visibility(st.bits, st.points.normals, resolution), limit=8)
+        lambda: derive_visibility(st.bits, st.points.normals, resolution), limit=8)[kind]
+
+
+# ------------------------------------------------------------------ storage (§5.1)
+
+IMAGE_PREFIX = "PRT RSL "
+_MAGIC = 5301.0
+_ROW_FLOATS = 4096 * 4
+
+
+def pack_cpca(model: rsl.ClusteredPCA, resolution: int) -> np.ndarray:
+    """Flat float32: header, means, bases, labels, coefficients (labels exact < 2**24)."""
+    C, E, D = model.bases.shape
+    head = np.array([_MAGIC, len(model.labels), D, C, E, resolution, 0, 0], np.float32)
+    return np.concatenate([head, model.means.ravel(), model.bases.ravel(),
+                           model.labels.astype(np.float32), model.coeffs.ravel()])
+
+
+def unpack_cpca(flat: np.ndarray):
+    """Inverse of :func:`pack_cpca`: ``(model, resolution)``; ValueError when malformed."""
+    if len(flat) < 8 or flat[0] != _MAGIC:
+        raise ValueError("not an RSL visibility image")
+    P, D, C, E, res = (int(v) for v in flat[1:6])
+    sizes = [C * D, C * E * D, P, P * E]
+    if len(flat) < 8 + sum(sizes) or res * res != D:
+        raise ValueError("RSL visibility image is truncated")
+    parts, at = [], 8
+    for n in sizes:
+        parts.append(flat[at:at + n])
+        at += n
+    model = rsl.ClusteredPCA(parts[2].astype(np.int64), parts[0].reshape(C, D),
+                             parts[1].reshape(C, E, D), parts[3].reshape(P, E))
+    return model, res
+
+
+def _write_image(name: str, flat: np.ndarray):
+    import bpy
+    rows = max(1, -(-len(flat) // _ROW_FLOATS))
+    data = np.zeros(rows * _ROW_FLOATS, np.float32)
+    data[:len(flat)] = flat
+    img = bpy.data.images.new(IMAGE_PREFIX + name, _ROW_FLOATS // 4, rows, alpha=True,
+                              float_buffer=True, is_data=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    img.use_fake_user = True
+    img.use_half_precision = False
+    img.pixels.foreach_set(data)
+    img.update()
+    img.pack()
+    return img
+
+
+def _read_image(img) -> np.ndarray:
+    w, h = img.size
+    flat = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(flat)
+    return flat
 
 
 class RSLMethod(Method):
@@ -111,6 +170,10 @@ class RSLMethod(Method):
                 items=[("VDT", "Distance Table", "One look-up per light (eq. 9)"),
                        ("SAT", "Summed-Area Table", "Exact box integral, four look-ups")],
                 default="VDT"),
+            "rsl_cpca_error": FloatProperty(
+                name="VDT Compression Error", default=0.02, min=1e-4, max=0.5,
+                description="Precompute: relative RMS error allowed when compressing the "
+                            "per-vertex distance tables with clustered PCA"),
             "rsl_gpu": BoolProperty(
                 name="GPU Pass", default=True, update=upd,
                 description="Shade the vertices in a GLSL pass (one texel per vertex) when a GPU "
@@ -125,6 +188,69 @@ class RSLMethod(Method):
             layout.prop(prt, "rsl_lights")
         layout.prop(prt, "rsl_visibility")
         layout.prop(prt, "rsl_gpu")
+        layout.prop(prt, "rsl_cpca_error")
+
+    # ---------------------------------------------------------- precompute
+    def derive(self, job):
+        """Per object: visibility maps in each vertex's disk map -> VDT (eq. 9) ->
+        clustered PCA within the error budget (§5.1)."""
+        from ...core.visibility import Cancelled
+        budget = float(job.settings.get("rsl_cpca_error", 0.02))
+        out = {}
+        for o in job.objects:
+            if job.cancel_requested:
+                raise Cancelled()
+            vdt = derive_visibility(o.bits, o.points.normals, job.resolution)["VDT"]
+            model, err, ratio = rsl.compress_by_budget(vdt.reshape(len(vdt), -1), budget)
+            out[o.name] = (pack_cpca(model, DISK_RESOLUTION), err, ratio)
+        return out
+
+    def store(self, scene, job, derived):
+        import bpy
+        notes = []
+        for name, (flat, err, ratio) in (derived or {}).items():
+            ob = bpy.data.objects.get(name)
+            if ob is None:
+                continue
+            old = ob.get("prt_rsl_image")
+            img = _write_image(name, flat)
+            ob["prt_rsl_image"] = img
+            ob["prt_rsl_id"] = ob.prt.precompute_id
+            if old is not None and old != img and old.name in bpy.data.images:
+                old.use_fake_user = False
+                if old.users <= 1:
+                    bpy.data.images.remove(old)
+            img.name = IMAGE_PREFIX + name
+            C, E = int(flat[3]), int(flat[4])
+            notes.append(f"{name}: CPCA {C}x{E}, error {err:.3f}, 1:{ratio:.0f}")
+        if notes:
+            scene.prt.last_report = "; ".join([scene.prt.last_report] + notes)
+
+    def sync(self, state):
+        import bpy
+        for st in state.objects:
+            ob = bpy.data.objects.get(st.name)
+            img = ob.get("prt_rsl_image") if ob is not None else None
+            if (img is None or st.status != "ok"
+                    or ob.get("prt_rsl_id") != ob.prt.precompute_id):
+                continue
+            key = (img.name_full, ob.get("prt_rsl_id"), st.points.count)
+            got = _STORED.get(key)
+            if got is None:
+                try:
+                    model, res = unpack_cpca(_read_image(img))
+                except ValueError as exc:
+                    state.note(f"RSL data of {st.name} unusable ({exc}); derived at sync")
+                    continue
+                if len(model.labels) != st.points.count:
+                    continue
+                got = np.concatenate([model.reconstruct(a, a + 4096)
+                                      for a in range(0, len(model.labels), 4096)])
+                got = got.reshape(-1, res, res).astype(np.float32)
+                if len(_STORED) > 8:
+                    _STORED.pop(next(iter(_STORED)))
+                _STORED[key] = got
+            st.data["rsl"] = got
 
     def view_dependent(self, state) -> bool:
         return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
@@ -140,7 +266,7 @@ class RSLMethod(Method):
         out = []
         for st in state.objects:
             pts = st.points
-            vis = object_visibility(st, state.resolution)[kind]
+            vis = object_visibility(st, state.resolution, kind)
             radiance = None
             if use_gpu:
                 try:
@@ -150,7 +276,8 @@ class RSLMethod(Method):
                     use_gpu = False
             if radiance is None:
                 V, C = runtime.per_visibility(
-                    _FACTORS, (st.name, id(st.bits), lkey, kind, R.round(9).tobytes()), st.bits,
+                    _FACTORS, (st.name, id(st.bits), id(vis), lkey, kind, R.round(9).tobytes()),
+                    st.bits,
                     lambda: evaluator.diffuse_factors(pts.normals, kind, vis, cos_tables),
                     limit=8)
                 radiance = np.zeros((pts.count, 3))
