@@ -138,7 +138,7 @@ class SSDFSGMethod(Method):
                 description="RMS angular error allowed for the PCA-compressed SSDFs; decides "
                             "the number of PCA terms per object (needs a precompute)"),
             "ssdf_max_terms": IntProperty(
-                name="SSDF Max Terms", default=48, min=4, max=128,
+                name="SSDF Max Terms", default=48, min=4, max=60,
                 description="Upper limit of PCA terms per object"),
             "sg_environment_lobes": IntProperty(
                 name="Environment Lobes", default=8, min=1, max=16,
@@ -234,9 +234,32 @@ class SSDFSGMethod(Method):
         return out
 
     def draw_objects(self, state, eye, view_dir):
-        return None
+        """Per-pixel eq. 39 + 41 on the GPU (``shaders/ssdf_sg_*.glsl``); None (per-vertex
+        ``shade``) when an object has a material the shader does not model."""
+        if not state.objects:
+            return None
+        unsupported = [st.name for st in state.objects
+                       if any(sg_brdf.sg_material_from_brdf(m).is_anisotropic
+                              for m in st.materials)]
+        if unsupported:
+            state.note("SSDF_SG: anisotropic materials are shaded per vertex: "
+                       + ", ".join(unsupported))
+            return None
+        fields = []
+        for st in state.objects:
+            field = st.data.get("ssdf_sg")
+            if field is None:
+                self.sync(state)
+                field = st.data["ssdf_sg"]
+            if field.terms + 1 > 4 * MAX_COEFF_TEXELS:
+                return None
+            fields.append(field)
+        fit, pre = self._lighting(state)
+        return gpu_draws(state, fields, fit, pre, eye, view_dir)
 
 
+#: the fragment shader holds (1, w_1..w_K) in at most this many vec4
+MAX_COEFF_TEXELS = 16
 #: "object: K terms, RMS" lines of the last sync (panel)
 LAST_TERMS: list = []
 
@@ -342,6 +365,178 @@ def read_image(name, points, cube_resolution, resolution, budget, max_terms):
         _READ_CACHE.pop(next(iter(_READ_CACHE)))
     _READ_CACHE[key] = field
     return field
+
+
+# ----------------------------------------------------------------- GPU (per pixel)
+
+_GPU = {}
+
+
+def _gpu_shader():
+    import gpu
+    sh = _GPU.get("shader")
+    if sh is None:
+        from ..drawing import SHADER_DIR
+        info = gpu.types.GPUShaderCreateInfo()
+        for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot")):
+            info.push_constant(kind, ident)
+        for slot, (kind, ident) in enumerate((("FLOAT_2D", "coeffTex"),
+                                              ("FLOAT_2D_ARRAY", "eigenTex"),
+                                              ("FLOAT_2D", "envTex"), ("FLOAT_2D", "lightTex"),
+                                              ("FLOAT_2D", "paramTex"))):
+            info.sampler(slot, kind, ident)
+        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"),
+                                              ("VEC3", "triPoints"), ("VEC3", "bary"))):
+            info.vertex_in(slot, kind, ident)
+        iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_iface")
+        iface.smooth("VEC3", "vPos")
+        iface.smooth("VEC3", "vNrm")
+        iface.smooth("VEC3", "vBary")
+        iface.flat("VEC3", "vTri")
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source((SHADER_DIR / "ssdf_sg_vert.glsl").read_text())
+        info.fragment_source((SHADER_DIR / "ssdf_sg_frag.glsl").read_text())
+        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
+    return sh
+
+
+def _texture(rgba, layers=0):
+    import gpu
+    flat = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+    buf = gpu.types.Buffer("FLOAT", flat.size, flat)
+    if layers:
+        h, w = rgba.shape[1:3]
+        return gpu.types.GPUTexture((w, h), layers=layers, format="RGBA32F", data=buf)
+    h, w = rgba.shape[:2]
+    return gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
+
+
+def field_textures(field):
+    """(coefficient texture, eigen-image array, texels per point) of a StoredField."""
+    if field.gpu is None:
+        K, D, n = field.terms, field.resolution ** 2, field.resolution
+        kt = -(-(K + 1) // 4)
+        weights = np.zeros((len(field.coefficients), kt * 4), np.float32)
+        weights[:, 0] = 1.0
+        weights[:, 1:K + 1] = field.coefficients
+        total = len(weights) * kt
+        rows = max(1, -(-total // 4096))
+        data = np.zeros((rows * 4096, 4), np.float32)
+        data[:total] = weights.reshape(-1, 4)
+        images = np.zeros((kt * 4, D), np.float32)
+        images[0] = field.mean
+        images[1:K + 1] = field.eigen
+        layers = images.reshape(kt, 4, n, n).transpose(0, 2, 3, 1)          # (kt, n, n, 4)
+        field.gpu = (_texture(data.reshape(rows, 4096, 4)), _texture(layers, layers=kt), kt)
+    return field.gpu
+
+
+def environment_textures(fit, pre):
+    key = (id(fit), id(pre))
+    hit = _GPU.get("env")
+    if hit is None or hit[0] != key:
+        axes, lam, mu, _ = fit
+        J = max(len(lam), 1)
+        light = np.zeros((J, 2, 4), np.float32)
+        light[:len(lam), 0, :3] = axes
+        light[:len(lam), 0, 3] = lam
+        light[:len(lam), 1, :3] = mu
+        hit = _GPU["env"] = (key, _texture(pre.atlas()), _texture(light), len(lam))
+    return hit[1:]
+
+
+def material_uniforms(material):
+    """Push-constant values of one material slot (the CPU half of specular_lobes)."""
+    m = sg_brdf.sg_material_from_brdf(material)
+    kd = np.asarray(sg_brdf.diffuse_albedo(m), np.float64).reshape(3) / np.pi
+    lam, mu = sg_brdf.iso_ndf_sg(m.model, m.roughness)
+    A, Bd, Bs = (np.asarray(x, np.float64).reshape(3) for x in sg_brdf.fresnel_coefficients(m))
+    glossy = bool(np.any(np.asarray(m.specular) > 0) or np.any(np.asarray(m.metallic) > 0))
+    model = {"COOK_TORRANCE": 0, "BLINN_PHONG": 0, "WARD": 1}.get(m.model, 2)
+    return dict(kd=(*kd, 1.0), glossy=int(glossy), brdfModel=model,
+                principled=int(m.fresnel == "PRINCIPLED"),
+                roughness=float(np.asarray(m.roughness).reshape(-1)[0]),
+                ior=float(np.asarray(m.ior).reshape(-1)[0]), ndfLambda=float(lam),
+                ndfMu=float(mu), fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0))
+
+
+def parameter_texture(env, mat, res, kt, eye4):
+    """The 9 parameter texels read by ``read_parameters`` in ssdf_sg_frag.glsl."""
+    p = np.zeros((1, 9, 4), np.float32)
+    p[0, 8] = eye4
+    p[0, 0] = (env["envStrength"], env["lightCount"], res, kt)
+    p[0, 1] = (env["envRes"], env["envLevels"], env["envLambdaFirst"], env["envRatio"])
+    p[0, 2] = (env["envTop"], mat["glossy"], mat["brdfModel"], mat["principled"])
+    p[0, 3] = (mat["roughness"], mat["ior"], mat["ndfLambda"], mat["ndfMu"])
+    p[0, 4], p[0, 5], p[0, 6], p[0, 7] = mat["kd"], mat["fresA"], mat["fresBd"], mat["fresBs"]
+    return _texture(p)
+
+
+def object_batches(st, field):
+    """One batch per material slot: per-corner position, normal, triangle points, barycentrics."""
+    from gpu_extras.batch import batch_for_shader
+    key = ("batches", st.name, id(st.arrays))
+    cache = field.__dict__.setdefault("_batches", {})
+    if key in cache:
+        return cache[key]
+    arrays, pts = st.arrays, st.points
+    tri = arrays.triangles
+    corner = tri.reshape(-1)
+    pos = arrays.positions[arrays.corner_verts[corner]].astype(np.float32)
+    nrm = arrays.corner_normals[corner].astype(np.float32)
+    tri_points = np.repeat(pts.point_of_corner[tri].astype(np.float32), 3, axis=0)
+    bary = np.tile(np.eye(3, dtype=np.float32), (len(tri), 1))
+    slots = arrays.corner_materials[tri[:, 0]]
+    out = []
+    for slot in np.unique(slots):
+        sel = np.repeat(slots == slot, 3)
+        batch = batch_for_shader(_gpu_shader(), "TRIS", {
+            "pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
+            "triPoints": np.ascontiguousarray(tri_points[sel]),
+            "bary": np.ascontiguousarray(bary[sel])})
+        out.append((int(slot), batch))
+    cache.clear()
+    cache[key] = out
+    return out
+
+
+def gpu_draws(state, fields, fit, pre, eye, view_dir):
+    """draw(view_projection) callables, one per object."""
+    env_tex, light_tex, light_count = environment_textures(fit, pre)
+    world = state.world
+    rot = [list(map(float, r)) for r in np.asarray(world.rotation, np.float64)]
+    eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None
+            else (*map(float, eye), 1.0))
+    env_common = dict(envStrength=float(world.strength), lightCount=int(light_count),
+                      envRes=int(pre.resolution), envLevels=int(pre.n_levels),
+                      envLambdaFirst=float(pre.lambda_first), envRatio=float(pre.ratio),
+                      envTop=float(pre.lambdas[-2]))
+    draws = []
+    for st, field in zip(state.objects, fields):
+        coeff_tex, eigen_tex, kt = field_textures(field)
+        batches = object_batches(st, field)
+        params = {slot: parameter_texture(env_common, material_uniforms(
+                      st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material()),
+                      field.resolution, kt, eye4) for slot, _ in batches}
+
+        def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
+                 eigen_tex=eigen_tex):
+            import mathutils
+            sh = _gpu_shader()
+            sh.bind()
+            sh.uniform_float("viewProjection", view_projection)
+            sh.uniform_float("envRot", mathutils.Matrix(rot))
+            sh.uniform_sampler("coeffTex", coeff_tex)
+            sh.uniform_sampler("eigenTex", eigen_tex)
+            sh.uniform_sampler("envTex", env_tex)
+            sh.uniform_sampler("lightTex", light_tex)
+            for slot, batch in batches:
+                sh.uniform_sampler("paramTex", params[slot])
+                batch.draw(sh)
+
+        draws.append(draw)
+    return draws
 
 
 register(SSDFSGMethod())

@@ -1,0 +1,323 @@
+/* SSDF_SG per-pixel shading (Wang, Ren, Gong, Snyder, Guo 2009, paper 003):
+ *   radiance = kd R_d + R_s(o)
+ *   R_d    = sum_j (C*(i; n) (x) L*_j) . V^d            eq. 39 (f_h of eq. 30, fit eq. 47-49)
+ *   R_s(o) = sum   ((C* (x) rho*_s(i; o)) (x) V^d) . L   eq. 41 (eq. 31, Gamma_L of eq. 35)
+ * GLSL twin of core/ssdf_sg.py (same formulas and the same texel arithmetic:
+ * bilinear SSDF lookups by texelFetch in the Shirley-Chiu square, the prefiltered
+ * pyramid's level/face interpolation of core/sg_lighting.PrefilteredEnvironment).
+ *
+ * Textures: coeffTex  per point (1, w_1..w_K) packed 4 per texel, coeffTexels texels
+ *                     per point, rows of 4096 texels;
+ *           eigenTex  2D array, layer l = SSDF images 4l..4l+3 (mean, E_1, ..., E_K);
+ *           envTex    prefiltered atlas, row (level * 6 + face) * envRes + row;
+ *           lightTex  per diffuse lobe j: texel (0, j) = (axis, lam), (1, j) = (mu, 0)
+ *                     in texture space (world axis = R^T axis, amplitude * strength);
+ *           paramTex  9 texels of scalar parameters (environment, SSDF, material slot),
+ *                     read into the globals below (push constants are kept to 128 bytes). */
+
+int lightCount, ssdfRes, coeffTexels, envRes, envLevels, glossy, brdfModel, principled;
+float envStrength, envLambdaFirst, envRatio, envTop, roughness, ior, ndfLambda, ndfMu;
+vec4 kd, fresA, fresBd, fresBs, eye;
+
+void read_parameters()
+{
+  vec4 p0 = texelFetch(paramTex, ivec2(0, 0), 0);
+  vec4 p1 = texelFetch(paramTex, ivec2(1, 0), 0);
+  vec4 p2 = texelFetch(paramTex, ivec2(2, 0), 0);
+  vec4 p3 = texelFetch(paramTex, ivec2(3, 0), 0);
+  envStrength = p0.x;
+  lightCount = int(p0.y + 0.5);
+  ssdfRes = int(p0.z + 0.5);
+  coeffTexels = int(p0.w + 0.5);
+  envRes = int(p1.x + 0.5);
+  envLevels = int(p1.y + 0.5);
+  envLambdaFirst = p1.z;
+  envRatio = p1.w;
+  envTop = p2.x;
+  glossy = int(p2.y + 0.5);
+  brdfModel = int(p2.z + 0.5);
+  principled = int(p2.w + 0.5);
+  roughness = p3.x;
+  ior = p3.y;
+  ndfLambda = p3.z;
+  ndfMu = p3.w;
+  kd = texelFetch(paramTex, ivec2(4, 0), 0);
+  fresA = texelFetch(paramTex, ivec2(5, 0), 0);
+  fresBd = texelFetch(paramTex, ivec2(6, 0), 0);
+  fresBs = texelFetch(paramTex, ivec2(7, 0), 0);
+  eye = texelFetch(paramTex, ivec2(8, 0), 0);   /* (position, 1) or (direction to camera, 0) */
+}
+
+const float PI = 3.14159265358979;
+const float TWO_PI = 6.28318530717959;
+const float LAMBDA_C = 2.133;
+const float MU_C = 1.170;
+const float FH_A = 1.05;
+const vec4 FH_K = vec4(-4.091177817839644e-05, 0.013875614940571624, 0.8602564494071566,
+                       1.4436420622237864);
+const vec3 FRAME_REF = vec3(0.2672612419124244, 0.5345224838248488, 0.8017837257372732);
+const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.5345224838248488);
+const float FRAME_SWITCH = 0.999;
+const float COS_MIN = 1e-4;
+const float COS_MIN_SINGULAR = 0.05;
+const float LAMBDA_MAX = 1e5;
+
+/* ------------------------------------------------------------ SG helpers (core/sg.py) */
+float one_minus_exp_neg_over(float lam, float x)   /* (1 - exp(-lam x)) / lam */
+{
+  return lam > 1e-6 ? (1.0 - exp(-lam * x)) / lam : x;
+}
+
+float sg_integral(float lam) { return TWO_PI * one_minus_exp_neg_over(lam, 2.0); }
+float sg_hemisphere_integral(float lam) { return TWO_PI * one_minus_exp_neg_over(lam, 1.0); }
+
+/* eq. 5/45: product of G(p1, l1, 1) and G(p2, l2, 1): axis, sharpness, amplitude */
+void sg_product(vec3 p1, float l1, vec3 p2, float l2, out vec3 axis, out float lam,
+                out float amp)
+{
+  vec3 d = l1 * p1 + l2 * p2;
+  float dm = length(d);
+  vec3 diff = p1 - p2;
+  float omc = clamp(0.5 * dot(diff, diff), 0.0, 2.0);
+  float s = l1 + l2 + dm;
+  float defect = s > 0.0 ? 2.0 * l1 * l2 * omc / s : 0.0;
+  axis = dm > 0.0 ? d / dm : p1;
+  lam = dm;
+  amp = exp(-defect);
+}
+
+/* eq. 47-48 (refit in sqrt(lam), core/sg.py): f_h(theta_d, lam) / f_h(pi/2, lam) */
+float fh_hat(float theta_d, float lam)
+{
+  float x = sqrt(max(lam, 0.0));
+  float k = ((FH_K.x * x + FH_K.y) * x + FH_K.z) * x + FH_K.w;
+  float td = clamp(theta_d, -0.5 * PI, 0.5 * PI);
+  float z = clamp(k * td, -60.0, 60.0);
+  float sig = FH_A * 0.5 * (1.0 + tanh(0.5 * z)) + 0.5 * (1.0 - FH_A);
+  return clamp(sig, 0.0, 1.0);
+}
+
+/* ------------------------------------------------------------ SSDF (core/ssdf.py) */
+void ssdf_frame(vec3 n, out vec3 t, out vec3 b)
+{
+  vec3 ref = abs(dot(n, FRAME_REF)) > FRAME_SWITCH ? FRAME_REF_ALT : FRAME_REF;
+  t = cross(ref, n);
+  t = t / max(length(t), 1e-30);
+  b = cross(n, t);
+}
+
+vec2 square_coordinates(vec3 d)
+{
+  float z = clamp(d.z, 0.0, 1.0);
+  float r = sqrt(1.0 - z);
+  float x = d.x, y = d.y;
+  if (x == 0.0 && y == 0.0) {
+    return vec2(0.5, 0.5);
+  }
+  float phi = atan(y, x);
+  float a, b;
+  if (abs(x) >= abs(y)) {
+    float phix = x >= 0.0 ? phi : (phi >= 0.0 ? phi - PI : phi + PI);
+    a = x >= 0.0 ? r : -r;
+    b = a * (4.0 / PI) * phix;
+  }
+  else {
+    float phiy = y >= 0.0 ? 0.5 * PI - phi : -0.5 * PI - phi;
+    b = y >= 0.0 ? r : -r;
+    a = b * (4.0 / PI) * phiy;
+  }
+  return vec2(0.5 * (a + 1.0), 0.5 * (b + 1.0));
+}
+
+/* SSDF value (eq. 24 reconstruction) at a local direction: bilinear per eigen-image
+ * layer, combined with the interpolated weights W (first weight 1 = the mean). */
+float ssdf_value(vec3 local, vec4 W[16])
+{
+  vec2 uv = square_coordinates(local);
+  float n = float(ssdfRes);
+  float x = clamp(uv.x * n - 0.5, 0.0, n - 1.0);
+  float y = clamp(uv.y * n - 0.5, 0.0, n - 1.0);
+  int x0 = min(int(floor(x)), max(ssdfRes - 2, 0));
+  int y0 = min(int(floor(y)), max(ssdfRes - 2, 0));
+  float fx = x - float(x0), fy = y - float(y0);
+  int x1 = min(x0 + 1, ssdfRes - 1);
+  int y1 = min(y0 + 1, ssdfRes - 1);
+  float v = 0.0;
+  for (int l = 0; l < coeffTexels; l++) {
+    vec4 e = texelFetch(eigenTex, ivec3(x0, y0, l), 0) * ((1.0 - fx) * (1.0 - fy)) +
+             texelFetch(eigenTex, ivec3(x1, y0, l), 0) * (fx * (1.0 - fy)) +
+             texelFetch(eigenTex, ivec3(x0, y1, l), 0) * ((1.0 - fx) * fy) +
+             texelFetch(eigenTex, ivec3(x1, y1, l), 0) * (fx * fy);
+    v += dot(e, W[l]);
+  }
+  return v - asin(clamp(-local.z, 0.0, 1.0));
+}
+
+vec4 coeff_fetch(float point, int l)
+{
+  int idx = int(point + 0.5) * coeffTexels + l;
+  return texelFetch(coeffTex, ivec2(idx % 4096, idx / 4096), 0);
+}
+
+/* ------------------------------------------------------------ prefiltered environment */
+void face_coordinates(vec3 d, out int face, out float s, out float t)
+{
+  vec3 ad = abs(d);
+  if (ad.x >= ad.y && ad.x >= ad.z) {
+    float m = max(ad.x, 1e-30);
+    face = d.x < 0.0 ? 1 : 0;
+    s = (d.x < 0.0 ? d.z : -d.z) / m;
+    t = -d.y / m;
+  }
+  else if (ad.y >= ad.z) {
+    float m = max(ad.y, 1e-30);
+    face = d.y < 0.0 ? 3 : 2;
+    s = d.x / m;
+    t = (d.y < 0.0 ? -d.z : d.z) / m;
+  }
+  else {
+    float m = max(ad.z, 1e-30);
+    face = d.z < 0.0 ? 5 : 4;
+    s = (d.z < 0.0 ? -d.x : d.x) / m;
+    t = -d.y / m;
+  }
+}
+
+float level_coordinate(float lam)
+{
+  lam = max(lam, 0.0);
+  float nf = float(envLevels - 2);
+  if (lam < envLambdaFirst) {
+    return lam / envLambdaFirst;
+  }
+  if (lam <= envTop) {
+    return 1.0 + log(lam / envLambdaFirst) / log(envRatio);
+  }
+  return nf + 1.0 - envTop / lam;
+}
+
+vec3 env_level(int level, int face, float s, float t)
+{
+  float N = float(envRes);
+  float x = clamp((s + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0);
+  float y = clamp((t + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0);
+  int x0 = min(int(floor(x)), envRes - 1);
+  int y0 = min(int(floor(y)), envRes - 1);
+  int x1 = min(x0 + 1, envRes - 1);
+  int y1 = min(y0 + 1, envRes - 1);
+  float fx = x - float(x0), fy = y - float(y0);
+  int base = (level * 6 + face) * envRes;
+  vec3 a = texelFetch(envTex, ivec2(x0, base + y0), 0).rgb * (1.0 - fx) +
+           texelFetch(envTex, ivec2(x1, base + y0), 0).rgb * fx;
+  vec3 b = texelFetch(envTex, ivec2(x0, base + y1), 0).rgb * (1.0 - fx) +
+           texelFetch(envTex, ivec2(x1, base + y1), 0).rgb * fx;
+  return a * (1.0 - fy) + b * fy;
+}
+
+/* kernel-weighted mean radiance of the (unrotated, unit strength) environment */
+vec3 env_lookup(vec3 world_dir, float lam)
+{
+  vec3 d = envRot * world_dir;
+  int face;
+  float s, t;
+  face_coordinates(d, face, s, t);
+  float x = level_coordinate(lam);
+  int l0 = min(int(floor(x)), envLevels - 1);
+  int l1 = min(l0 + 1, envLevels - 1);
+  float f = x - float(l0);
+  return env_level(l0, face, s, t) * (1.0 - f) + env_level(l1, face, s, t) * f;
+}
+
+/* ------------------------------------------------------------ BRDF view slice (core/sg_brdf.py) */
+float beckmann_lambda_raw(float a2, float c)
+{
+  c = clamp(c, 1e-12, 1.0);
+  float t2 = a2 * max(1.0 / (c * c) - 1.0, 0.0);
+  if (t2 < 0.39) {
+    return 0.0;
+  }
+  float a = 1.0 / sqrt(max(t2, 0.39));
+  return ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a);
+}
+
+float m_factor(float cos_i, float cos_o, float h_dot_i)
+{
+  if (brdfModel == 0) {            /* Cook-Torrance / Blinn-Phong: Smith Beckmann */
+    float ci = max(cos_i, COS_MIN), co = max(cos_o, COS_MIN);
+    float a2 = roughness * roughness;
+    return 1.0 / ((1.0 + beckmann_lambda_raw(a2, ci) + beckmann_lambda_raw(a2, co)) * 4.0 *
+                  ci * co);
+  }
+  float ci = max(cos_i, COS_MIN_SINGULAR), co = max(cos_o, COS_MIN_SINGULAR);
+  if (brdfModel == 1) {            /* Ward */
+    return 1.0 / (4.0 * sqrt(ci * co));
+  }
+  return 1.0 / (4.0 * max(h_dot_i, COS_MIN_SINGULAR) * max(ci, co));
+}
+
+float fresnel_eq14(float c, float eta)
+{
+  c = abs(c);
+  float g2 = eta * eta + c * c - 1.0;
+  if (g2 <= 0.0) {
+    return 1.0;
+  }
+  float g = sqrt(g2);
+  float a = (g - c) / (g + c);
+  float b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
+  return 0.5 * a * a * (1.0 + b * b);
+}
+
+void main()
+{
+  read_parameters();
+  vec3 n = normalize(vNrm);
+  vec3 t, b;
+  ssdf_frame(n, t, b);
+  vec4 W[16];
+  for (int l = 0; l < coeffTexels; l++) {
+    W[l] = vBary.x * coeff_fetch(vTri.x, l) + vBary.y * coeff_fetch(vTri.y, l) +
+           vBary.z * coeff_fetch(vTri.z, l);
+  }
+  /* eq. 39 */
+  vec3 rd = vec3(0.0);
+  for (int j = 0; j < lightCount; j++) {
+    vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
+    vec3 mu = texelFetch(lightTex, ivec2(1, j), 0).rgb;
+    vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */
+    vec3 p;
+    float lam, amp;
+    sg_product(n, LAMBDA_C, axis, al.w, p, lam, amp);
+    vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
+    float theta = ssdf_value(local, W);
+    rd += mu * (MU_C * amp * fh_hat(theta, lam) * sg_hemisphere_integral(lam));
+  }
+  vec3 color = kd.rgb * rd * envStrength;
+  /* eq. 41 with the one-lobe isotropic NDF view slice (eq. 17-22) */
+  if (glossy != 0) {
+    vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+    float c = dot(o, n);
+    vec3 pw = 2.0 * c * n - o;
+    pw = pw / max(length(pw), 1e-30);
+    float tau = max(4.0 * abs(c), 4.0 * COS_MIN);
+    float lam_w = min(ndfLambda / tau, LAMBDA_MAX);
+    float cos_i = dot(n, pw);
+    float cos_o = dot(n, o);
+    float m = m_factor(cos_i, cos_o, c) * (c > 0.0 ? 1.0 : 0.0);
+    float cf = clamp(c, 0.0, 1.0);
+    vec3 fres = fresA.rgb + fresBd.rgb * fresnel_eq14(cf, ior) + fresBs.rgb * pow(1.0 - cf, 5.0);
+    if (principled != 0) {
+      fres = max(fres, vec3(0.0));
+    }
+    vec3 mu = ndfMu * m * fres;
+    vec3 p;
+    float lam, amp;
+    sg_product(n, LAMBDA_C, pw, lam_w, p, lam, amp);
+    vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
+    float theta = ssdf_value(local, W);
+    float scale = MU_C * amp * fh_hat(theta, lam);
+    vec3 gamma = env_lookup(p, lam) * envStrength * sg_integral(lam);
+    color += scale * mu * gamma;
+  }
+  fragColor = vec4(color, 1.0);
+}

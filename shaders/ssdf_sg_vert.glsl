@@ -1,0 +1,11 @@
+/* SSDF_SG (paper 003): per-corner position/normal, the triangle's three shading
+ * points (flat) and barycentric weights, so the fragment shader interpolates the
+ * PCA coefficients (eq. 24) of the three points it lies between (section 7). */
+void main()
+{
+  vPos = pos;
+  vNrm = nrm;
+  vBary = bary;
+  vTri = triPoints;
+  gl_Position = viewProjection * vec4(pos, 1.0);
+}
