@@ -1,8 +1,8 @@
 """Blender-side glue of prt_relight (bpy only; the numerics live in ``core``)."""
 
-from . import engine, operators, panels, properties, report
+from . import engine, operators, panels, properties, report, sg_material
 
-_MODULES = (properties, operators, report, engine, panels)
+_MODULES = (properties, sg_material, operators, report, engine, panels)
 
 
 def register():

@@ -852,3 +852,45 @@ def sg_material_from_brdf(material: core_brdf.Material) -> SGMaterial:
     return SGMaterial(diffuse=material.diffuse_albedo, specular=spec, fresnel="PRINCIPLED",
                       ior=material.ior if material.ior != 1.0 else 1.0 + 1e-6,
                       metallic=material.metallic, **common)
+
+
+# --------------------------------------------------------------------------- textures
+
+def sample_texture(pixels, uv):
+    """Bilinear lookup with repeat wrapping (Blender's Image Texture defaults, Linear
+    interpolation): ``pixels`` (H, W, C) with row 0 at v = 0 (Blender's order, bottom
+    row first), ``uv`` (P, 2).  Texel centres sit at ``((i + 0.5)/W, (j + 0.5)/H)``.
+    Returns (P, C) float64.  Used for per-point textured SG parameters (base colour,
+    roughness, normal maps) exported by ``addon/sg_material.py``."""
+    img = np.asarray(pixels, dtype=np.float64)
+    if img.ndim == 2:
+        img = img[..., None]
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    if not (np.all(np.isfinite(img)) and np.all(np.isfinite(uv))):
+        raise ValueError("texture pixels/uv have NaN/Inf values")
+    H, W = img.shape[:2]
+    x = uv[:, 0] * W - 0.5
+    y = uv[:, 1] * H - 0.5
+    x0 = np.floor(x).astype(np.int64)
+    y0 = np.floor(y).astype(np.int64)
+    fx = (x - x0)[:, None]
+    fy = (y - y0)[:, None]
+    xa, xb = x0 % W, (x0 + 1) % W
+    ya, yb = y0 % H, (y0 + 1) % H
+    return ((img[ya, xa] * (1 - fx) + img[ya, xb] * fx) * (1 - fy)
+            + (img[yb, xa] * (1 - fx) + img[yb, xb] * fx) * fy)
+
+
+def tangent_space_normals(normal_pixels_rgb, normals, tangents, bitangent_sign, strength=1.0):
+    """Blender Normal Map node (tangent space): ``n' = normalize(x t + y b + z n)`` with
+    ``(x, y, z) = 2 rgb - 1``, ``b = sign (n x t)``, blended with ``n`` by ``strength``.
+    All inputs per point: rgb (P, 3), normals/tangents (P, 3), sign (P,).  Returns (P, 3)."""
+    rgb = np.asarray(normal_pixels_rgb, dtype=np.float64)[:, :3]
+    n = _unit(normals, "normals")
+    t = _unit(tangents, "tangents")
+    b = np.asarray(bitangent_sign, dtype=np.float64)[:, None] * np.cross(n, t)
+    c = 2.0 * rgb - 1.0
+    m = c[:, 0:1] * t + c[:, 1:2] * b + c[:, 2:3] * n
+    m = n + float(strength) * (m - n)
+    ln = np.linalg.norm(m, axis=1, keepdims=True)
+    return np.where(ln > 1e-12, m / np.where(ln > 0, ln, 1.0), n)
