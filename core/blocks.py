@@ -339,6 +339,22 @@ def _encode_levels(q: np.ndarray, levels: int):
     return kind, counts, k_[keep].astype(np.uint8), vals
 
 
+def _encode_binary(v: np.ndarray):
+    """:func:`_encode_levels` for 0/1 maps (p, blocks, 256) uint8: the changes are where
+    a pixel differs from the previous one (pixel 0 from an implicit 0)."""
+    nz = np.empty(v.shape, dtype=bool)
+    nz[:, :, 0] = v[:, :, 0] != 0
+    np.not_equal(v[:, :, 1:], v[:, :, :-1], out=nz[:, :, 1:])
+    counts = np.count_nonzero(nz, axis=2)
+    kind = np.full(counts.shape, MIXED, dtype=np.uint8)
+    kind[counts == 0] = ZERO
+    kind[(counts == 1) & nz[:, :, 0]] = ONE
+    nz[kind != MIXED] = False
+    flat = np.flatnonzero(nz)
+    counts = np.where(kind == MIXED, counts, 0)
+    return kind, counts, (flat % BLOCK_PIXELS).astype(np.uint8), None
+
+
 def _assemble(resolution, parts, levels, binary):
     kinds = [p[0] for p in parts]
     counts = np.concatenate([p[1].reshape(-1) for p in parts]) if parts else np.zeros(0, np.int64)
@@ -357,11 +373,15 @@ def encode_visibility(vis_bits: np.ndarray, resolution: int, chunk: int = 1024) 
     if bits.ndim == 1:
         bits = bits[None]
     D = 6 * int(resolution) ** 2
-    perm = block_permutation(resolution)
+    if bits.shape[1] != D // 8:
+        raise ValueError(f"visibility has {bits.shape[1]} bytes per point, expected {D // 8}")
+    # A block row is 16 consecutive texels = 2 whole bytes: reorder bytes, then unpack.
+    byte_perm = block_permutation(resolution)[:, ::8] // 8           # (blocks, 32)
+    nb = byte_perm.shape[0]
     parts = []
     for a in range(0, len(bits), chunk):
-        v = unpack_visibility(bits[a:a + chunk], D).view(np.uint8)
-        parts.append(_encode_levels(v[:, perm], 1))
+        v = np.unpackbits(bits[a:a + chunk][:, byte_perm], axis=2).reshape(-1, nb, BLOCK_PIXELS)
+        parts.append(_encode_binary(v))
     return _assemble(resolution, parts, 1, True)
 
 
@@ -794,7 +814,7 @@ from concurrent.futures import ThreadPoolExecutor as _Pool
 from . import brdf as _brdf
 
 #: Default rule thresholds on q = D(closest half-vector) / D(peak) (see glossy_levels).
-DEFAULT_LEVEL_THRESHOLDS = (1e-2, 1e-3, 1e-4)
+DEFAULT_LEVEL_THRESHOLDS = (1e-2, 1e-3, 1e-4, 1e-9)
 
 
 @dataclass(frozen=True)
@@ -941,34 +961,51 @@ def light_tables(lighting, resolution: int) -> LightTables:
                        ub.astype(np.float32))
 
 
-def light_vis_sums(pairs: ActivePairs, tables: LightTables, chunk: int = 1 << 20):
-    """Per pair the line-9 product ``L_int . V_d`` of ``[L~, L~ w]`` (pairs, 12):
-    columns 0..2 the visible light of the block (``S_b``), 3..11 its first moment."""
-    out = np.empty((pairs.count, 12))
-    one = np.nonzero(pairs.one)[0]
-    out[one] = tables.integral12[pairs.b[one], 0]
-    mixed = np.nonzero(~pairs.one)[0]
-    for a in range(0, mixed.size, chunk):
-        sel = mixed[a:a + chunk]
-        row, ent = _entries(pairs, sel)
-        w = _entry_weights(pairs, sel, row, ent)
-        vals = tables.integral12[pairs.b[sel][row], pairs.dv.indices[ent].astype(np.int64)]
-        vals *= w[:, None]
-        acc = np.zeros((sel.size, 12))
-        for c in range(12):
-            acc[:, c] = np.bincount(row, weights=vals[:, c], minlength=sel.size)
-        out[sel] = acc
-    return out
+@dataclass
+class LightVis:
+    """Line-9 products of one lighting: ``S`` (pairs, 3) float32, the visible light
+    ``L_int . V_d`` of every active pair (for constant-1 blocks the block total), and
+    ``moment`` (P, 3, 3): per vertex ``sum_k L~_k w_k V_k`` (colour x direction),
+    whose product with the normal is the Lambert irradiance."""
+
+    S: np.ndarray
+    moment: np.ndarray
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.S.nbytes + self.moment.nbytes)
 
 
-def lambert_irradiance(pairs: ActivePairs, sums: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """E = sum_b n . (sum_k L~_k w_k V_k) per vertex (P, 3), from :func:`light_vis_sums`."""
+def light_vis_sums(pairs: ActivePairs, tables: LightTables, chunk: int = 1 << 20) -> LightVis:
+    """Alg. 1 line 9's light-vis product ``L_int . V_d`` (eq. 6, a sum over the stored
+    change indices only) of ``[L~, L~ w_x, L~ w_y, L~ w_z]`` for every active pair."""
     P = pairs.dv.count
-    mom = np.zeros((P, 9))
-    for c in range(9):
-        mom[:, c] = np.bincount(pairs.p, weights=sums[:, 3 + c], minlength=P)
+    S = np.empty((pairs.count, 3), dtype=np.float32)
+    moment = np.zeros((P, 9))
+    for a in range(0, pairs.count, chunk):
+        sel = np.arange(a, min(pairs.count, a + chunk))
+        vals = np.empty((sel.size, 12))
+        one = pairs.one[sel]
+        vals[one] = tables.integral12[pairs.b[sel[one]], 0]
+        mixed = np.nonzero(~one)[0]
+        if mixed.size:
+            row, ent = _entries(pairs, sel[mixed])
+            w = _entry_weights(pairs, sel[mixed], row, ent)
+            e = tables.integral12[pairs.b[sel[mixed]][row], pairs.dv.indices[ent].astype(np.int64)]
+            e *= w[:, None]
+            for c in range(12):
+                vals[mixed, c] = np.bincount(row, weights=e[:, c], minlength=mixed.size)
+        S[sel] = vals[:, :3]
+        for c in range(9):
+            moment[:, c] += np.bincount(pairs.p[sel], weights=vals[:, 3 + c], minlength=P)
+    return LightVis(S, moment.reshape(P, 3, 3))
+
+
+def lambert_irradiance(light_vis: LightVis, normals: np.ndarray) -> np.ndarray:
+    """E = n . sum_k L~_k w_k V_k per vertex (P, 3): the Lambert layer's integral
+    (REFERENCE's ``diffuse_irradiance``), exact because the cosine is linear in w."""
     n = np.asarray(normals, dtype=np.float64)
-    return np.einsum("pcd,pd->pc", mom.reshape(P, 3, 3), n)
+    return np.einsum("pcd,pd->pc", light_vis.moment, n)
 
 
 def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: bool = True):
@@ -1158,7 +1195,8 @@ def glossy_levels(lobe: GlossyLobe, p: np.ndarray, b: np.ndarray, geometry: Bloc
     norm = np.sqrt(np.maximum(np.float32(2.0) + np.float32(2.0) * vc, np.float32(1e-12)))
     cos_hc = np.clip((nc + lobe.cos_o32[p]) / norm, -1.0, 1.0)
     th = np.arccos(cos_hc) - geometry.radius32[b] / norm     # closest half-vector angle
-    levels = np.ones(p.size, dtype=np.int64)
+    levels = np.zeros(p.size, dtype=np.int64)
+    levels[th < angles[3]] = 1
     levels[th < angles[2]] = 4
     levels[th < angles[1]] = 16
     levels[th < angles[0]] = PIXEL
@@ -1176,7 +1214,7 @@ class BlocksStats:
 
     def __post_init__(self):
         self.cases = np.zeros(4, dtype=np.int64) if self.cases is None else self.cases
-        self.levels = {lv: 0 for lv in BRDF_LEVELS} if self.levels is None else self.levels
+        self.levels = {lv: 0 for lv in (0,) + BRDF_LEVELS} if self.levels is None else self.levels
         self.times = {} if self.times is None else self.times
 
     def add(self, other: "BlocksStats"):
@@ -1241,13 +1279,16 @@ def glossy_blocks(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, lob
         raise ValueError("mode must be 'adaptive', 'pixel', 1, 4 or 16")
     t0 = _tick(st, "levels", t0)
     one = pairs.one[idx]
-    per_pair = np.zeros((idx.size, 3), dtype=np.float32)
+    wide = lobe.dtype == np.float64           # float64 lobe: float64 tables (tests, exactness)
+    unit_dirs = tables.unit_dirs if wide else tables.unit_dirs32
+    pixel = tables.pixel if wide else tables.pixel32
+    per_pair = np.zeros((idx.size, 3), dtype=lobe.dtype)
     # level 1 (line 6 with one coefficient, line 9): rho_1 * S_b
     s = np.nonzero(levels == 1)[0]
     if s.size:
         pix1, _ = projection_system(1)
-        f = lobe.sample(P[s], tables.unit_dirs32[:, pix1[0]][Bk[s]])
-        f *= sums[idx[s], :3]
+        f = lobe.sample(P[s], unit_dirs[:, pix1[0]][Bk[s]])
+        f *= sums.S[idx[s]]
         per_pair[s] = f
         st.samples += s.size
     t0 = _tick(st, "level 1", t0)
@@ -1262,20 +1303,21 @@ def glossy_blocks(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, lob
         lv = int(levels[rows[0]])
         p = P[rows]
         t1 = _time.perf_counter()
-        vis = _decompress(pairs, idx[rows], np.float32)
+        vis = _decompress(pairs, idx[rows], lobe.dtype)
         t0 = _tick(st, "decompress", t1)
         if lv == PIXEL:
-            Lb = tables.pixel32[blk]
-            for f, w in lobe.dense(p, tables.unit_dirs32[blk]):
+            Lb = pixel[blk]
+            for f, w in lobe.dense(p, unit_dirs[blk]):
                 f *= vis
                 per_pair[rows] += (f @ Lb) * w
             st.samples += int(np.count_nonzero(vis)) if not pairs.one[idx[rows]].all() else vis.size
         else:
             l = {4: 2, 16: 4}[lv]
             pix, inv = projection_system(l)
-            W = (vis @ tables.dct_light[blk, :, :lv * 3]).reshape(rows.size, lv, 3)
-            inv_t = inv.T.astype(np.float32)
-            for f, w in lobe.dense(p, tables.unit_dirs32[blk, pix]):
+            W = (vis @ tables.dct_light[blk, :, :lv * 3].astype(lobe.dtype, copy=False)
+                 ).reshape(rows.size, lv, 3)
+            inv_t = inv.T.astype(lobe.dtype)
+            for f, w in lobe.dense(p, unit_dirs[blk, pix]):
                 per_pair[rows] += np.einsum("mk,mkc->mc", f @ inv_t, W) * w
             st.samples += rows.size * lv
         t0 = _tick(st, "pixel" if lv == PIXEL else f"level {lv}", t0)
@@ -1285,9 +1327,9 @@ def glossy_blocks(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, lob
     _tick(st, "sum", t0)
     mixed = ~one
     st.cases[1] += int(one.sum())
-    st.cases[2] += int((mixed & (levels == 1)).sum())
+    st.cases[2] += int((mixed & (levels <= 1)).sum())
     st.cases[3] += int((mixed & (levels > 1)).sum())
-    for lv in BRDF_LEVELS:
+    for lv in (0,) + BRDF_LEVELS:
         st.levels[lv] += int((levels == lv).sum())
     return out
 
@@ -1323,7 +1365,7 @@ def shade_points(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, posi
     t0 = _time.perf_counter()
     exact_lambert = mode in ("pixel", PIXEL)
     if irradiance is None and not exact_lambert:
-        irradiance = lambert_irradiance(pairs, sums, normals)
+        irradiance = lambert_irradiance(sums, normals)
         t0 = _tick(st, "lambert", t0)
     for slot in np.unique(materials):
         sel = np.nonzero(materials == slot)[0]

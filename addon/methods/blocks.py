@@ -1,0 +1,224 @@
+"""BLOCKS: locally adaptive per-block products (seed 004, Inger et al. 2012, §4).
+
+The stored visibility is re-encoded per 16x16 cubemap block as differential
+change indices (eq. 5), serialized as base-128 varints and stored in the .blend
+next to the bit-packed form (``derive``/``store`` at precompute; ``sync`` loads
+it).  Each frame runs Algorithm 1 for every (vertex, block) pair with the BRDF
+sampled per vertex for the current view (:mod:`...core.blocks`).  Lighting block
+forms (§4.3) and the view-independent line-9 products are cached per world.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core import blocks as core_blocks, visibility
+from .. import runtime
+from . import Method, register
+
+IMAGE_PREFIX = "PRT Blocks "
+#: recommended minimum cubemap resolution (the paper uses 6x64^2 and 6x128^2)
+MIN_RESOLUTION = 64
+
+# Lighting tables per env key (one world at a time).
+_TABLES: dict = {}
+# Differential visibility read from the .blend per (image, precompute id, points).
+_STORED: dict = {}
+# Encoded from the bit-packed visibility when nothing compressed is stored.
+_ENCODED: dict = {}
+# Active pairs per differential visibility; line-9 products per (pairs, lighting).
+_PAIRS: dict = {}
+_LIGHT_VIS: dict = {}
+#: statistics of the last shade() (Tables 1-2 of the paper), for the bench and the UI
+LAST_STATS: dict = {}
+
+
+def thresholds_for(tolerance: float):
+    """Rule thresholds (pixel, 16, 4, skip) on the lobe's value relative to its peak."""
+    t = float(tolerance)
+    return (t, t * 1e-1, t * 1e-2, t * 1e-7)
+
+
+def bytes_to_floats(data: np.ndarray) -> np.ndarray:
+    """uint8 stream -> float32 values holding 3 bytes each (exact below 2**24), padded."""
+    b = np.asarray(data, dtype=np.uint8).reshape(-1)
+    pad = (-b.size) % 3
+    b = np.concatenate([b, np.zeros(pad, np.uint8)]) if pad else b
+    return visibility.bytes_to_float24(b.reshape(1, -1))[0]
+
+
+def floats_to_bytes(values: np.ndarray, nbytes: int) -> np.ndarray:
+    f = np.asarray(values, dtype=np.float32).reshape(1, -1)
+    return visibility.float24_to_bytes(f)[0][:nbytes]
+
+
+def _image_size(nfloats: int):
+    pixels = max(1, -(-nfloats // 4))
+    width = min(4096, pixels)
+    return width, -(-pixels // width)
+
+
+def write_stream_image(name: str, data: np.ndarray):
+    """A packed, fake-user, Non-Color float image holding the byte stream ``data``."""
+    import bpy
+    floats = bytes_to_floats(data)
+    width, height = _image_size(floats.size)
+    flat = np.zeros(width * height * 4, dtype=np.float32)
+    flat[:floats.size] = floats
+    img = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True, is_data=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    img.use_fake_user = True
+    img.use_half_precision = False
+    img.pixels.foreach_set(flat)
+    img.update()
+    img.pack()
+    img["prt_nbytes"] = int(np.asarray(data).size)
+    return img
+
+
+def read_stream_image(img) -> np.ndarray:
+    nbytes = int(img.get("prt_nbytes", -1))
+    if nbytes < 0:
+        raise ValueError(f"image '{img.name}' holds no BLOCKS stream")
+    width, height = img.size
+    flat = np.empty(width * height * 4, dtype=np.float32)
+    img.pixels.foreach_get(flat)
+    nfloats = -(-nbytes // 3)
+    if nfloats > flat.size:
+        raise ValueError(f"image '{img.name}' is too small for its stream")
+    return floats_to_bytes(flat[:nfloats], nbytes)
+
+
+class BlocksMethod(Method):
+    id = "BLOCKS"
+    label = "Locally Adaptive Blocks"
+    description = ("Inger et al. 2012: per 16x16 cubemap block, Algorithm 1 (skip / "
+                   "light-BRDF / light-visibility / triple product) with differential "
+                   "visibility and the BRDF sampled per view; needs 6x64x64 or finer")
+    budget = ("blocks_tolerance", [1e-1, 1e-2, 1e-3, 1e-4])
+
+    def scene_properties(self):
+        from bpy.props import FloatProperty
+        return {"blocks_tolerance": FloatProperty(
+            name="Block Tolerance", default=1e-2, min=1e-6, max=1.0, precision=6,
+            update=runtime.redraw_viewports,
+            description="BLOCKS: a block is sampled at every pixel where the glossy lobe "
+                        "reaches this fraction of its peak, with 16 / 4 / 1 DCT coefficients "
+                        "down to 1/10, 1/100, 1e-7 of it (smaller: more accurate, slower)")}
+
+    def view_dependent(self, state) -> bool:
+        return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
+                   for st in state.objects for m in st.materials)
+
+    # ------------------------------------------------------------ precompute
+    def derive(self, job):
+        """Differential visibility (eq. 5) of every object, serialized as varints."""
+        out = {}
+        for o in job.objects:
+            if job.cancel_requested:
+                raise visibility.Cancelled()
+            dv = core_blocks.encode_visibility(o.bits, job.resolution)
+            out[o.name] = core_blocks.serialize_visibility(dv)
+        return out
+
+    def store(self, scene, job, derived):
+        import bpy
+        if not derived:
+            return
+        for o in job.objects:
+            data = derived.get(o.name)
+            if data is None:
+                continue
+            name = IMAGE_PREFIX + o.name
+            old = bpy.data.images.get(name)
+            img = write_stream_image(name, data)
+            img["prt_precompute_id"] = bpy.data.objects[o.name].prt.precompute_id
+            img["prt_points"] = int(o.points.count)
+            if old is not None:
+                old.use_fake_user = False
+                bpy.data.images.remove(old)
+            img.name = name
+
+    # ------------------------------------------------------------ frames
+    def sync(self, state):
+        import bpy
+        for st in state.objects:
+            st.data.pop("blocks_dv", None)
+            ob = bpy.data.objects.get(st.name)
+            img = bpy.data.images.get(IMAGE_PREFIX + st.name)
+            if st.status != "ok" or ob is None or img is None:
+                continue
+            pid = ob.prt.precompute_id
+            if img.get("prt_precompute_id") != pid or img.get("prt_points") != st.points.count:
+                continue
+            key = (img.name_full, pid, st.points.count)
+            dv = _STORED.get(key)
+            if dv is None:
+                try:
+                    dv = core_blocks.deserialize_visibility(read_stream_image(img).tobytes())
+                except ValueError:
+                    continue
+                if dv.count != st.points.count or dv.resolution != state.resolution:
+                    continue
+                if len(_STORED) >= 16:
+                    _STORED.pop(next(iter(_STORED)))
+                _STORED[key] = dv
+            st.data["blocks_dv"] = dv
+            st.data["blocks_stream_bytes"] = int(img["prt_nbytes"])
+
+    def visibility_of(self, st, resolution):
+        """The object's differential visibility: stored, else encoded from its bits."""
+        dv = st.data.get("blocks_dv")
+        if dv is not None and dv.resolution == resolution:
+            return dv, "stored"
+        dv = runtime.per_visibility(_ENCODED, (st.name, id(st.bits), resolution), st.bits,
+                                    lambda: core_blocks.encode_visibility(st.bits, resolution),
+                                    limit=16)
+        return dv, "encoded"
+
+    def shade(self, state, eye, view_dir):
+        res = int(state.resolution)
+        if res < MIN_RESOLUTION:
+            state.note(f"BLOCKS works on 16x16 blocks: at 6x{res}x{res} a cube face has only "
+                       f"{res // 16}x{res // 16} of them; precompute with Directions 6x64x64 "
+                       "or 6x128x128 as in the paper")
+        L = runtime.environment_cubemap(state.world, res)
+        key = runtime.env_key(state.world, res)
+        tables = _TABLES.get(key)
+        if tables is None:
+            tables = core_blocks.light_tables(L, res)
+            _TABLES.clear()
+            _TABLES[key] = tables
+        thresholds = thresholds_for(state.settings.get("blocks_tolerance", 1e-2))
+        stats = core_blocks.BlocksStats()
+        sources = []
+        out = []
+        for st in state.objects:
+            pts = st.points
+            dv, source = self.visibility_of(st, res)
+            sources.append(source)
+            pairs = runtime.per_visibility(_PAIRS, (st.name, id(dv)), dv,
+                                           lambda: core_blocks.active_pairs(dv), limit=16)
+            light_vis = runtime.per_visibility(
+                _LIGHT_VIS, (st.name, id(pairs), key), pairs,
+                lambda: core_blocks.light_vis_sums(pairs, tables), limit=16)
+            irradiance = runtime.per_visibility(
+                _LIGHT_VIS, (st.name, id(pairs), key, "E"), pairs,
+                lambda: core_blocks.lambert_irradiance(light_vis, pts.normals), limit=16)
+            view_dirs = None
+            if view_dir is not None:
+                view_dirs = np.broadcast_to(np.asarray(view_dir, dtype=np.float64),
+                                            pts.normals.shape)
+            radiance = core_blocks.shade_points(
+                pairs, light_vis, tables, pts.positions, pts.normals, pts.materials,
+                st.materials, eye, view_dirs=view_dirs, irradiance=irradiance,
+                thresholds=thresholds, stats=stats)
+            radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
+            out.append(radiance[pts.point_of_corner].astype(np.float32))
+        LAST_STATS.clear()
+        LAST_STATS.update(stats=stats, sources=sources)
+        return out
+
+
+register(BlocksMethod())
