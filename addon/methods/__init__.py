@@ -91,4 +91,6 @@ def scene_properties() -> dict:
 # Registration order = order in the UI enum.
 from . import reference, sh, wavelet  # noqa: E402,F401
 from . import ssdf_sg  # noqa: E402,F401
+from . import rsl  # noqa: E402,F401
+from . import blocks  # noqa: E402,F401
 from . import auto  # noqa: E402,F401  (last: AUTO chooses among the methods above)
