@@ -8,8 +8,11 @@ precompute, per-method derive/store, offscreen drawing through the engine's
 
 Per-frame time: the full ``render_pixels`` call (shade + draw + synchronous read-back,
 so the GPU has finished) at the camera resolution without supersampling, median of
-``repeats`` after one warm-up frame.  The images and errors use the F12 path (the
-scene's supersampling).
+``repeats`` after one warm-up frame.  Every timed frame is *relit*: the environment is
+turned to an angle not drawn before, so per-lighting caches (REFERENCE's diffuse sums,
+resampled cubemaps, wavelet lighting) are rebuilt as they would be while relighting,
+while per-geometry data (transfer vectors) stays warm.  The images and errors use the
+F12 path (the scene's supersampling) at the scene's own lighting.
 """
 
 from __future__ import annotations
@@ -50,6 +53,16 @@ def ensure_gpu(scene):
         _GPU_READY = True
     finally:
         r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
+
+
+def rotated_world(world, angle: float):
+    """``world`` turned by ``angle`` about +Z (same pixels, a new lighting key)."""
+    import copy
+    c, s = math.cos(angle), math.sin(angle)
+    out = copy.copy(world)
+    out.rotation = np.asarray(world.rotation) @ np.array([[c, -s, 0.0], [s, c, 0.0],
+                                                           [0.0, 0.0, 1.0]])
+    return out
 
 
 def sweep(method_ids=None):
@@ -215,6 +228,7 @@ class ReportRun:
         self.index: pathlib.Path | None = None
         self.steps_total = len(sweep(method_ids)) + 3 + int(include_cycles) + int(stability)
         self.steps_done = 0
+        self._frames = 0
 
     # -------------------------------------------------------------- helpers
     def _frame(self, depsgraph, view, projection, w, h, persp, supersampling):
@@ -225,13 +239,21 @@ class ReportRun:
         return state, img[::-1].copy()
 
     def _time_frames(self, state, view, projection, w, h, persp):
+        """Relit frames: each one turns the environment to an angle not drawn before,
+        so nothing cached per lighting is reused (what PRT is for); the camera stays."""
         from .engine import render_pixels
-        render_pixels(state, view, projection, w, h, True, persp, 1)      # warm-up
+        world, background = state.world, state.background
         times = []
-        for _ in range(self.repeats):
+        for k in range(self.repeats + 1):                 # the first one warms up
+            self._frames += 1
+            state.world = rotated_world(world, 0.05 + 0.37 * self._frames)
+            if background is not None:                    # same pixels: no texture upload
+                state.background = (state.world, background[1])
             t0 = time.perf_counter()
             render_pixels(state, view, projection, w, h, True, persp, 1)
-            times.append(time.perf_counter() - t0)
+            if k:
+                times.append(time.perf_counter() - t0)
+        state.world, state.background = world, background
         return times
 
     # -------------------------------------------------------------- steps
