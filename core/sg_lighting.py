@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import sg as core_sg
-from .directions import FACE_AXES, Cubemap, cubemap
+from .directions import FACE_AXES, Cubemap, cubemap, direction_to_texel
 
 __all__ = [
     "fit_environment_sgs", "environment_irradiance", "sg_mixture_radiance",
@@ -86,6 +86,10 @@ def _tangent_basis(p):
     return t, np.cross(p, t)
 
 
+#: finer cubemaps are box-filtered to this resolution before the diffuse SG fit.
+FIT_RESOLUTION = 32
+
+
 def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: float = 0.03,
                         refine_iterations: int = 12):
     """SG mixture ``L*(i) = sum_j G(i; p_j, lam_j, mu_j)`` of an environment for the
@@ -99,6 +103,7 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
     2. All amplitudes (RGB) are re-solved jointly by least squares (clipped >= 0)
        and the axes/log-sharpnesses refined by Levenberg-Marquardt (amplitudes
        projected out) on the **irradiance** error -- what eq. 39 uses.
+    Cubes finer than :data:`FIT_RESOLUTION` are box-filtered to it first.
     3. Stop when the relative L2 error of the unshadowed irradiance over the
        normals of a 6x8^2 cubemap is <= ``tol``, or at ``max_lobes``.
 
@@ -106,6 +111,10 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
     space (texture space for an unrotated world).  A black world gives J = 0.
     """
     L = _check_radiance(cube_radiance, cube)
+    if cube.resolution > FIT_RESOLUTION and cube.resolution % FIT_RESOLUTION == 0:
+        # the diffuse lobes need no more than a 6 x 32^2 cube (box-filtered, energy kept)
+        L = _downsample(L, cube.resolution, FIT_RESOLUTION)[0]
+        cube = cubemap(FIT_RESOLUTION)
     dirs = np.asarray(cube.directions, dtype=np.float64)
     w = np.asarray(cube.solid_angles, dtype=np.float64)
     normals, C = _irradiance_operator(cube)
@@ -264,6 +273,79 @@ def _bilinear(level, face, s, t):
     return a * (1 - fy) + b * fy
 
 
+#: kernel values below e^-KERNEL_CUTOFF of the peak are skipped by the local convolution.
+KERNEL_CUTOFF = 20.0
+
+
+def _bucket_radius(nc):
+    """Largest angle between a texel centre of the nc-cube and its corners."""
+    e = np.linspace(-1.0, 1.0, nc + 1)
+    c = 0.5 * (e[:-1] + e[1:])
+    worst = 0.0
+    for s0, s1, sc in zip(e[:-1], e[1:], c):           # face +Z suffices by symmetry
+        for t0, t1, tc in zip(e[:-1], e[1:], c):
+            ctr = np.array([sc, tc, 1.0]) / math.sqrt(sc * sc + tc * tc + 1.0)
+            for s_, t_ in ((s0, t0), (s0, t1), (s1, t0), (s1, t1)):
+                cor = np.array([s_, t_, 1.0]) / math.sqrt(s_ * s_ + t_ * t_ + 1.0)
+                worst = max(worst, math.acos(min(1.0, float(ctr @ cor))))
+    return worst
+
+
+def _sg_convolve(out_dirs, src_dirs, src_w, src_L, lam):
+    """``sum_k G(w_k; p, lam) L_k dw_k / sum_k G(w_k; p, lam) dw_k`` for every output
+    direction ``p``.  Sharp kernels only see sources within ``theta_max``
+    (``lam (1 - cos theta_max) = KERNEL_CUTOFF``): outputs and sources are bucketed by
+    the texels of a coarse cube and each output bucket is convolved densely with the
+    sources of the buckets whose centres lie within ``theta_max`` plus both bucket
+    radii -- exact up to the e^-20 cut-off, and O(P * cap) instead of O(P * D)."""
+    res = np.empty((out_dirs.shape[0], src_L.shape[1]))
+    # float32 products/exponentials (the levels are float32): relative error of the
+    # kernel ~ lam * 6e-8 <= 1e-4 for the sharpest level at N = 64
+    out_dirs = np.asarray(out_dirs, dtype=np.float32)
+    src_dirs = np.asarray(src_dirs, dtype=np.float32)
+    src_w = np.asarray(src_w, dtype=np.float32)
+    src_L = np.asarray(src_L, dtype=np.float32)
+    lam32 = np.float32(lam)
+    cos_max = 1.0 - KERNEL_CUTOFF / lam
+    theta_max = math.acos(cos_max) if cos_max > -1.0 else math.pi
+    if theta_max > 0.6:
+        chunk = max(1, 4_000_000 // src_w.size)
+        for a in range(0, out_dirs.shape[0], chunk):
+            G = out_dirs[a:a + chunk] @ src_dirs.T
+            np.minimum(G, np.float32(1.0), out=G)
+            G -= np.float32(1.0)
+            G *= lam32
+            np.exp(G, out=G)
+            G *= src_w[None, :]
+            res[a:a + chunk] = (G @ src_L) / G.sum(axis=1, keepdims=True)
+        return res
+    nc = max(1, min(64, int(math.ceil(0.5 * math.pi / theta_max))))
+    coarse = cubemap(nc)
+    radius = _bucket_radius(nc)
+    ob = direction_to_texel(out_dirs, nc)
+    sb = direction_to_texel(src_dirs, nc)
+    o_order = np.argsort(ob, kind="stable")
+    s_order = np.argsort(sb, kind="stable")
+    o_start = np.searchsorted(ob[o_order], np.arange(coarse.size + 1))
+    s_start = np.searchsorted(sb[s_order], np.arange(coarse.size + 1))
+    centres = np.asarray(coarse.directions)
+    near = centres @ centres.T >= math.cos(min(math.pi, theta_max + 2.0 * radius))
+    for b in range(coarse.size):
+        oi = o_order[o_start[b]:o_start[b + 1]]
+        if oi.size == 0:
+            continue
+        nb = np.flatnonzero(near[b])
+        si = np.concatenate([s_order[s_start[c]:s_start[c + 1]] for c in nb])
+        G = out_dirs[oi] @ src_dirs[si].T
+        np.minimum(G, np.float32(1.0), out=G)
+        G -= np.float32(1.0)
+        G *= lam32
+        np.exp(G, out=G)
+        G *= src_w[si][None, :]
+        res[oi] = (G @ src_L[si]) / G.sum(axis=1, keepdims=True)
+    return res
+
+
 class PrefilteredEnvironment:
     """``Gamma_L(p, lam)`` of eq. 34-35 tabulated as a pyramid of cubemaps.
 
@@ -278,9 +360,11 @@ class PrefilteredEnvironment:
 
     Each finite level is computed by brute force, ``sum_k G(w_k; p, lam) L_k dw_k
     / sum_k G(w_k; p, lam) dw_k`` over the texels of the environment box-filtered to
-    ``Ns = min(N, 2^ceil(log2(pi sqrt(lam))))`` texels per face edge (>= 4;
-    texels at most ~1/pi of a lobe width), evaluated at all ``N x N`` texel
-    centres of the output.
+    ``Ns = min(N, 2^ceil(log2(2.5 sqrt(lam))))`` texels per face edge (>= 8;
+    texels at most ~0.6 of the lobe width ``1/sqrt(lam)``; each coarse texel sits
+    at the luminance-weighted mean direction of its children), evaluated at all
+    ``N x N`` texel centres of the output; sharp kernels only gather sources
+    within their e^-20 support (:func:`_sg_convolve`).
 
     :meth:`lookup` interpolates linearly in ``log lam`` between levels
     (linearly in ``lam`` below ``lam_1`` and in ``1/lam`` above the last
@@ -313,17 +397,12 @@ class PrefilteredEnvironment:
         levels[0] = mean.astype(np.float32)
         out_dirs = np.asarray(cube.directions)
         for li, lam in enumerate(finite, start=1):
-            Ns = 4
-            while Ns < N and Ns < math.pi * math.sqrt(lam):
+            Ns = 8
+            while Ns < N and Ns < 2.5 * math.sqrt(lam):
                 Ns *= 2
             Ns = min(Ns, N)
             Ls, sdirs, sw = _downsample(L, N, Ns)
-            res = np.empty((cube.size, 3))
-            chunk = max(1, 4_000_000 // sw.size)
-            for a in range(0, cube.size, chunk):
-                G = np.exp(lam * (np.minimum(out_dirs[a:a + chunk] @ sdirs.T, 1.0) - 1.0))
-                G *= sw[None, :]
-                res[a:a + chunk] = (G @ Ls) / G.sum(axis=1, keepdims=True)
+            res = _sg_convolve(out_dirs, sdirs, sw, Ls, float(lam))
             levels[li] = res.reshape(6, N, N, 3).astype(np.float32)
         levels[-1] = L.reshape(6, N, N, 3).astype(np.float32)
         self.levels = levels
