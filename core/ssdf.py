@@ -124,26 +124,36 @@ def _boundary_candidates(h: int):
     return d, first, second, mid
 
 
-def _cube_texel_f32(d, resolution):
-    """``directions.direction_to_texel`` for float32 (..., 3), branch-free per major axis.
+def _cube_texel_xyz(x, y, z, resolution):
+    """``directions.direction_to_texel`` for float32 component arrays ``x, y, z`` (same shape).
 
     Face coordinates of ``FACE_AXES``: X major ``s = -z/x, t = -y/|x|``; Y major
     ``s = x/|y|, t = z/y``; Z major ``s = x/z, t = -y/|z|``.
     """
-    x, y, z = d[..., 0], d[..., 1], d[..., 2]
     ax, ay, az = np.abs(x), np.abs(y), np.abs(z)
     is_x = (ax >= ay) & (ax >= az)
-    is_y = ~is_x & (ay >= az)
-    major = np.where(is_x, ax, np.where(is_y, ay, az))
-    major = np.where(major > 0, major, 1.0).astype(d.dtype)
-    inv = 1.0 / major
-    s = np.where(is_x, -z * np.sign(x), x * np.where(is_y, 1.0, np.sign(z)).astype(d.dtype)) * inv
-    t = np.where(is_x | ~is_y, -y, z * np.sign(y)) * inv
-    face = np.where(is_x, (x < 0).astype(np.int64), np.where(is_y, 2 + (y < 0), 4 + (z < 0)))
+    is_y = (ay >= az) & ~is_x
+    is_z = ~(is_x | is_y)
+    major = np.maximum(np.maximum(ax, ay), az)
+    np.maximum(major, np.float32(1e-30), out=major)
+    s = np.where(is_x, -z, x)
+    s /= np.where(is_x, x, np.where(is_y, ay, z))
+    t = np.where(is_y, z, -y)
+    t /= np.where(is_y, y, major)
     n = int(resolution)
-    col = np.clip(((s + 1.0) * (0.5 * n)).astype(np.int64), 0, n - 1)
-    row = np.clip(((t + 1.0) * (0.5 * n)).astype(np.int64), 0, n - 1)
+    half = np.float32(0.5 * n)
+    col = ((s + 1.0) * half).astype(np.int32)
+    row = ((t + 1.0) * half).astype(np.int32)
+    np.clip(col, 0, n - 1, out=col)
+    np.clip(row, 0, n - 1, out=row)
+    face = is_y.astype(np.int32) * 2 + is_z.astype(np.int32) * 4
+    face += np.where(is_x, x < 0, np.where(is_y, y < 0, z < 0))
     return (face * n + row) * n + col
+
+
+def _cube_texel_f32(d, resolution):
+    """``directions.direction_to_texel`` for float32 (..., 3)."""
+    return _cube_texel_xyz(d[..., 0], d[..., 1], d[..., 2], resolution)
 
 
 def square_visibility(bits, normals, cube, size: int, tangents=None, bitangents=None):
@@ -152,11 +162,12 @@ def square_visibility(bits, normals, cube, size: int, tangents=None, bitangents=
     normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     if tangents is None:
         tangents, bitangents = ssdf_frames(normals)
-    local = square_centres(size).reshape(-1, 3).astype(np.float32)
+    local_t = np.ascontiguousarray(square_centres(size).reshape(-1, 3).T, dtype=np.float32)
     frame = np.stack([tangents, bitangents, normals], axis=1).astype(np.float32)   # (P, 3, 3)
-    world = np.matmul(local[None, :, :], frame)                                  # (P, Q, 3)
-    texel = _cube_texel_f32(world, cube.resolution)
-    vis = unpack_visibility(np.asarray(bits), cube.size).astype(bool)
+    # world component c of every sample: frame[:, :, c] (P, 3) @ local^T (3, Q)
+    xyz = [np.ascontiguousarray(frame[:, :, c]) @ local_t for c in range(3)]
+    texel = _cube_texel_xyz(xyz[0], xyz[1], xyz[2], cube.resolution)
+    vis = unpack_visibility(np.asarray(bits), cube.size)
     return np.take_along_axis(vis, texel, axis=1)
 
 
@@ -203,18 +214,21 @@ def _signed_distances(query_local, query_vis, bpoint, bdirs, count, any_visible)
     if len(bdirs):
         counts = np.bincount(bpoint, minlength=count)
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        bmax = int(counts.max())
-        # pad each point's boundary list to bmax by repeating its first point
-        # (duplicates do not change the maximum)
-        slot = np.minimum(np.arange(bmax)[None, :], np.maximum(counts[:, None] - 1, 0))
-        padded = bdirs.astype(np.float32)[np.minimum(starts[:, None] + slot, len(bdirs) - 1)]
         has = counts > 0
-        sub = max(1, int(2 ** 24 // max(bmax * Q, 1)))
-        for a in range(0, count, sub):
-            b = min(count, a + sub)
-            dots = np.matmul(padded[a:b], q32)                    # (c, bmax, Q)
-            red = dots.max(axis=1)
-            best[a:b] = np.where(has[a:b, None], red, best[a:b])
+        bd32 = bdirs.astype(np.float32)
+        # points sorted by boundary count, in groups padded to the group's largest count
+        # (repeating a point's first boundary point: duplicates do not change the maximum)
+        order = np.argsort(counts, kind="stable")
+        group = 8
+        for g in range(0, count, group):
+            idx = order[g:g + group]
+            idx = idx[has[idx]]
+            if len(idx) == 0:
+                continue
+            bmax = int(counts[idx].max())
+            slot = np.minimum(np.arange(bmax)[None, :], counts[idx, None] - 1)
+            padded = bd32[starts[idx, None] + slot]                       # (g, bmax, 3)
+            best[idx] = np.matmul(padded, q32).max(axis=1)
     angle = np.arccos(np.clip(best.astype(np.float64), -1.0, 1.0))
     angle[best < -1.5] = np.inf                                 # no boundary point
     elevation = np.arcsin(np.clip(query_local[:, 2], 0.0, 1.0))[None, :]

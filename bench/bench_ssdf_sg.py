@@ -1,0 +1,122 @@
+"""SSDF_SG (paper 003) against Cycles and REFERENCE, and its F12 time (issue 3 targets).
+
+    .venv/bin/python bench/bench_ssdf_sg.py [--resolution 160x120] [--samples 256]
+
+Held-out scenes (nothing was tuned on them):
+  * diffuse: spot.obj with a Diffuse BSDF (0.8) on a diffuse 96^2 ground grid, "forest"
+    HDRI rotated 0.6 rad; teapot.obj likewise under "city";
+  * glossy: the Stanford bunny (35,947 vertices) with a white Beckmann Glossy BSDF of
+    roughness 0.3 on the diffuse ground, "city" rotated 0.6 rad.
+Per scene it prints: points, the SSDF+PCA precompute time (derive) and PCA terms, the
+rel-L2 of SSDF_SG's F12 against Cycles (direct light only) and against REFERENCE's F12,
+REFERENCE's own error against Cycles, and the F12 times of SSDF_SG, REFERENCE and
+Workbench of the same scene in the same run (lighting fit/prefilter warm: the first
+F12 after a lighting change is timed separately).  Targets: diffuse <= 3 % of Cycles
+and <= 2 % of REFERENCE; glossy <= 6 % of Cycles; F12 <= REFERENCE / 5 and <= 2 x
+Workbench.  Writes out/bench/ssdf_sg.txt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import statistics
+import sys
+import time
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import scenes  # noqa: E402
+
+MESHES = scenes.ROOT.parent / "shared/data/meshes"
+
+
+def _timed(fn, repeats=2):
+    times = []
+    for _ in range(repeats):
+        times.append(fn())
+    return statistics.median(times)
+
+
+def diffuse_scene(mesh, hdri):
+    scenes.reset()
+    scenes.add_world(hdri, rotation_z=0.6)
+    ground = scenes.add_ground(cuts=96)
+    scenes.add_bsdf_material(ground, "Ground", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.8, 0.8, 1))
+    ob = scenes.add_obj(mesh)
+    scenes.add_bsdf_material(ob, "Object", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.8, 0.8, 1))
+    scenes.add_camera()
+
+
+def glossy_scene(hdri):
+    scenes.glossy_bunny_scene(hdri=hdri, roughness=0.3, cuts=96)
+
+
+def run_scene(label, build, kind, w, h, samples, out_dir, lines):
+    import bpy
+    build()
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = w, h
+    t = scenes.precompute(32, method="SSDF_SG")
+    from prt_relight.addon.methods import ssdf_sg as method
+    d = out_dir / label
+    t_first = scenes.render_prt(d.with_suffix(".ssdf_first.exr"))
+    t_ssdf = _timed(lambda: scenes.render_prt(d.with_suffix(".ssdf.exr")))
+    terms = "; ".join(method.LAST_TERMS)
+    scene.prt.method = "REFERENCE"
+    scenes.render_prt(d.with_suffix(".ref.exr"))                     # warm caches
+    t_ref = _timed(lambda: scenes.render_prt(d.with_suffix(".ref.exr")))
+    t_wb = _timed(lambda: scenes.render_workbench())
+    t_cyc = scenes.render_cycles(d.with_suffix(".cycles.exr"), samples=samples)
+    ours = scenes.read_exr(d.with_suffix(".ssdf.exr"))
+    ref = scenes.read_exr(d.with_suffix(".ref.exr"))
+    cyc = scenes.read_exr(d.with_suffix(".cycles.exr"))
+    e_cyc = scenes.rel_l2(ours, cyc)
+    e_ref = scenes.rel_l2(ours, ref)
+    e_ref_cyc = scenes.rel_l2(ref, cyc)
+    target = "diffuse: <=3% Cycles, <=2% REF" if kind == "diffuse" else "glossy: <=6% Cycles"
+    ok_acc = (e_cyc <= 0.03 and e_ref <= 0.02) if kind == "diffuse" else e_cyc <= 0.06
+    ok_time = t_ssdf <= t_ref / 5 and t_ssdf <= 2 * t_wb
+    rows = [
+        f"== {label} ({kind}, {w}x{h}) ==",
+        f"points {t['points']}, SSDF+PCA derive {t.get('derive', 0):.1f} s "
+        f"({1e3 * t.get('derive', 0) / max(t['points'], 1):.2f} ms/point), rays {t['rays']:.1f} s",
+        f"PCA: {terms}",
+        f"rel-L2 SSDF_SG vs Cycles {e_cyc:.4f}  vs REFERENCE {e_ref:.4f}  "
+        f"(REFERENCE vs Cycles {e_ref_cyc:.4f})  [{target}: {'met' if ok_acc else 'NOT met'}]",
+        f"F12 SSDF_SG {t_ssdf:.3f} s (first after lighting change {t_first:.2f} s), "
+        f"REFERENCE {t_ref:.3f} s (ratio {t_ref / max(t_ssdf, 1e-9):.2f}x), "
+        f"Workbench {t_wb:.3f} s (SSDF_SG/Workbench {t_ssdf / max(t_wb, 1e-9):.2f}x), "
+        f"Cycles {t_cyc:.1f} s  [<= REF/5 and <= 2x Workbench: {'met' if ok_time else 'NOT met'}]",
+    ]
+    for r in rows:
+        print(r, flush=True)
+    lines += rows
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--resolution", default="160x120")
+    ap.add_argument("--samples", type=int, default=256)
+    ap.add_argument("--only", default="", help="diffuse or glossy")
+    args, _ = ap.parse_known_args(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv
+                                  else sys.argv[1:])
+    w, h = (int(x) for x in args.resolution.split("x"))
+    out_dir = scenes.ROOT / "out/bench/ssdf_sg"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    lines = []
+    cases = [
+        ("spot_forest", lambda: diffuse_scene(MESHES / "spot.obj", "forest"), "diffuse"),
+        ("teapot_city", lambda: diffuse_scene(MESHES / "teapot.obj", "city"), "diffuse"),
+        ("bunny_glossy_city", lambda: glossy_scene("city"), "glossy"),
+    ]
+    for label, build, kind in cases:
+        if args.only and args.only != kind:
+            continue
+        t0 = time.perf_counter()
+        run_scene(label, build, kind, w, h, args.samples, out_dir, lines)
+        print(f"   ({time.perf_counter() - t0:.0f} s for this scene)", flush=True)
+    (scenes.ROOT / "out/bench/ssdf_sg.txt").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
