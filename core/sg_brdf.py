@@ -674,8 +674,9 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     ``tangents`` made orthogonal to ``n``, or the branchless
     :func:`.directions.orthonormal_frame` tangent when None):
 
-    * warp (eq. 18-21): ``p_W = 2 (o.p) p - o``, ``lam_W = lam_D / (4 |o.p|)``
-      (capped at :data:`LAMBDA_MAX`), ``mu_W = mu_D``;
+    * warp (eq. 18-21): ``p_W = 2 (o.p) p - o``, ``lam_W = lam_D / (4 |o.p|)``,
+      ``mu_W = mu_D``; where ``lam_W`` exceeds :data:`LAMBDA_MAX` it is capped and
+      ``mu_W`` scaled by ``LAMBDA_MAX / lam_W`` so the lobe keeps its integral;
     * views below the horizon (``n.o < 1e-4``) are bent up to it as in
       :func:`.brdf.reflectance_cosine`;
     * ``mu = mu_W ks F(o.p) M_o(p_W)`` (eq. 22) with ``M_o`` of the model
@@ -703,7 +704,9 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     pw = 2.0 * c[..., None] * p - o[:, None, :]
     pw /= np.maximum(np.linalg.norm(pw, axis=-1, keepdims=True), 1e-300)
     tau = np.maximum(4.0 * np.abs(c), 4.0 * COS_MIN)
-    lam = np.minimum(np.broadcast_to(lam_d, (P, K)) / tau, LAMBDA_MAX)
+    lam_raw = np.broadcast_to(lam_d, (P, K)) / tau
+    lam = np.minimum(lam_raw, LAMBDA_MAX)
+    keep_energy = lam / lam_raw          # capped lobes keep their integral ~ mu / lam
     cos_i = np.sum(n[:, None, :] * pw, axis=-1)
     cos_o = np.sum(n * o, axis=1)[:, None]
     rough = material.roughness
@@ -715,7 +718,7 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
         fres = _fresnel_pointwise(mat, c, P)
     else:
         fres = _fresnel(mat, c)
-    mu = np.broadcast_to(mu_d, (P, K))[..., None] * (m * (c > 0.0))[..., None] * fres
+    mu = np.broadcast_to(mu_d, (P, K))[..., None] * (m * (c > 0.0) * keep_energy)[..., None] * fres
     return pw, lam, mu
 
 

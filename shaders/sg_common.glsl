@@ -257,10 +257,11 @@ int specular_lobes(vec4 sgm0, vec4 sgm1, vec4 sgm2, vec3 n, vec3 o, vec3 t_in,
     vec3 pw = 2.0 * c * p - o;                     /* eq. 18 */
     pw = pw / max(length(pw), 1e-30);
     float tau = max(4.0 * abs(c), 4.0 * SG_COS_MIN); /* eq. 21 */
+    float lam_raw = lam_d / tau;                   /* eq. 19 */
     axes[k] = pw;
-    lams[k] = min(lam_d / tau, SG_LAMBDA_MAX);      /* eq. 19 */
+    lams[k] = min(lam_raw, SG_LAMBDA_MAX);
     if (c > 0.0) {
-      float m = sg_m_factor(model, roughness, dot(n, pw), cos_o, c);
+      float m = sg_m_factor(model, roughness, dot(n, pw), cos_o, c) * (lams[k] / lam_raw);
       mus[k] = mu_d * m * sg_fresnel(fresnel, c, eta, sgm1.rgb, sgm1.a, sgm2.rgb); /* eq. 22 */
     }
   }
