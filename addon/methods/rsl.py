@@ -270,7 +270,8 @@ class RSLMethod(Method):
             radiance = None
             if use_gpu:
                 try:
-                    radiance = self._shade_gpu(st, evaluator, kind, vis, eye, view_dir)
+                    radiance = self._shade_gpu(st, evaluator, kind, vis, eye, view_dir,
+                                               (lkey, R.round(9).tobytes()))
                 except Exception as exc:                  # numpy below gives the same sums
                     state.note(f"RSL GPU pass failed ({exc}); shading with numpy")
                     use_gpu = False
@@ -289,7 +290,7 @@ class RSLMethod(Method):
         return out
 
     @staticmethod
-    def _shade_gpu(st, evaluator, kind, vis, eye, view_dir):
+    def _shade_gpu(st, evaluator, kind, vis, eye, view_dir, lighting_key):
         key = ("vis", st.name, kind)
         got = _GPU.get(key)
         if got is None or got[0] is not vis:
@@ -298,10 +299,20 @@ class RSLMethod(Method):
         radiance = np.zeros((pts.count, 3))
         for mat, sel, vd in _groups(st, eye, view_dir):
             normals = pts.normals[sel]
+            if vd is None:                  # view independent: once per lighting/rotation
+                rkey = (st.name, kind, mat, lighting_key)
+                done = _GPU_DIFFUSE.get(rkey)
+                if done is not None and done[0] is vis:
+                    radiance[sel] = done[1]
+                    continue
             radiance[sel] = gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
                                       brdf_tables(mat), normals, vd,
                                       rsl.point_weights(mat, normals, vd), kind, got[1],
                                       vis.shape[-1] - (kind == "SAT"), sel)
+            if vd is None:
+                if len(_GPU_DIFFUSE) > 16:
+                    _GPU_DIFFUSE.pop(next(iter(_GPU_DIFFUSE)))
+                _GPU_DIFFUSE[rkey] = (vis, radiance[sel])
         return radiance
 
 
@@ -330,6 +341,7 @@ register(RSLMethod())
 MAX_TERMS = 8
 TEXTURE_WIDTH = 8192
 _GPU: dict = {}             # shader, cached textures (per object tables, per material SATs)
+_GPU_DIFFUSE: dict = {}     # view-independent GPU results per (object, material, lighting)
 
 
 def gpu_available() -> bool:
