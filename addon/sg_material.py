@@ -17,9 +17,10 @@ Functions for the method module (``addon/methods/ssdf_sg.py``):
   Normal Map node wired into "Normal": ``{"base_color": (pixels (H, W, 4) linear,
   uv_map name), "roughness": ..., "normal": (pixels, uv_map, strength)}`` (only the
   keys present).  Pixels are Blender's order (row 0 at v = 0); sample them per
-  shading point with ``core.sg_brdf.sample_texture(pixels, uv)`` and turn normal-map
-  texels into normals with ``core.sg_brdf.tangent_space_normals``.  A texture's
-  roughness value r becomes the slope ``a = max(r^2, ALPHA_MIN)``.
+  shading point with ``core.sg_brdf.sample_texture(pixels, uv)``, make the per-point
+  material with ``core.sg_brdf.with_textures(material, base_color=..., roughness=...)``
+  (roughness r -> slope ``a = max(r^2, ALPHA_MIN)``) and turn normal-map texels into
+  normals with ``core.sg_brdf.tangent_space_normals``.
 * :func:`mesh_uv_tangents(ob_eval, uv_map=None) -> (uv (C, 2), tangents (C, 3) world,
   bitangent_sign (C,))` per face corner (``mesh.calc_tangents``), or None without UVs.
 * :func:`export_lamps(depsgraph) -> list[core.sg_lighting.Lamp]` (point, spot, sun; area

@@ -103,7 +103,7 @@ __all__ = [
     "fit_anisotropic_ndf", "iso_ndf_sg", "specular_lobes", "specular_brdf",
     "fresnel_coefficients", "fresnel_eq14", "diffuse_albedo", "diffuse_view_weight",
     "sg_material_from_brdf", "ISO_TABLE_ALPHA", "ISO_NDF_TABLE", "iso_table_fit",
-    "MODEL_INDEX", "FRESNEL_INDEX",
+    "MODEL_INDEX", "FRESNEL_INDEX", "sample_texture", "tangent_space_normals", "with_textures",
 ]
 
 MODELS = ("COOK_TORRANCE", "BLINN_PHONG", "WARD", "WARD_ANISO", "ASHIKHMIN_SHIRLEY")
@@ -897,3 +897,20 @@ def tangent_space_normals(normal_pixels_rgb, normals, tangents, bitangent_sign, 
     m = n + float(strength) * (m - n)
     ln = np.linalg.norm(m, axis=1, keepdims=True)
     return np.where(ln > 1e-12, m / np.where(ln > 0, ln, 1.0), n)
+
+
+def with_textures(material: SGMaterial, base_color=None, roughness=None) -> SGMaterial:
+    """Per-point copy of ``material`` with sampled texture values (:func:`sample_texture`):
+    ``base_color`` (P, 3|4) replaces ``diffuse`` (the Principled base colour, also the
+    metal F0), ``roughness`` (P,) or (P, C) (first channel; Blender roughness r) sets the
+    slope ``a = max(r^2, ALPHA_MIN)`` of the isotropic models."""
+    out = SGMaterial.__new__(SGMaterial)
+    out.__dict__.update(material.__dict__)
+    if base_color is not None:
+        out.diffuse = np.maximum(_rgb_array(np.asarray(base_color, dtype=np.float64)[:, :3],
+                                            "base_color"), 0.0)
+    if roughness is not None:
+        r = np.asarray(roughness, dtype=np.float64)
+        r = r[:, 0] if r.ndim == 2 else r
+        out.roughness = _positive_array(np.clip(r, 0.0, 1.0) ** 2, "roughness", ALPHA_MIN)
+    return out

@@ -614,3 +614,18 @@ def test_sharp_lobes_lambda_1e4_to_1e5_by_cap_quadrature(alpha):
         print(f"a={alpha} view {deg}: lam_W {lam[0, 0]:.0f}, SG/exact {got / ref:.4f}")
         # 88 deg: a = 0.005 hits the LAMBDA_MAX cap (warp 5.7e5), the lobe keeps its energy
         assert abs(got / ref - 1.0) < (0.02 if deg < 60 else 0.06 if deg < 80 else 0.25)
+
+
+def test_with_textures_gives_per_point_materials():
+    base = sg_brdf.SGMaterial(model="COOK_TORRANCE", roughness=0.3, specular=(0.5, 0.5, 0.5))
+    tex = sg_brdf.with_textures(base, base_color=[[0.1, 0.2, 0.3, 1.0], [0.4, 0.5, 0.6, 1.0]],
+                                roughness=[[0.2, 0, 0, 1], [0.6, 0, 0, 1]])
+    assert np.allclose(tex.diffuse, [[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
+    assert np.allclose(tex.roughness, [0.04, 0.36])
+    n = np.tile([0.0, 0.0, 1.0], (2, 1))
+    v = _views([20, 50])
+    _, lam, _ = sg_brdf.specular_lobes(tex, n, v)
+    for p, a in enumerate((0.04, 0.36)):
+        _, l1, _ = sg_brdf.specular_lobes(sg_brdf.SGMaterial(roughness=a), n[p:p + 1], v[p:p + 1])
+        assert np.allclose(lam[p], l1[0])
+    assert np.isclose(base.roughness, 0.3)          # the original is untouched
