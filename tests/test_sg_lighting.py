@@ -200,14 +200,14 @@ def _lamp_scene():
         if node.type == "BACKGROUND":          # a new world has nodes in Blender 5
             node.inputs["Strength"].default_value = 0.0
     scene.world = world
-    bpy.ops.mesh.primitive_plane_add(size=2.0)
+    bpy.ops.mesh.primitive_plane_add(size=3.0)      # larger than the view: no partial edge pixels
     plane = bpy.context.object
     plane.data.materials.append(bs.bsdf_material("White", "ShaderNodeBsdfDiffuse",
                                                  Color=(0.8, 0.8, 0.8, 1.0)))
     cam = bs.add_camera(location=(0.0, 0.0, 5.0), rotation=(0.0, 0.0, 0.0))
     cam.data.type = "ORTHO"
     cam.data.ortho_scale = 2.0
-    bs.set_resolution(24, 24)
+    bs.set_resolution(16, 16)
     return scene
 
 
@@ -267,9 +267,9 @@ def test_lamp_sg_units_match_cycles(kind, tmp_path):
         _add_light("SUN", rotation=(0.5, 0.2, 0.0), energy=2.0, angle=0.05)
     else:
         _add_light("SPOT", (0.0, 0.0, 1.5), rotation=(0.2, 0.0, 0.0), energy=80.0,
-                   spot_size=1.2, spot_blend=0.4, shadow_soft_size=0.05)
+                   spot_size=1.2, spot_blend=1.0, shadow_soft_size=0.05)  # edge wider than a pixel
     lamps = sg_material.export_lamps(bpy.context.evaluated_depsgraph_get())
-    img = bs.render_exr(tmp_path / "lamp.exr", engine="CYCLES", samples=32)
+    img = bs.render_exr(tmp_path / "lamp.exr", engine="CYCLES", samples=16)
     h, w = img.shape[:2]
     # pixel centres on the plane (top row first: +y at the top)
     xs = -1.0 + (np.arange(w) + 0.5) * 2.0 / w
@@ -284,4 +284,4 @@ def test_lamp_sg_units_match_cycles(kind, tmp_path):
     err = np.linalg.norm(ours - cyc) / np.linalg.norm(cyc)
     print(f"{kind}: Cycles vs SG lamp on a Lambert plane: rel L2 {err:.4f}, "
           f"mean ratio {ours.mean() / cyc.mean():.4f}")
-    assert err <= 0.06
+    assert err <= 0.04
