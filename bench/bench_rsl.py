@@ -78,8 +78,8 @@ def run_scene(mesh, hdri, w, h, out_dir, lines):
     _, lighting = rsl_method._unrotated_lighting(state.world, 32)
     cube = directions.cubemap(32)
     head = (f"{mesh.stem if mesh.is_file() else 'suzanne'} + 96² grid, HDRI {hdri} (rot 0.6), "
-            f"{w}x{h}, {pre['points']} points (RSL precompute: derive {pre.get('derive', 0):.1f} s; "
-            f"{pre.get('report', '')}); REFERENCE F12 {ref_f12:.2f} s (again: {ref_warm:.2f} s), "
+            f"{w}x{h}, {pre['points']} points (RSL precompute: rays {pre.get('rays', 0):.1f} s, "
+            f"VDT + CPCA {pre.get('derive', 0):.1f} s, {pre.get('rsl_cpca', '')}); REFERENCE F12 {ref_f12:.2f} s (again: {ref_warm:.2f} s), "
             f"shade {ref_t:.3f} s")
     lines += [head, f"{'K':>4s} {'rel-L2 F12':>10s} {'rel-L2 vtx':>10s} {'shade':>8s} "
                     f"{'F12':>7s} {'F12/REF':>8s} {'F12 again':>9s} {'/REF':>6s} {'decomp':>7s}"]
@@ -116,6 +116,14 @@ def main(argv=None):
              "machine, one run)"]
     for hdri in args.hdri:
         run_scene(args.mesh, hdri, w, h, out_dir, lines)
+    from prt_relight.core import brdf, rsl
+    for mat in (brdf.principled_material(roughness=0.5), brdf.principled_material(roughness=0.3)):
+        rsl.brdf_tables(mat)                          # warm (Cycles' albedo tables load once)
+        t0 = time.perf_counter()
+        rsl.brdf_tables(mat, 32, 32, 3)
+        lines.append(f"BRDF SAT rebuild (32 views x 32², Principled r={mat.roughness}): "
+                     f"{(time.perf_counter() - t0) * 1000:.0f} ms")
+        print(lines[-1], flush=True)
     text = "\n".join(lines)
     print(text)
     args.out.write_text(text + "\n")

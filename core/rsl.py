@@ -653,47 +653,46 @@ def _top_components(X: np.ndarray, count: int, rng) -> np.ndarray:
 def clustered_pca(vectors: np.ndarray, clusters: int, eigen: int, iterations: int = 8,
                   seed: int = 0) -> ClusteredPCA:
     """Cluster with k-means (in a global 32-D PCA space), then a PCA basis of ``eigen``
-    vectors per cluster; a few CPCA refinements reassign each vector to the cluster
-    that reconstructs it best."""
+    vectors per cluster (rows sorted by decreasing variance, so the first ``e`` rows
+    are the best ``e``-vector basis)."""
     X = np.asarray(vectors, dtype=np.float32)
     P, D = X.shape
     C = max(1, min(int(clusters), P))
     E = max(0, min(int(eigen), D))
     rng = np.random.default_rng(seed)
-    mu = X.mean(0)
-    sample = X[rng.choice(P, min(P, 4096), replace=False)] - mu
-    red_basis = _top_components(sample, 32, rng)
-    Z = (X - mu) @ red_basis.T
-    centres = Z[rng.choice(P, C, replace=False)]
     labels = np.zeros(P, np.int64)
-    for _ in range(iterations):
-        d2 = (Z * Z).sum(1)[:, None] - 2 * Z @ centres.T + (centres * centres).sum(1)[None]
-        labels = np.argmin(d2, axis=1)
-        for c in range(C):
-            m = labels == c
-            centres[c] = Z[m].mean(0) if m.any() else Z[rng.integers(P)]
-    for refine in range(2):
-        means = np.zeros((C, D), np.float32)
-        bases = np.zeros((C, E, D), np.float32)
-        for c in range(C):
-            m = labels == c
-            if not m.any():
-                continue
-            means[c] = X[m].mean(0)
-            B = _top_components(X[m] - means[c], E, rng)
-            bases[c, :len(B)] = B
-        if refine == 1 or C == 1:
-            break
-        # CPCA step: assign each vector to the cluster with the least residual
-        err = np.empty((P, C), np.float32)
-        for c in range(C):
-            R = X - means[c]
-            proj = R @ bases[c].T
-            err[:, c] = (R * R).sum(1) - (proj * proj).sum(1)
-        labels = np.argmin(err, axis=1)
-    coeffs = np.einsum("pd,ped->pe", X - means[labels], bases[labels]) if E else \
-        np.zeros((P, 0), np.float32)
-    return ClusteredPCA(labels, means, bases, coeffs.astype(np.float32))
+    if C > 1:
+        mu = X.mean(0)
+        sample = X[rng.choice(P, min(P, 4096), replace=False)] - mu
+        red_basis = _top_components(sample, 32, rng)
+        Z = (X - mu) @ red_basis.T
+        centres = Z[rng.choice(P, C, replace=False)]
+        for _ in range(iterations):
+            d2 = (Z * Z).sum(1)[:, None] - 2 * Z @ centres.T + (centres * centres).sum(1)[None]
+            labels = np.argmin(d2, axis=1)
+            for c in range(C):
+                m = labels == c
+                centres[c] = Z[m].mean(0) if m.any() else Z[rng.integers(P)]
+    means = np.zeros((C, D), np.float32)
+    bases = np.zeros((C, E, D), np.float32)
+    for c in range(C):
+        m = labels == c
+        if not m.any():
+            continue
+        means[c] = X[m].mean(0)
+        B = _top_components(X[m] - means[c], E, rng)
+        bases[c, :len(B)] = B
+    coeffs = np.zeros((P, E), np.float32)
+    for a in range(0, P, 4096):
+        lab = labels[a:a + 4096]
+        coeffs[a:a + 4096] = np.einsum("pd,ped->pe", X[a:a + 4096] - means[lab], bases[lab])
+    return ClusteredPCA(labels, means, bases, coeffs)
+
+
+def truncated(model: ClusteredPCA, eigen: int) -> ClusteredPCA:
+    """The same clusters with only the first ``eigen`` basis vectors."""
+    return ClusteredPCA(model.labels, model.means, model.bases[:, :eigen].copy(),
+                        model.coeffs[:, :eigen].copy())
 
 
 def relative_error(vectors: np.ndarray, model: ClusteredPCA, chunk: int = 4096) -> float:
@@ -711,16 +710,22 @@ CPCA_CANDIDATES = ((1, 4), (4, 4), (16, 4), (16, 8), (64, 8), (256, 8), (256, 16
 
 def compress_by_budget(vectors: np.ndarray, budget: float, seed: int = 0):
     """The first (clusters, eigenvectors) of :data:`CPCA_CANDIDATES` whose relative
-    RMS error is within ``budget`` (the last one otherwise).  Returns
-    ``(model, error, compression ratio)``; the ratio counts stored floats (§5.1)."""
+    RMS error is within ``budget`` (the last one otherwise); one clustering per cluster
+    count, truncated for the smaller eigenvector counts.  Returns ``(model, error,
+    compression ratio)``; the ratio counts stored floats (§5.1)."""
     X = np.asarray(vectors, np.float32)
     P = len(X)
-    model = err = None
-    for C, E in CPCA_CANDIDATES:
+    best = None
+    for C in sorted({c for c, _ in CPCA_CANDIDATES}):
         if C > P:
-            continue
-        model = clustered_pca(X, C, E, seed=seed)
-        err = relative_error(X, model)
-        if err <= budget:
             break
+        eigens = [e for c, e in CPCA_CANDIDATES if c == C]
+        full = clustered_pca(X, C, max(eigens), seed=seed)
+        for E in eigens:
+            model = truncated(full, E)
+            err = relative_error(X, model)
+            best = (model, err)
+            if err <= budget:
+                return model, err, X.size / model.stored_floats
+    model, err = best
     return model, err, X.size / model.stored_floats

@@ -196,19 +196,21 @@ class RSLMethod(Method):
         clustered PCA within the error budget (§5.1)."""
         from ...core.visibility import Cancelled
         budget = float(job.settings.get("rsl_cpca_error", 0.02))
-        out = {}
+        out, notes = {}, []
         for o in job.objects:
             if job.cancel_requested:
                 raise Cancelled()
             vdt = derive_visibility(o.bits, o.points.normals, job.resolution)["VDT"]
             model, err, ratio = rsl.compress_by_budget(vdt.reshape(len(vdt), -1), budget)
             out[o.name] = (pack_cpca(model, DISK_RESOLUTION), err, ratio)
+            C, E, _ = model.bases.shape
+            notes.append(f"{o.name}: CPCA {C}x{E} error {err:.3f} ratio 1:{ratio:.0f}")
+        job.timings["rsl_cpca"] = "; ".join(notes)
         return out
 
     def store(self, scene, job, derived):
         import bpy
-        notes = []
-        for name, (flat, err, ratio) in (derived or {}).items():
+        for name, (flat, _err, _ratio) in (derived or {}).items():
             ob = bpy.data.objects.get(name)
             if ob is None:
                 continue
@@ -221,10 +223,6 @@ class RSLMethod(Method):
                 if old.users <= 1:
                     bpy.data.images.remove(old)
             img.name = IMAGE_PREFIX + name
-            C, E = int(flat[3]), int(flat[4])
-            notes.append(f"{name}: CPCA {C}x{E}, error {err:.3f}, 1:{ratio:.0f}")
-        if notes:
-            scene.prt.last_report = "; ".join([scene.prt.last_report] + notes)
 
     def sync(self, state):
         import bpy
