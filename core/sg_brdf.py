@@ -87,14 +87,13 @@ Cycles' multiple-scattering energy compensation (dropped: its factor is at most
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
 from . import brdf as core_brdf
-from . import sg as core_sg
 from .directions import orthonormal_frame
 
 __all__ = [
@@ -774,8 +773,6 @@ def specular_brdf(material: SGMaterial, normals, views, dirs, tangents=None):
     cos_o = np.sum(n * o, axis=1)[:, None]
     c = np.sum(h * L[None], -1)
     m = _m_factor(material.model, rough, cos_i, cos_o, c)
-    if material.model in ("COOK_TORRANCE", "BLINN_PHONG"):
-        pass
     fres = _fresnel_pointwise(material, c, n.shape[0]) if (
         material.diffuse.ndim == 2 or material.specular.ndim == 2) else _fresnel(material, c)
     return (d * m * (cos_i > 0))[..., None] * fres

@@ -22,7 +22,7 @@ rotate by ``R^T`` (:func:`rotate_to_world`, eq. 7).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -103,10 +103,10 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
     2. All amplitudes (RGB) are re-solved jointly by least squares (clipped >= 0)
        and the axes/log-sharpnesses refined by Levenberg-Marquardt (amplitudes
        projected out) on the **irradiance** error -- what eq. 39 uses.
-    Cubes finer than :data:`FIT_RESOLUTION` are box-filtered to it first.
     3. Stop when the relative L2 error of the unshadowed irradiance over the
        normals of a 6x8^2 cubemap is <= ``tol``, or at ``max_lobes``.
 
+    Cubes finer than :data:`FIT_RESOLUTION` are box-filtered to it first.
     Returns ``(axes (J, 3), lam (J,), mu (J, 3), rel_error)`` in the cube's
     space (texture space for an unrotated world).  A black world gives J = 0.
     """
