@@ -49,9 +49,10 @@ the lighting (eq. 4 as printed writes ``cos(x 2 pi u / N)``, which is not the
 basis whose coefficients the lighting is stored in; line 6's dot product needs
 both in the same orthonormal basis, so we use DCT-II for both).
 
-Selection rule (in the spirit of Appendix A, whose BRDF-specific Phong logic
-is not reproduced in our copy of the paper; ours is generic and data driven):
-the BRDF x cos is also sampled on a 5 x 5 *check grid* (pixels 0, 4, 8, 12, 15
+Selection rule of the per-vertex reference path (:func:`project_brdf`, used by
+:func:`integrate_vertex` for any sampled BRDF; generic and data driven -- the
+batched frame path uses the analytic Appendix-A-style rule :func:`glossy_levels`
+instead, which needs no extra samples): the BRDF x cos is also sampled on a 5 x 5 *check grid* (pixels 0, 4, 8, 12, 15
 in each direction: corners, edges and centre, where a horizon kink or a lobe
 shows first).  The chosen representation is the smallest ``l`` in (1, 2, 4)
 whose reconstruction matches every check sample (every colour channel) within
@@ -65,6 +66,20 @@ that contribute negligibly are not refined.  As in the paper the decision
 depends on how smooth the BRDF is within the block, not on its magnitude
 (except through that absolute floor).  Blocks whose visibility is constant 0
 are never sampled (Alg. 1 line 1 comes before line 4).
+
+Batched frame path (:func:`shade_points`, the BLOCKS method): see the section
+"batched evaluator" below -- all (vertex, block) pairs of a chunk of vertices at
+once, the Lambert layer exactly from line-9 products of the light's first
+moment, the glossy layer by Algorithm 1 with the representation chosen by
+:func:`glossy_levels`.  Differences from the paper, all measured in
+``bench/bench_blocks.py``: (1) Appendix A's Lambert rule (one coefficient per
+block) is replaced by the exact linear cosine (3 moment products per block, view
+independent, cached per lighting); (2) the microfacet rule adds a fifth class,
+"lobe below ``t_skip`` of its peak everywhere in the block": not sampled,
+contributes 0 (the paper samples such a block once); (3) the line-9 products
+``S_b`` are cached per lighting, so a frame with only the camera moved does not
+redo them (a relight frame does); (4) pixel-basis products run as dense matrix
+products with occluded pixels multiplied by 0 rather than skipped run by run.
 """
 
 from __future__ import annotations
@@ -1013,40 +1028,50 @@ def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: 
     :func:`.brdf.microfacet_D`, :func:`.brdf.smith_lambda` and ``brdf._specular_terms``
     (Cycles' ``bsdf_microfacet_eval``) written for float32 arrays of any shape
     (``cos_o``/``lam_o`` broadcast; float64 inputs are computed in float64).
-    Zero where ``cos_i <= 0``."""
+    Zero where ``cos_i <= 0``.  Grazing directions overflow to inf on purpose
+    (``G2 -> 0``): callers hold ``np.errstate`` (see :func:`glossy_blocks`)."""
     f32 = np.float32
-    with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
-        len2 = dot_io * f32(2.0)
-        len2 += f32(2.0)
-        valid = (cos_i > 0.0) & (len2 > f32(_brdf._HALF_LEN2_FLOOR))
-        np.maximum(len2, f32(_brdf._HALF_LEN2_FLOOR), out=len2)
-        c = cos_i + cos_o
-        c /= np.sqrt(len2)
-        c *= c                                      # cos_h^2 (cos_h > 0 where valid)
-        np.minimum(c, f32(1.0), out=c)
-        if distribution == "BECKMANN":
-            np.maximum(c, f32(1e-30), out=c)
-            s2 = f32(1.0) - c
-            val = np.exp(-s2 / (c * a2))
-            val /= (f32(np.pi) * a2) * c * c
-        else:
-            den = f32(1.0) - c + a2 * c
-            val = a2 / (f32(np.pi) * den * den)
+    len2 = dot_io * f32(2.0)
+    len2 += f32(2.0)
+    valid = (cos_i > 0.0) & (len2 > f32(_brdf._HALF_LEN2_FLOOR))
+    np.maximum(len2, f32(_brdf._HALF_LEN2_FLOOR), out=len2)
+    c = cos_i + cos_o
+    c /= np.sqrt(len2)
+    c *= c                                      # cos_h^2 (cos_h > 0 where valid)
+    np.minimum(c, f32(1.0), out=c)
+    if distribution == "BECKMANN":
+        np.maximum(c, f32(1e-30), out=c)
+        s2 = f32(1.0) - c
+        val = np.exp(-s2 / (c * a2))
+        val /= (f32(np.pi) * a2) * c * c
+    else:
+        den = f32(1.0) - c + a2 * c
+        val = a2 / (f32(np.pi) * den * den)
+    if distribution == "BECKMANN":
+        # Lambda = 0 unless t2 = a2 tan^2 >= 0.39, i.e. cos^2 <= a2 / (a2 + 0.39):
+        # evaluate the rational fit only on those (grazing) directions
+        lam = np.zeros(np.shape(cos_i), dtype=val.dtype)
+        cut = float(a2) / (float(a2) + 0.39) * 1.001
+        mask = cos_i <= f32(np.sqrt(cut))
+        g = np.flatnonzero(mask)
+        lam_flat = lam.reshape(-1)
+        ci = np.clip(np.asarray(cos_i).reshape(-1)[g], f32(1e-12), f32(1.0))
+        t2 = a2 * np.maximum(f32(1.0) / (ci * ci) - f32(1.0), f32(0.0))
+        a = f32(1.0) / np.sqrt(np.maximum(t2, f32(0.39)))
+        lg = ((f32(0.396) * a - f32(1.259)) * a + f32(1.0)) / ((f32(2.181) * a + f32(3.535)) * a)
+        lg[t2 < f32(0.39)] = 0.0
+        lam_flat[g] = lg
+    else:
         ci = np.clip(cos_i, f32(1e-12), f32(1.0))
         t2 = a2 * np.maximum(f32(1.0) / (ci * ci) - f32(1.0), f32(0.0))
-        if distribution == "BECKMANN":
-            a = f32(1.0) / np.sqrt(np.maximum(t2, f32(0.39)))
-            lam = ((f32(0.396) * a - f32(1.259)) * a + f32(1.0)) / ((f32(2.181) * a + f32(3.535)) * a)
-            lam[t2 < f32(0.39)] = 0.0
-        else:
-            lam = f32(0.5) * (np.sqrt(f32(1.0) + t2) - f32(1.0))
-        lam += f32(1.0) + lam_o
-        lam *= f32(4.0) * cos_o
-        val /= lam
-        val[~valid] = 0.0
-        h = None
-        if want_h:
-            h = np.sqrt(np.clip(f32(0.5) * (f32(1.0) + dot_io), f32(0.0), f32(1.0)))
+        lam = f32(0.5) * (np.sqrt(f32(1.0) + t2) - f32(1.0))
+    lam += f32(1.0) + lam_o
+    lam *= f32(4.0) * cos_o
+    val /= lam
+    val[~valid] = 0.0
+    h = None
+    if want_h:
+        h = np.sqrt(np.clip(f32(0.5) * (f32(1.0) + dot_io), f32(0.0), f32(1.0)))
     return val, h
 
 
@@ -1242,9 +1267,18 @@ def _group_bounds(keys: np.ndarray):
     return list(zip(starts.tolist(), stops.tolist()))
 
 
+_QUIET = dict(over="ignore", under="ignore", divide="ignore", invalid="ignore")
+
+
 def glossy_blocks(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, lobe: GlossyLobe,
                   verts: np.ndarray, mode="adaptive", thresholds=DEFAULT_LEVEL_THRESHOLDS,
                   stats: BlocksStats | None = None) -> np.ndarray:
+    with np.errstate(**_QUIET):
+        return _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats)
+
+
+def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats):
+    # body of glossy_blocks (under np.errstate)
     """Glossy radiance (len(verts), 3) of vertices ``verts`` by Algorithm 1 over their
     active pairs.
 
@@ -1297,25 +1331,30 @@ def glossy_blocks(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, lob
     code = Bk[rest] * 4 + np.searchsorted(np.array([4, 16, PIXEL]), levels[rest])
     order = np.argsort(code, kind="stable")
     rest, code = rest[order], code[order]
+    t1 = _time.perf_counter()
+    vis_all = _decompress(pairs, idx[rest], lobe.dtype)      # §4.4, once for all groups
+    t0 = _tick(st, "decompress", t1)
     for lo, hi in _group_bounds(code):
         rows = rest[lo:hi]
         blk = int(Bk[rows[0]])
         lv = int(levels[rows[0]])
         p = P[rows]
-        t1 = _time.perf_counter()
-        vis = _decompress(pairs, idx[rows], lobe.dtype)
-        t0 = _tick(st, "decompress", t1)
+        vis = None if one[rows].all() else vis_all[lo:hi]
         if lv == PIXEL:
             Lb = pixel[blk]
             for f, w in lobe.dense(p, unit_dirs[blk]):
-                f *= vis
+                if vis is not None:
+                    f *= vis
                 per_pair[rows] += (f @ Lb) * w
-            st.samples += int(np.count_nonzero(vis)) if not pairs.one[idx[rows]].all() else vis.size
+            st.samples += rows.size * BLOCK_PIXELS
         else:
             l = {4: 2, 16: 4}[lv]
             pix, inv = projection_system(l)
-            W = (vis @ tables.dct_light[blk, :, :lv * 3].astype(lobe.dtype, copy=False)
-                 ).reshape(rows.size, lv, 3)
+            H = tables.dct_light[blk, :, :lv * 3].astype(lobe.dtype, copy=False)
+            if vis is None:                           # constant 1: the lighting's DCT
+                W = np.broadcast_to(H.sum(axis=0).reshape(1, lv, 3), (rows.size, lv, 3))
+            else:
+                W = (vis @ H).reshape(rows.size, lv, 3)
             inv_t = inv.T.astype(lobe.dtype)
             for f, w in lobe.dense(p, unit_dirs[blk, pix]):
                 per_pair[rows] += np.einsum("mk,mkc->mc", f @ inv_t, W) * w
@@ -1332,6 +1371,9 @@ def glossy_blocks(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, lob
     for lv in (0,) + BRDF_LEVELS:
         st.levels[lv] += int((levels == lv).sum())
     return out
+
+
+glossy_blocks.__doc__ = _glossy_blocks.__doc__
 
 
 def for_chunks(count: int, chunk: int, fn, threads: int | None = None):
@@ -1381,6 +1423,13 @@ def shade_points(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, posi
             continue
         out[sel] = lambert_layer(mat, irradiance[sel], normals[sel], vd)
         if mat.is_diffuse_only:
+            # the Lambert layer's blocks are Light-BRDF (line 6) / Light-Vis (line 9)
+            # products of the light's first moment; nothing is sampled per frame
+            in_sel = np.zeros(P, dtype=bool)
+            in_sel[sel] = True
+            ones = pairs.one[in_sel[pairs.p]]
+            st.cases[1] += int(ones.sum())
+            st.cases[2] += int((~ones).sum())
             continue
 
         def run(a, b, sel=sel, vd=vd, mat=mat):
@@ -1422,7 +1471,8 @@ def _pixel_vertices(pairs, tables, mat, normals, views, verts, threads):
             f += cos[:, None] * albedo[None, :] * wd[a:b][p]
         if not mat.is_diffuse_only:
             lobe = GlossyLobe(mat, np.float64).prepare(normals[a:b], views[a:b])
-            f += lobe.sample(p, tables.unit_dirs[bk, px])
+            with np.errstate(**_QUIET):
+                f += lobe.sample(p, tables.unit_dirs[bk, px])
         f *= vis[rows, px][:, None] * tables.pixel[bk, px]
         out = np.zeros((v.size, 3))
         for c in range(3):
