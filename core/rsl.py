@@ -675,17 +675,19 @@ def clustered_pca(vectors: np.ndarray, clusters: int, eigen: int, iterations: in
                 centres[c] = Z[m].mean(0) if m.any() else Z[rng.integers(P)]
     means = np.zeros((C, D), np.float32)
     bases = np.zeros((C, E, D), np.float32)
-    for c in range(C):
-        m = labels == c
-        if not m.any():
-            continue
-        means[c] = X[m].mean(0)
-        B = _top_components(X[m] - means[c], E, rng)
-        bases[c, :len(B)] = B
     coeffs = np.zeros((P, E), np.float32)
-    for a in range(0, P, 4096):
-        lab = labels[a:a + 4096]
-        coeffs[a:a + 4096] = np.einsum("pd,ped->pe", X[a:a + 4096] - means[lab], bases[lab])
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(C + 1))
+    for c in range(C):
+        idx = order[bounds[c]:bounds[c + 1]]
+        if len(idx) == 0:
+            continue
+        Xc = X[idx]
+        means[c] = Xc.mean(0)
+        Xc -= means[c]
+        B = _top_components(Xc, E, rng)
+        bases[c, :len(B)] = B
+        coeffs[idx] = Xc @ bases[c].T
     return ClusteredPCA(labels, means, bases, coeffs)
 
 
@@ -704,28 +706,40 @@ def relative_error(vectors: np.ndarray, model: ClusteredPCA, chunk: int = 4096) 
     return float(np.sqrt(num / max(den, 1e-300)))
 
 
-#: (clusters, eigenvectors) tried by :func:`compress_by_budget`, cheapest first
-CPCA_CANDIDATES = ((1, 4), (4, 4), (16, 4), (16, 8), (64, 8), (256, 8), (256, 16), (256, 32))
+#: cluster counts and eigenvector counts tried by :func:`compress_by_budget`
+CPCA_CLUSTERS = (1, 4, 16, 64, 256)
+CPCA_EIGEN = (4, 8, 16, 32)
 
 
 def compress_by_budget(vectors: np.ndarray, budget: float, seed: int = 0):
-    """The first (clusters, eigenvectors) of :data:`CPCA_CANDIDATES` whose relative
-    RMS error is within ``budget`` (the last one otherwise); one clustering per cluster
-    count, truncated for the smaller eigenvector counts.  Returns ``(model, error,
+    """The cheapest (clusters, eigenvectors) pair -- fewest stored floats -- whose
+    relative RMS error is within ``budget``; pairs that would not compress at least
+    2:1 or leave fewer than 16 vectors per cluster are skipped, and when none meets
+    the budget the most accurate one tried is kept.  One clustering per cluster
+    count, truncated for smaller eigenvector counts.  Returns ``(model, error,
     compression ratio)``; the ratio counts stored floats (§5.1)."""
     X = np.asarray(vectors, np.float32)
-    P = len(X)
-    best = None
-    for C in sorted({c for c, _ in CPCA_CANDIDATES}):
-        if C > P:
+    P, D = X.shape
+    pairs = sorted(((C * (E + 1) * D + P * (E + 1), C, E) for C in CPCA_CLUSTERS
+                    for E in CPCA_EIGEN if C * 16 <= max(P, 16) and E < D),
+                   key=lambda t: t[0])
+    pairs = [p for p in pairs if 2 * p[0] <= X.size] or pairs[:1]
+    fulls, best = {}, None
+    total = float(np.einsum("pd,pd->", X, X, dtype=np.float64))
+    for _, C, E in pairs:
+        if C not in fulls:
+            full = clustered_pca(X, C, max(e for _, c, e in pairs if c == C), seed=seed)
+            centred = sum(float(((X[a:a + 4096] - full.means[full.labels[a:a + 4096]]) ** 2)
+                                .sum(dtype=np.float64)) for a in range(0, P, 4096))
+            fulls[C] = (full, centred, np.cumsum((full.coeffs.astype(np.float64) ** 2).sum(0)))
+        full, centred, captured = fulls[C]
+        # orthonormal bases: residual = centred energy - energy of the kept coefficients
+        err = float(np.sqrt(max(centred - (captured[E - 1] if E else 0.0), 0.0)
+                            / max(total, 1e-300)))
+        if best is None or err < best[1]:
+            best = (truncated(full, E), err)
+        if err <= budget:
+            best = (truncated(full, E), err)
             break
-        eigens = [e for c, e in CPCA_CANDIDATES if c == C]
-        full = clustered_pca(X, C, max(eigens), seed=seed)
-        for E in eigens:
-            model = truncated(full, E)
-            err = relative_error(X, model)
-            best = (model, err)
-            if err <= budget:
-                return model, err, X.size / model.stored_floats
     model, err = best
     return model, err, X.size / model.stored_floats
