@@ -949,6 +949,7 @@ class LightTables:
     pixel32: np.ndarray = None
     dct_light: np.ndarray = None
     unit_dirs32: np.ndarray = None
+    integral12_t: np.ndarray = None        # (12, blocks, 256): the same, channel-major
 
 
 def light_tables(lighting, resolution: int) -> LightTables:
@@ -967,13 +968,14 @@ def light_tables(lighting, resolution: int) -> LightTables:
     t12 = np.concatenate([pix, (pix[:, :, :, None] * mb[:, :, None, :]).reshape(pix.shape[0], BLOCK_PIXELS, 9)],
                          axis=2)
     integral12 = np.ascontiguousarray(np.cumsum(t12[:, ::-1], axis=1)[:, ::-1])
+    integral12_t = np.ascontiguousarray(np.moveaxis(integral12, 2, 0))
     dct = np.einsum("kp,bpc->bkc", dct_basis(), pix)
     # H_b[p, k, c] = Phi_k(p) L~_pc: V @ H_b projects the visible light on the DCT functions
     dct_light = (dct_basis().T[None, :, :, None] * pix[:, :, None, :]).astype(np.float32)
     ub = to_blocks(unit, n)
     return LightTables(n, pix, dct, integral12, ub, mb, pix.astype(np.float32),
                        np.ascontiguousarray(dct_light.reshape(pix.shape[0], BLOCK_PIXELS, 48)),
-                       ub.astype(np.float32))
+                       ub.astype(np.float32), integral12_t)
 
 
 @dataclass
@@ -991,29 +993,44 @@ class LightVis:
         return int(self.S.nbytes + self.moment.nbytes)
 
 
-def light_vis_sums(pairs: ActivePairs, tables: LightTables, chunk: int = 1 << 20) -> LightVis:
+def light_vis_sums(pairs: ActivePairs, tables: LightTables, chunk: int = 1 << 16) -> LightVis:
     """Alg. 1 line 9's light-vis product ``L_int . V_d`` (eq. 6, a sum over the stored
     change indices only) of ``[L~, L~ w_x, L~ w_y, L~ w_z]`` for every active pair."""
     P = pairs.dv.count
-    S = np.empty((pairs.count, 3), dtype=np.float32)
-    moment = np.zeros((P, 9))
-    for a in range(0, pairs.count, chunk):
-        sel = np.arange(a, min(pairs.count, a + chunk))
-        vals = np.empty((sel.size, 12))
-        one = pairs.one[sel]
-        vals[one] = tables.integral12[pairs.b[sel[one]], 0]
-        mixed = np.nonzero(~one)[0]
-        if mixed.size:
-            row, ent = _entries(pairs, sel[mixed])
-            w = _entry_weights(pairs, sel[mixed], row, ent)
-            e = tables.integral12[pairs.b[sel[mixed]][row], pairs.dv.indices[ent].astype(np.int64)]
-            e *= w[:, None]
-            for c in range(12):
-                vals[mixed, c] = np.bincount(row, weights=e[:, c], minlength=mixed.size)
-        S[sel] = vals[:, :3]
-        for c in range(9):
-            moment[:, c] += np.bincount(pairs.p[sel], weights=vals[:, 3 + c], minlength=P)
+    table = tables.integral12_t                          # (12, blocks, 256)
+    vals = np.empty((12, pairs.count))
+    one = np.nonzero(pairs.one)[0]
+    vals[:, one] = table[:, pairs.b[one], 0]
+    mixed_all = np.nonzero(~pairs.one)[0]
+    for a in range(0, mixed_all.size, chunk):
+        mixed = mixed_all[a:a + chunk]       # every mixed pair has >= 1 entry
+        row, ent = _entries(pairs, mixed)
+        w = _entry_weights(pairs, mixed, row, ent)
+        flat = pairs.b[mixed][row] * BLOCK_PIXELS + pairs.dv.indices[ent]
+        e = np.take(table.reshape(12, -1), flat, axis=1)            # (12, E), C order
+        e *= w
+        vals[:, mixed] = _segment_sums(e, pairs.entry_count[mixed])
+    S = np.ascontiguousarray(vals[:3].T, dtype=np.float32)
+    # per vertex: pairs are vertex-major, pairs.first delimits each vertex's run
+    moment = _segment_sums(vals[3:], np.diff(pairs.first)).T
     return LightVis(S, moment.reshape(P, 3, 3))
+
+
+def _segment_sums(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Sums of consecutive runs along the *last* axis of ``values`` (C, E) (run i has
+    ``counts[i]`` elements, may be 0) -> (C, len(counts)), via one cumulative sum along
+    the contiguous axis (much faster than ``reduceat``/``cumsum`` along a strided one)."""
+    out = np.zeros(values.shape[:-1] + (counts.size,))
+    if values.shape[-1] == 0:
+        return out
+    cs = np.cumsum(values, axis=-1)
+    ends = np.cumsum(counts)
+    has = counts > 0
+    out[..., has] = cs[..., ends[has] - 1]
+    prev = ends - counts - 1
+    later = has & (prev >= 0)
+    out[..., later] -= cs[..., prev[later]]
+    return out
 
 
 def lambert_irradiance(light_vis: LightVis, normals: np.ndarray) -> np.ndarray:
