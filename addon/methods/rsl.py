@@ -40,7 +40,8 @@ def _unrotated_lighting(world: envmap.WorldLighting, resolution: int):
     return key, got
 
 
-def square_lights(state) -> rsl.SquareLights:
+def square_lights(state):
+    """``(cache key, SquareLights)`` for the state's world and RSL settings."""
     key, lighting = _unrotated_lighting(state.world, state.resolution)
     s = state.settings
     budget = s.get("rsl_error_budget") if s.get("rsl_mode", "COUNT") == "BUDGET" else None
