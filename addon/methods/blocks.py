@@ -96,12 +96,12 @@ class BlocksMethod(Method):
     description = ("Inger et al. 2012: per 16x16 cubemap block, Algorithm 1 (skip / "
                    "light-BRDF / light-visibility / triple product) with differential "
                    "visibility and the BRDF sampled per view; needs 6x64x64 or finer")
-    budget = ("blocks_tolerance", [1e-1, 1e-2, 1e-3, 1e-4])
+    budget = ("blocks_tolerance", [0.3, 0.1, 0.01, 0.001])
 
     def scene_properties(self):
         from bpy.props import FloatProperty
         return {"blocks_tolerance": FloatProperty(
-            name="Block Tolerance", default=1e-2, min=1e-6, max=1.0, precision=6,
+            name="Block Tolerance", default=0.1, min=1e-6, max=1.0, precision=6,
             update=runtime.redraw_viewports,
             description="BLOCKS: a block is sampled at every pixel where the glossy lobe "
                         "reaches this fraction of its peak, with 16 / 4 / 1 DCT coefficients "
@@ -190,7 +190,7 @@ class BlocksMethod(Method):
             tables = core_blocks.light_tables(L, res)
             _TABLES.clear()
             _TABLES[key] = tables
-        thresholds = thresholds_for(state.settings.get("blocks_tolerance", 1e-2))
+        thresholds = thresholds_for(state.settings.get("blocks_tolerance", 0.1))
         stats = core_blocks.BlocksStats()
         sources = []
         out = []
