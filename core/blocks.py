@@ -1351,6 +1351,12 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats):
     t1 = _time.perf_counter()
     vis_all = _decompress(pairs, idx[rest], lobe.dtype)      # §4.4, once for all groups
     t0 = _tick(st, "decompress", t1)
+    sel_of = {lv: np.nonzero(levels == lv)[0] for lv in (4, 16)}
+    where = np.full(idx.size, -1, dtype=np.int64)
+    W_of = {}
+    for lv in (4, 16):
+        where[sel_of[lv]] = np.arange(sel_of[lv].size)
+        W_of[lv] = np.empty((sel_of[lv].size, lv, 3), dtype=lobe.dtype)
     for lo, hi in _group_bounds(code):
         rows = rest[lo:hi]
         blk = int(Bk[rows[0]])
@@ -1364,19 +1370,26 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats):
                     f *= vis
                 per_pair[rows] += (f @ Lb) * w
             st.samples += rows.size * BLOCK_PIXELS
-        else:
-            l = {4: 2, 16: 4}[lv]
-            pix, inv = projection_system(l)
+        else:                                          # only W here; samples below
             H = tables.dct_light[blk, :, :lv * 3].astype(lobe.dtype, copy=False)
             if vis is None:                           # constant 1: the lighting's DCT
-                W = np.broadcast_to(H.sum(axis=0).reshape(1, lv, 3), (rows.size, lv, 3))
+                W_of[lv][where[rows]] = H.sum(axis=0).reshape(1, lv, 3)
             else:
-                W = (vis @ H).reshape(rows.size, lv, 3)
-            inv_t = inv.T.astype(lobe.dtype)
-            for f, w in lobe.dense(p, unit_dirs[blk, pix]):
-                per_pair[rows] += np.einsum("mk,mkc->mc", f @ inv_t, W) * w
-            st.samples += rows.size * lv
+                W_of[lv][where[rows]] = (vis @ H).reshape(rows.size, lv, 3)
         t0 = _tick(st, "pixel" if lv == PIXEL else f"level {lv}", t0)
+    # 4 / 16: all pairs of a level sampled at once (eq. 4 nodes), A = inv @ samples,
+    # line 6 / 11 = A . W
+    for lv, l in ((4, 2), (16, 4)):
+        s = sel_of[lv]
+        if not s.size:
+            continue
+        pix, inv = projection_system(l)
+        d = unit_dirs[Bk[s][:, None], pix[None, :]].reshape(-1, 3)
+        f = lobe.sample(np.repeat(P[s], lv), d).reshape(s.size, lv, 3)
+        A = np.einsum("ij,mjc->mic", inv.astype(lobe.dtype), f)
+        per_pair[s] += np.einsum("mkc,mkc->mc", A, W_of[lv])
+        st.samples += s.size * lv
+        t0 = _tick(st, f"level {lv}", t0)
     out = np.zeros((verts.size, 3))
     for c in range(3):
         out[:, c] = np.bincount(P, weights=per_pair[:, c], minlength=verts.size)
