@@ -1,8 +1,9 @@
 """RSL (rotatable square lights, seed 000) against REFERENCE: the K table of Fig. 9/10.
 
-    .venv/bin/python bench/bench_rsl.py [--mesh spot.obj] [--hdri forest city] [--resolution 160x120]
+    .venv/bin/python bench/bench_rsl.py [--mesh spot.obj] [--hdri forest city]
+                                        [--resolution 160x120]
 
-Held-out scenes (the decomposition cost was tuned on sunset only): a mesh with Cycles'
+Held-out scenes (the decomposition cost was tuned on sunset and courtyard): a mesh with Cycles'
 default Principled surface on a diffuse 96² ground grid, each listed HDRI rotated 0.6 rad.
 For K = 10, 30, 60, 100 it prints the rel-L2 of the F12 image against REFERENCE's (pixels
 with alpha > 0.5) and of the per-vertex radiance, the per-frame shading time, the F12 time
@@ -79,8 +80,8 @@ def run_scene(mesh, hdri, w, h, out_dir, lines):
     cube = directions.cubemap(32)
     head = (f"{mesh.stem if mesh.is_file() else 'suzanne'} + 96² grid, HDRI {hdri} (rot 0.6), "
             f"{w}x{h}, {pre['points']} points (RSL precompute: rays {pre.get('rays', 0):.1f} s, "
-            f"VDT + CPCA {pre.get('derive', 0):.1f} s, {pre.get('rsl_cpca', '')}); REFERENCE F12 {ref_f12:.2f} s (again: {ref_warm:.2f} s), "
-            f"shade {ref_t:.3f} s")
+            f"VDT + CPCA {pre.get('derive', 0):.1f} s, {pre.get('rsl_cpca', '')}); "
+            f"REFERENCE F12 {ref_f12:.2f} s (again: {ref_warm:.2f} s), shade {ref_t:.3f} s")
     lines += [head, f"{'K':>4s} {'rel-L2 F12':>10s} {'rel-L2 vtx':>10s} {'shade':>8s} "
                     f"{'F12':>7s} {'F12/REF':>8s} {'F12 again':>9s} {'/REF':>6s} {'decomp':>7s}"]
     print(lines[-2] + "\n" + lines[-1], flush=True)

@@ -33,10 +33,6 @@ from .directions import rsl_disk_to_hemisphere
 from .envmap import LUMINANCE, CubeLighting
 from .visibility import unpack_visibility
 
-#: RSL fitting is averaged over these rotation angles (§4.1.1).
-FIT_ANGLES = (0.0, math.pi / 8, math.pi / 4, 3 * math.pi / 8)
-
-
 # --------------------------------------------------------------------------- #
 # §4.1  Light decomposition
 # --------------------------------------------------------------------------- #
@@ -111,15 +107,15 @@ def _fit_error(A, E, Q, M):
     ``A`` solid angle, ``E = integral Y``, ``Q = integral Y^2``, ``M = integral w`` (3,).
     The square of area ``A`` (intensity ``I = E/A``) leaves the subregion's own
     variance ``Q - E²/A`` and, where region and square differ, ``I²`` times the area
-    of the symmetric difference.  That area is estimated from the region's second
-    moment about its centre ``J = A - |M|²/A``: a region as compact as the disk
-    swept by the rotating square (``J = A²/2π``) differs from it only by the corners
-    the rotation moves, a long region by up to ``2A``.
+    of the symmetric difference, averaged over the rotations 0, π/8, π/4, 3π/8.  That
+    area is estimated from the region's second moment about its centre
+    ``J = A - |M|²/A``: ``A (0.1 + 1.9 (1 - min(1, A²/2πJ)))``, from about ``0.1 A``
+    for disk-like regions to ``2 A`` for long ones.  (Measured on the plane the mean is
+    0.18 A for a disk and 0.22 A for a square; the smaller constant rendered better
+    on the tuning HDRIs: sunset 4.5 % vs 4.8 % at 30 lights, courtyard 3.4 % vs 4.8 %.)
     """
     var = max(Q - E * E / A, 0.0)
     J = max(A - (M[0] * M[0] + M[1] * M[1] + M[2] * M[2]) / A, 1e-300)
-    # symmetric difference of a rotated square and a region of the same area; for a
-    # square region averaged over FIT_ANGLES this is 0.1 A, and -> 2 A for thin ones.
     compact = min(A * A / (2.0 * math.pi * J), 1.0)
     mismatch = A * (0.1 + 1.9 * (1.0 - compact))
     return var + (E / A) ** 2 * mismatch
