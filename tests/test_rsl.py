@@ -288,3 +288,28 @@ def test_clustered_pca_is_exact_with_full_rank_and_meets_its_budget():
     assert err <= 0.05 and err == pytest.approx(rsl.relative_error(X, model), abs=1e-6)
     assert ratio > 1.0
     np.testing.assert_allclose(model.reconstruct(), X, atol=0.2 * np.abs(X).max())
+
+
+def test_offset_sat_keeps_float32_precision():
+    """§4.2's GPU precision problem: a SAT of large positive values loses the small
+    boxes' integrals in float32; the SAT of ``f - mean`` (mean added back) keeps them."""
+    rng = np.random.default_rng(6)
+    n = 32
+    cell = (2.0 / n) ** 2
+    integ = (50.0 + rng.random((n, n))) * cell
+    exact = rsl.summed_area(integ)
+    plain = exact.astype(np.float32)
+    offset_sat, mean = rsl._offset_sat(integ, cell)
+    offset_sat = offset_sat.astype(np.float32)
+    err_plain, err_offset = [], []
+    for _ in range(300):
+        half = rng.uniform(0.005, 0.03)
+        px, py = rng.uniform(0.3, 0.9, 2)                 # far corner: large SAT values
+        want = rsl.box_integral(exact, px, py, half)
+        got_plain = rsl.box_integral(plain.astype(np.float64), px, py, half)
+        got_offset = (rsl.box_integral(offset_sat.astype(np.float64), px, py, half)
+                      + mean * rsl._clipped_area(px, py, half))
+        err_plain.append(abs(got_plain - want) / want)
+        err_offset.append(abs(got_offset - want) / want)
+    assert np.max(err_offset) < 1e-4
+    assert np.max(err_plain) > 10 * np.max(err_offset)

@@ -420,6 +420,8 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
     import gpu
     from gpu_extras.batch import batch_for_shader
     P = len(normals)
+    if P == 0:
+        return np.zeros((0, 3))
     terms = len(weights) - 1
     if terms > MAX_TERMS:
         raise ValueError(f"{terms} BRDF terms; the GPU pass takes {MAX_TERMS}")
