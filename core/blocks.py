@@ -1048,47 +1048,58 @@ def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: 
     Zero where ``cos_i <= 0``.  Grazing directions overflow to inf on purpose
     (``G2 -> 0``): callers hold ``np.errstate`` (see :func:`glossy_blocks`)."""
     f32 = np.float32
+    one = f32(1.0)
+    floor = f32(_brdf._HALF_LEN2_FLOOR)
     len2 = dot_io * f32(2.0)
     len2 += f32(2.0)
-    valid = (cos_i > 0.0) & (len2 > f32(_brdf._HALF_LEN2_FLOOR))
-    np.maximum(len2, f32(_brdf._HALF_LEN2_FLOOR), out=len2)
+    shape = np.shape(len2)
+    degenerate = None
+    if len2.size and len2.min() <= floor:           # wi = -wo exactly: no half-vector
+        degenerate = len2 <= floor
+        np.maximum(len2, floor, out=len2)
     c = cos_i + cos_o
-    c /= np.sqrt(len2)
-    c *= c                                      # cos_h^2 (cos_h > 0 where valid)
-    np.minimum(c, f32(1.0), out=c)
+    c *= c
+    c /= len2                                       # cos_h^2
+    np.minimum(c, one, out=c)
     if distribution == "BECKMANN":
+        # D = exp(-tan^2 / a2) / (pi a2 cos^4); G2 = 1 / (1 + Lambda_i + Lambda_o), and
+        # Lambda_i = 0 unless t2 = a2 tan^2(theta_i) >= 0.39 (grazing light): the
+        # per-vertex part 1 / (pi a2 4 cos_o (1 + Lambda_o)) is one factor, the grazing
+        # directions get (1 + Lambda_o) / (1 + Lambda_o + Lambda_i) afterwards.
         np.maximum(c, f32(1e-30), out=c)
-        s2 = f32(1.0) - c
-        val = np.exp(-s2 / (c * a2))
-        val /= (f32(np.pi) * a2) * c * c
-    else:
-        den = f32(1.0) - c + a2 * c
-        val = a2 / (f32(np.pi) * den * den)
-    if distribution == "BECKMANN":
-        # Lambda = 0 unless t2 = a2 tan^2 >= 0.39, i.e. cos^2 <= a2 / (a2 + 0.39):
-        # evaluate the rational fit only on those (grazing) directions
-        lam = np.zeros(np.shape(cos_i), dtype=val.dtype)
+        r = np.divide(one, c, out=c)                # 1 / cos_h^2
+        val = r - one                               # tan^2
+        val *= -one / a2
+        np.exp(val, out=val)
+        val *= r
+        val *= r
+        val *= one / ((f32(np.pi) * a2) * f32(4.0) * cos_o * (one + lam_o))
         cut = float(a2) / (float(a2) + 0.39) * 1.001
-        mask = cos_i <= f32(np.sqrt(cut))
-        g = np.flatnonzero(mask)
-        lam_flat = lam.reshape(-1)
-        ci = np.clip(np.asarray(cos_i).reshape(-1)[g], f32(1e-12), f32(1.0))
-        t2 = a2 * np.maximum(f32(1.0) / (ci * ci) - f32(1.0), f32(0.0))
-        a = f32(1.0) / np.sqrt(np.maximum(t2, f32(0.39)))
-        lg = ((f32(0.396) * a - f32(1.259)) * a + f32(1.0)) / ((f32(2.181) * a + f32(3.535)) * a)
-        lg[t2 < f32(0.39)] = 0.0
-        lam_flat[g] = lg
+        g = np.flatnonzero(cos_i <= f32(np.sqrt(cut)))
+        if g.size:
+            at = np.unravel_index(g, shape)
+            ci = np.clip(np.asarray(cos_i)[at], f32(1e-12), one)
+            t2 = a2 * np.maximum(one / (ci * ci) - one, f32(0.0))
+            a = one / np.sqrt(np.maximum(t2, f32(0.39)))
+            lg = ((f32(0.396) * a - f32(1.259)) * a + one) / ((f32(2.181) * a + f32(3.535)) * a)
+            lg[t2 < f32(0.39)] = 0.0
+            lo = np.broadcast_to(lam_o, shape)[at]
+            val.reshape(-1)[g] *= (one + lo) / (one + lo + lg)
     else:
-        ci = np.clip(cos_i, f32(1e-12), f32(1.0))
-        t2 = a2 * np.maximum(f32(1.0) / (ci * ci) - f32(1.0), f32(0.0))
-        lam = f32(0.5) * (np.sqrt(f32(1.0) + t2) - f32(1.0))
-    lam += f32(1.0) + lam_o
-    lam *= f32(4.0) * cos_o
-    val /= lam
-    val[~valid] = 0.0
+        den = one - c + a2 * c
+        val = a2 / (f32(np.pi) * den * den)
+        ci = np.clip(cos_i, f32(1e-12), one)
+        t2 = a2 * np.maximum(one / (ci * ci) - one, f32(0.0))
+        lam = f32(0.5) * (np.sqrt(one + t2) - one)
+        lam += one + lam_o
+        lam *= f32(4.0) * cos_o
+        val /= lam
+    val[cos_i <= 0.0] = 0.0
+    if degenerate is not None:
+        val[degenerate] = 0.0
     h = None
     if want_h:
-        h = np.sqrt(np.clip(f32(0.5) * (f32(1.0) + dot_io), f32(0.0), f32(1.0)))
+        h = np.sqrt(np.clip(f32(0.5) * (one + dot_io), f32(0.0), one))
     return val, h
 
 
