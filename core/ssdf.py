@@ -219,7 +219,7 @@ def _signed_distances(query_local, query_vis, bpoint, bdirs, count, any_visible)
         # points sorted by boundary count, in groups padded to the group's largest count
         # (repeating a point's first boundary point: duplicates do not change the maximum)
         order = np.argsort(counts, kind="stable")
-        group = 8
+        group = 16
         for g in range(0, count, group):
             idx = order[g:g + group]
             idx = idx[has[idx]]
@@ -228,7 +228,8 @@ def _signed_distances(query_local, query_vis, bpoint, bdirs, count, any_visible)
             bmax = int(counts[idx].max())
             slot = np.minimum(np.arange(bmax)[None, :], counts[idx, None] - 1)
             padded = bd32[starts[idx, None] + slot]                       # (g, bmax, 3)
-            best[idx] = np.matmul(padded, q32).max(axis=1)
+            dots = (padded.reshape(-1, 3) @ q32).reshape(len(idx), bmax, Q)   # one BLAS GEMM
+            best[idx] = dots.max(axis=1)
     angle = np.arccos(np.clip(best.astype(np.float64), -1.0, 1.0))
     angle[best < -1.5] = np.inf                                 # no boundary point
     elevation = np.arcsin(np.clip(query_local[:, 2], 0.0, 1.0))[None, :]

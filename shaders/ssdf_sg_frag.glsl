@@ -13,8 +13,12 @@
  *           lightTex  per diffuse lobe j: texel (0, j) = (axis, lam), (1, j) = (mu, 0)
  *                     in texture space (world axis = R^T axis, amplitude * strength);
  *           paramTex  9 texels of scalar parameters (environment, SSDF, material slot),
- *                     read into the globals below (push constants are kept to 128 bytes). */
+ *                     read into the globals below (push constants are kept to 128 bytes),
+ *                     texel 9 = (cosine lobe count, sharpness), texels 10.. = (local
+ *                     direction, amplitude) of the clamped-cosine SG mixture C*. */
 
+int cosLobes;
+float cosLambda;
 int lightCount, ssdfRes, coeffTexels, envRes, envLevels, glossy, brdfModel, principled;
 float envStrength, envLambdaFirst, envRatio, envTop, roughness, ior, ndfLambda, ndfMu;
 vec4 kd, fresA, fresBd, fresBs, eye;
@@ -45,13 +49,14 @@ void read_parameters()
   fresA = texelFetch(paramTex, ivec2(5, 0), 0);
   fresBd = texelFetch(paramTex, ivec2(6, 0), 0);
   fresBs = texelFetch(paramTex, ivec2(7, 0), 0);
-  eye = texelFetch(paramTex, ivec2(8, 0), 0);   /* (position, 1) or (direction to camera, 0) */
+  eye = texelFetch(paramTex, ivec2(8, 0), 0);
+  vec4 p9 = texelFetch(paramTex, ivec2(9, 0), 0);
+  cosLobes = int(p9.x + 0.5);
+  cosLambda = p9.y;   /* (position, 1) or (direction to camera, 0) */
 }
 
 const float PI = 3.14159265358979;
 const float TWO_PI = 6.28318530717959;
-const float LAMBDA_C = 2.133;
-const float MU_C = 1.170;
 const float FH_A = 1.05;
 const vec4 FH_K = vec4(-4.091177817839644e-05, 0.013875614940571624, 0.8602564494071566,
                        1.4436420622237864);
@@ -279,18 +284,22 @@ void main()
     W[l] = vBary.x * coeff_fetch(vTri.x, l) + vBary.y * coeff_fetch(vTri.y, l) +
            vBary.z * coeff_fetch(vTri.z, l);
   }
-  /* eq. 39 */
+  /* eq. 39: every (clamped-cosine lobe, light lobe) product probes the SSDF at its axis */
   vec3 rd = vec3(0.0);
-  for (int j = 0; j < lightCount; j++) {
-    vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
-    vec3 mu = texelFetch(lightTex, ivec2(1, j), 0).rgb;
-    vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */
-    vec3 p;
-    float lam, amp;
-    sg_product(n, LAMBDA_C, axis, al.w, p, lam, amp);
-    vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
-    float theta = ssdf_value(local, W);
-    rd += mu * (MU_C * amp * fh_hat(theta, lam) * sg_hemisphere_integral(lam));
+  for (int m = 0; m < cosLobes; m++) {
+    vec4 cl = texelFetch(paramTex, ivec2(10 + m, 0), 0);
+    vec3 cw = cl.x * t + cl.y * b + cl.z * n;
+    for (int j = 0; j < lightCount; j++) {
+      vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
+      vec3 mu = texelFetch(lightTex, ivec2(1, j), 0).rgb;
+      vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */
+      vec3 p;
+      float lam, amp;
+      sg_product(cw, cosLambda, axis, al.w, p, lam, amp);
+      vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
+      float theta = ssdf_value(local, W);
+      rd += mu * (cl.w * amp * fh_hat(theta, lam) * sg_hemisphere_integral(lam));
+    }
   }
   vec3 color = kd.rgb * rd * envStrength;
   /* eq. 41 with the one-lobe isotropic NDF view slice (eq. 17-22) */
@@ -310,14 +319,18 @@ void main()
       fres = max(fres, vec3(0.0));
     }
     vec3 mu = ndfMu * m * fres;
-    vec3 p;
-    float lam, amp;
-    sg_product(n, LAMBDA_C, pw, lam_w, p, lam, amp);
-    vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
-    float theta = ssdf_value(local, W);
-    float scale = MU_C * amp * fh_hat(theta, lam);
-    vec3 gamma = env_lookup(p, lam) * envStrength * sg_integral(lam);
-    color += scale * mu * gamma;
+    for (int k = 0; k < cosLobes; k++) {
+      vec4 cl = texelFetch(paramTex, ivec2(10 + k, 0), 0);
+      vec3 cw = cl.x * t + cl.y * b + cl.z * n;
+      vec3 p;
+      float lam, amp;
+      sg_product(cw, cosLambda, pw, lam_w, p, lam, amp);
+      vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
+      float theta = ssdf_value(local, W);
+      float scale = cl.w * amp * fh_hat(theta, lam);
+      vec3 gamma = env_lookup(p, lam) * envStrength * sg_integral(lam);
+      color += scale * mu * gamma;
+    }
   }
   fragColor = vec4(color, 1.0);
 }

@@ -108,7 +108,8 @@ def test_glsl_equals_numpy_per_pixel():
         px_field = method.ssdf_sg.PCAField(field.mean, field.eigen, coeffs, field.resolution)
         mats = st.points.materials[pts[:, 0]]
         numpy_px[sel] = method.shade_object(px_field, nrm, pos, mats, st.materials, state.world,
-                                            fit, pre, eye=eye)
+                                            fit, pre, eye=eye,
+                                            cosine=method.cosine_of(state.settings))
     gpu = gpu_px.reshape(-1, 4)
     mask = ok & (gpu[:, 3] > 0.5)
     assert mask.sum() > 0.3 * W * H

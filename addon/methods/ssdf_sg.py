@@ -36,6 +36,10 @@ _LIGHTING_CACHE: dict = {}
 _FIELD_CACHE: dict = {}
 
 
+def cosine_of(settings) -> ssdf_sg.CosineLobes:
+    return ssdf_sg.COSINE_MODELS.get(str(settings.get("ssdf_cosine", "SG7")), ssdf_sg.COSINE_SG7)
+
+
 def grid_from_settings(settings) -> ssdf.SSDFGrid:
     return ssdf.SSDFGrid(int(settings.get("ssdf_resolution", 32)))
 
@@ -81,7 +85,7 @@ def sg_materials(materials):
 
 
 def shade_object(field, normals, positions, materials_of_points, materials, world, fit, pre,
-                 eye=None, view_dir=None, chunk=4096):
+                 eye=None, view_dir=None, chunk=4096, cosine=ssdf_sg.COSINE_EQ40):
     """Per-point radiance (P, 3) by eq. 39 + 41 (numpy, per vertex)."""
     P = len(normals)
     out = np.zeros((P, 3))
@@ -104,7 +108,7 @@ def shade_object(field, normals, positions, materials_of_points, materials, worl
             sel = sel_all[a:a + chunk]
             n = normals[sel]
             t, b = ssdf.ssdf_frames(n)
-            rd = ssdf_sg.diffuse_transfer(field, sel, n, axes, lam, mu, t, b)
+            rd = ssdf_sg.diffuse_transfer(field, sel, n, axes, lam, mu, t, b, cosine=cosine)
             out[sel] = rd * kd
             if glossy:
                 if view_dir is not None:
@@ -114,7 +118,8 @@ def shade_object(field, normals, positions, materials_of_points, materials, worl
                     v = np.asarray(eye, np.float64)[None, :] - v
                     v = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
                 la, ll, lm = sg_brdf.specular_lobes(mat, n, v)
-                out[sel] += ssdf_sg.specular_radiance(field, sel, n, la, ll, lm, env_lookup, t, b)
+                out[sel] += ssdf_sg.specular_radiance(field, sel, n, la, ll, lm, env_lookup, t, b,
+                                                      cosine=cosine)
     return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
 
 
@@ -126,8 +131,16 @@ class SSDFSGMethod(Method):
     budget = ("ssdf_error_budget", [0.2, 0.1, 0.05, 0.025])
 
     def scene_properties(self):
-        from bpy.props import FloatProperty, IntProperty
+        from bpy.props import EnumProperty, FloatProperty, IntProperty
         return {
+            "ssdf_cosine": EnumProperty(
+                name="Clamped Cosine", default="SG7", update=runtime.redraw_viewports,
+                items=[("EQ40", "1 lobe (paper, eq. 40)",
+                        "One SG on the normal: fastest, L2 error 17.7 %"),
+                       ("SG7", "7 lobes", "SG mixture over the hemisphere, L2 error 6.3 %"),
+                       ("SG19", "19 lobes", "SG mixture over the hemisphere, L2 error 3.7 %")],
+                description="SG mixture standing in for max(0, n.i) in eq. 39/41; more lobes "
+                            "are more accurate and probe visibility more locally, but slower"),
             "ssdf_resolution": IntProperty(
                 name="SSDF Resolution", default=32, min=8, max=64,
                 description="Texels per edge of each point's SSDF square (Shirley-Chiu map of "
@@ -229,7 +242,8 @@ class SSDFSGMethod(Method):
                 field = st.data["ssdf_sg"]
             pts = st.points
             rad = shade_object(field.numpy, pts.normals, pts.positions, pts.materials,
-                               st.materials, state.world, fit, pre, eye, view_dir)
+                               st.materials, state.world, fit, pre, eye, view_dir,
+                               cosine=cosine_of(state.settings))
             out.append(rad[pts.point_of_corner].astype(np.float32))
         return out
 
@@ -461,10 +475,15 @@ def material_uniforms(material):
                 ndfMu=float(mu), fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0))
 
 
-def parameter_texture(env, mat, res, kt, eye4):
-    """The 9 parameter texels read by ``read_parameters`` in ssdf_sg_frag.glsl."""
-    p = np.zeros((1, 9, 4), np.float32)
+def parameter_texture(env, mat, res, kt, eye4, cosine):
+    """The parameter texels read by ``read_parameters`` in ssdf_sg_frag.glsl: 9 scalars
+    texels, then (count, sharpness) and (local direction, amplitude) per cosine lobe."""
+    M = len(cosine.amplitudes)
+    p = np.zeros((1, 10 + M, 4), np.float32)
     p[0, 8] = eye4
+    p[0, 9] = (M, cosine.sharpness, 0.0, 0.0)
+    p[0, 10:, :3] = cosine.directions
+    p[0, 10:, 3] = cosine.amplitudes
     p[0, 0] = (env["envStrength"], env["lightCount"], res, kt)
     p[0, 1] = (env["envRes"], env["envLevels"], env["envLambdaFirst"], env["envRatio"])
     p[0, 2] = (env["envTop"], mat["glossy"], mat["brdfModel"], mat["principled"])
@@ -504,6 +523,7 @@ def object_batches(st, field):
 def gpu_draws(state, fields, fit, pre, eye, view_dir):
     """draw(view_projection) callables, one per object."""
     env_tex, light_tex, light_count = environment_textures(fit, pre)
+    cosine = cosine_of(state.settings)
     world = state.world
     rot = [list(map(float, r)) for r in np.asarray(world.rotation, np.float64)]
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None
@@ -518,7 +538,7 @@ def gpu_draws(state, fields, fit, pre, eye, view_dir):
         batches = object_batches(st, field)
         params = {slot: parameter_texture(env_common, material_uniforms(
                       st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material()),
-                      field.resolution, kt, eye4) for slot, _ in batches}
+                      field.resolution, kt, eye4, cosine) for slot, _ in batches}
 
         def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
                  eigen_tex=eigen_tex):
