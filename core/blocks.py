@@ -951,6 +951,14 @@ class LightTables:
     unit_dirs32: np.ndarray = None
     integral12_t: np.ndarray = None        # (12, blocks, 256): the same, channel-major
 
+    def dct_light_of(self, k: int, dtype=np.float32) -> np.ndarray:
+        """``H`` for the first ``k`` DCT functions, (blocks, 256, 3k) contiguous (cached)."""
+        cache = self.__dict__.setdefault("_h_cache", {})
+        key = (k, np.dtype(dtype).str)
+        if key not in cache:
+            cache[key] = np.ascontiguousarray(self.dct_light[:, :, :3 * k], dtype=dtype)
+        return cache[key]
+
 
 def light_tables(lighting, resolution: int) -> LightTables:
     """:class:`LightTables` of a :class:`.envmap.CubeLighting` (radiance + directions)."""
@@ -1382,7 +1390,7 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats):
                 per_pair[rows] += (f @ Lb) * w
             st.samples += rows.size * BLOCK_PIXELS
         else:                                          # only W here; samples below
-            H = tables.dct_light[blk, :, :lv * 3].astype(lobe.dtype, copy=False)
+            H = tables.dct_light_of(lv, lobe.dtype)[blk]
             if vis is None:                           # constant 1: the lighting's DCT
                 W_of[lv][where[rows]] = H.sum(axis=0).reshape(1, lv, 3)
             else:
@@ -1397,8 +1405,9 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats):
         pix, inv = projection_system(l)
         d = unit_dirs[Bk[s][:, None], pix[None, :]].reshape(-1, 3)
         f = lobe.sample(np.repeat(P[s], lv), d).reshape(s.size, lv, 3)
-        A = np.einsum("ij,mjc->mic", inv.astype(lobe.dtype), f)
-        per_pair[s] += np.einsum("mkc,mkc->mc", A, W_of[lv])
+        A = np.matmul(inv.astype(lobe.dtype), f)                 # (m, lv, 3)
+        A *= W_of[lv]
+        per_pair[s] += A.sum(axis=1)
         st.samples += s.size * lv
         t0 = _tick(st, f"level {lv}", t0)
     out = np.zeros((verts.size, 3))
