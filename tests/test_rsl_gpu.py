@@ -123,3 +123,49 @@ def test_method_renders_and_follows_world_rotation(registered_addon):
     ref_b = shaded()
     assert np.linalg.norm(b - a) / np.linalg.norm(a) > 0.05
     assert np.linalg.norm(b - ref_b) / np.linalg.norm(ref_b) < 0.1
+
+
+@pytest.mark.slow
+def test_turning_an_object_turns_its_self_shadowing_without_recompute(registered_addon):
+    """The VDTs live in vertex frames: after a rigid turn (and move) of the object the
+    stored data, read in the object's precompute orientation with the points matched
+    to their stored rows, shades like a fresh precompute."""
+    from prt_relight.addon.runtime import FrameState
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_monkey_add()
+    monkey = bpy.context.active_object                  # flat shaded: split normals
+    world = bpy.data.worlds.new("W")
+    scene.world = world
+    nt = world.node_tree
+    img = bpy.data.images.new("sky", 64, 32, float_buffer=True)
+    px = _sky_with_sun(32, 64, sun=(6, 20), sun_value=800.0)
+    rgba = np.concatenate([px[::-1], np.ones((32, 64, 1), np.float32)], axis=2)
+    img.pixels.foreach_set(rgba.reshape(-1))
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = img
+    nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    scene.prt.method = "RSL"
+    scene.prt.rsl_lights = 60
+    scene.prt.rsl_gpu = False
+    bpy.ops.prt.precompute()
+    eye = np.array([0.0, -6.0, 1.0])
+
+    def shaded():
+        state = FrameState()
+        state.sync(bpy.context.evaluated_depsgraph_get())
+        return np.concatenate(state.shade(eye)), state
+
+    before, _ = shaded()
+    monkey.rotation_euler = (0.5, 0.2, 1.1)
+    monkey.location = (0.3, 0.0, 0.2)
+    bpy.context.view_layer.update()
+    turned, state = shaded()
+    assert state.objects[0].status == "stale" and "rsl_rotation" in state.objects[0].data
+    bpy.ops.prt.precompute()
+    fresh, state = shaded()
+    assert "rsl_rotation" not in state.objects[0].data
+    change = np.linalg.norm(fresh - before) / np.linalg.norm(fresh)
+    diff = np.linalg.norm(turned - fresh) / np.linalg.norm(fresh)
+    # what is left is the resampling of the traced cubemap bits into the vertex frames
+    assert change > 0.15 and diff < 0.05 and diff < 0.25 * change, (change, diff)

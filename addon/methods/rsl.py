@@ -3,6 +3,7 @@ BRDF from summed-area tables and visibility from per-vertex distance tables (eq.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import numpy as np
@@ -75,15 +76,75 @@ def derive_visibility(bits, normals, resolution: int) -> dict:
     return {"VDT": rsl.visibility_distance_table(maps), "SAT": rsl.visibility_sat(maps)}
 
 
-def object_visibility(st, resolution: int, kind: str) -> np.ndarray:
+def object_visibility(st, resolution: int, kind: str, normals=None, rows=None) -> np.ndarray:
     """The object's VDT (stored CPCA reconstruction when synced, else derived from the
-    visibility bits) or visibility SAT (always derived: the exact option)."""
+    visibility bits) or visibility SAT (always derived: the exact option), one table per
+    current point.  ``normals``: the normals the bits were traced with (the precompute
+    orientation); ``rows``: the stored row of each current point after a turn."""
+    normals = st.points.normals if normals is None else normals
     stored = st.data.get("rsl")
     if kind == "VDT" and stored is not None:
-        return stored
+        if rows is None:
+            return stored
+        return runtime.per_visibility(_VISIBILITY, (st.name, "rows", rows.tobytes()), stored,
+                                      lambda: stored[rows], limit=8)
+    bits = st.bits if rows is None else st.bits[rows]
+    key = (st.name, id(st.bits), resolution, None if rows is None else rows.tobytes())
     return runtime.per_visibility(
-        _VISIBILITY, (st.name, id(st.bits), resolution), st.bits,
-        lambda: derive_visibility(st.bits, st.points.normals, resolution), limit=8)[kind]
+        _VISIBILITY, key, st.bits,
+        lambda: derive_visibility(bits, normals, resolution), limit=8)[kind]
+
+
+# ------------------------------------------------------------------ rigid motion
+
+def _rotation_part(M: np.ndarray) -> np.ndarray:
+    """Nearest rotation to the linear part of a 4x4 matrix (polar decomposition)."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=np.float64)[:3, :3])
+    R = U @ Vt
+    if np.linalg.det(R) < 0:
+        R = U @ np.diag([1.0, 1.0, -1.0]) @ Vt
+    return R
+
+
+def _local_probe(world_positions: np.ndarray, M: np.ndarray, count: int = 64) -> np.ndarray:
+    """A few vertices in object space (detects edits other than a rigid motion)."""
+    pos = np.asarray(world_positions, dtype=np.float64)
+    idx = np.linspace(0, len(pos) - 1, min(count, len(pos))).astype(np.int64)
+    return (pos[idx] - M[:3, 3]) @ np.linalg.inv(M[:3, :3]).T
+
+
+def _precompute_rows(st, turn):
+    """Stored row of each current shading point: points are ordered by (vertex,
+    quantised world normal, material), so after a turn the split normals of a vertex
+    may sort differently; the precompute order is the order of the turned-back
+    normals (as in :func:`..core.mesh.shading_points`)."""
+    pts, arrays = st.points, st.arrays
+    vert = np.empty(pts.count, dtype=np.int64)
+    vert[pts.point_of_corner] = arrays.corner_verts
+    n0 = np.asarray(pts.normals, np.float64) @ turn
+    q = np.clip(np.round(n0 * 4096.0).astype(np.int64) + 4096, 0, 8192)
+    mat = np.clip(pts.materials, 0, (1 << 20) - 1)
+    key = (((q[:, 0] << 14) | q[:, 1]) << 14 | q[:, 2]) << 20 | mat
+    order = np.lexsort((key, vert))          # order[i]: current point of stored row i
+    rows = np.empty(pts.count, dtype=np.int64)
+    rows[order] = np.arange(pts.count)
+    return rows
+
+
+def _rigid_rotation(ob, st):
+    """``R1 R0^T`` when the object only moved/turned since precompute (same object-space
+    vertices), else None."""
+    R0 = ob.get("prt_rsl_rotation")
+    probe = ob.get("prt_rsl_probe")
+    if R0 is None or probe is None:
+        return None
+    M = np.array(ob.matrix_world, dtype=np.float64)
+    now = _local_probe(st.arrays.positions, M)
+    then = np.asarray(probe, dtype=np.float64).reshape(-1, 3)
+    scale = max(float(np.abs(then).max(initial=0.0)), 1e-9)
+    if now.shape != then.shape or np.abs(now - then).max() > 1e-4 * scale:
+        return None
+    return _rotation_part(M) @ np.asarray(R0, dtype=np.float64).reshape(3, 3).T
 
 
 # ------------------------------------------------------------------ storage (§5.1)
@@ -224,15 +285,27 @@ class RSLMethod(Method):
                 if old.users <= 1:
                     bpy.data.images.remove(old)
             img.name = IMAGE_PREFIX + name
+            # pose at precompute: the VDTs live in vertex frames that turn with the object
+            job_ob = next(o for o in job.objects if o.name == name)
+            M = np.array(ob.matrix_world, dtype=np.float64)
+            ob["prt_rsl_rotation"] = _rotation_part(M).ravel().tolist()
+            ob["prt_rsl_probe"] = _local_probe(job_ob.arrays.positions, M).ravel().tolist()
 
     def sync(self, state):
         import bpy
         for st in state.objects:
             ob = bpy.data.objects.get(st.name)
             img = ob.get("prt_rsl_image") if ob is not None else None
-            if (img is None or st.status != "ok"
-                    or ob.get("prt_rsl_id") != ob.prt.precompute_id):
+            if img is None or ob.get("prt_rsl_id") != ob.prt.precompute_id:
                 continue
+            if st.status != "ok":
+                turn = _rigid_rotation(ob, st)
+                if turn is None:
+                    continue
+                st.data["rsl_rotation"] = turn
+                st.data["rsl_rows"] = _precompute_rows(st, turn)
+                state.note(f"RSL: {st.name} turned since precompute; its self-shadowing turns "
+                           "with it (shadows on other objects are not updated)")
             key = (img.name_full, ob.get("prt_rsl_id"), st.points.count)
             got = _STORED.get(key)
             if got is None:
@@ -265,39 +338,45 @@ class RSLMethod(Method):
         out = []
         for st in state.objects:
             pts = st.points
-            vis = object_visibility(st, state.resolution, kind)
+            turn = st.data.get("rsl_rotation")
+            ev, normals = evaluator, pts.normals
+            if turn is not None:        # work in the object's precompute orientation
+                ev = copy.copy(evaluator)
+                ev.centres = evaluator.centres @ turn
+                normals = np.asarray(pts.normals, np.float64) @ turn
+            rows = st.data.get("rsl_rows")
+            vis = object_visibility(st, state.resolution, kind, normals, rows)
+            rkey = (lkey, R.round(9).tobytes(), None if turn is None else turn.round(9).tobytes())
             radiance = None
             if use_gpu:
                 try:
-                    radiance = self._shade_gpu(st, evaluator, kind, vis, eye, view_dir,
-                                               (lkey, R.round(9).tobytes()))
+                    radiance = self._shade_gpu(st, ev, kind, vis, eye, view_dir, rkey, normals,
+                                               turn)
                 except Exception as exc:                  # numpy below gives the same sums
                     state.note(f"RSL GPU pass failed ({exc}); shading with numpy")
                     use_gpu = False
             if radiance is None:
                 V, C = runtime.per_visibility(
-                    _FACTORS, (st.name, id(st.bits), id(vis), lkey, kind, R.round(9).tobytes()),
-                    st.bits,
-                    lambda: evaluator.diffuse_factors(pts.normals, kind, vis, cos_tables),
-                    limit=8)
+                    _FACTORS, (st.name, id(st.bits), id(vis), kind, rkey), st.bits,
+                    lambda: ev.diffuse_factors(normals, kind, vis, cos_tables), limit=8)
                 radiance = np.zeros((pts.count, 3))
-                for mat, sel, vd in _groups(st, eye, view_dir):
-                    radiance[sel] = evaluator.shade(mat, brdf_tables(mat), pts.normals[sel], vd,
-                                                    V[sel], C[sel])
+                for mat, sel, vd in _groups(st, eye, view_dir, turn):
+                    radiance[sel] = ev.shade(mat, brdf_tables(mat), normals[sel], vd,
+                                             V[sel], C[sel])
             radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
             out.append(radiance[pts.point_of_corner].astype(np.float32))
         return out
 
     @staticmethod
-    def _shade_gpu(st, evaluator, kind, vis, eye, view_dir, lighting_key):
+    def _shade_gpu(st, evaluator, kind, vis, eye, view_dir, lighting_key, normals, turn):
         key = ("vis", st.name, kind)
         got = _GPU.get(key)
         if got is None or got[0] is not vis:
             _GPU[key] = got = (vis, _texture(_tiles(vis), "R32F"))
         pts = st.points
         radiance = np.zeros((pts.count, 3))
-        for mat, sel, vd in _groups(st, eye, view_dir):
-            normals = pts.normals[sel]
+        for mat, sel, vd in _groups(st, eye, view_dir, turn):
+            group_normals = normals[sel]
             if vd is None:                  # view independent: once per lighting/rotation
                 rkey = (st.name, kind, mat, lighting_key)
                 done = _GPU_DIFFUSE.get(rkey)
@@ -305,8 +384,8 @@ class RSLMethod(Method):
                     radiance[sel] = done[1]
                     continue
             radiance[sel] = gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
-                                      brdf_tables(mat), normals, vd,
-                                      rsl.point_weights(mat, normals, vd), kind, got[1],
+                                      brdf_tables(mat), group_normals, vd,
+                                      rsl.point_weights(mat, group_normals, vd), kind, got[1],
                                       vis.shape[-1] - (kind == "SAT"), sel)
             if vd is None:
                 if len(_GPU_DIFFUSE) > 16:
@@ -315,8 +394,9 @@ class RSLMethod(Method):
         return radiance
 
 
-def _groups(st, eye, view_dir):
-    """(material, point indices, view directions or None) per material slot."""
+def _groups(st, eye, view_dir, turn=None):
+    """(material, point indices, view directions or None) per material slot; views in
+    the object's precompute orientation when it has turned (``turn``)."""
     pts = st.points
     for slot in np.unique(pts.materials):
         sel = np.nonzero(pts.materials == slot)[0]
@@ -327,6 +407,8 @@ def _groups(st, eye, view_dir):
                 vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
             else:
                 vd = reference.view_directions(pts.positions[sel], eye)
+            if turn is not None:
+                vd = vd @ turn
         yield mat, sel, vd
 
 
