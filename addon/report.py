@@ -65,14 +65,20 @@ def rotated_world(world, angle: float):
     return out
 
 
-def sweep(method_ids=None):
+def sweep(method_ids=None, budgets_per_method=None):
     """(method, budget property or None, value or None) for every registered method and
-    budget value, REFERENCE first (the yardstick)."""
+    budget value, REFERENCE first (the yardstick).  ``budgets_per_method``: keep that
+    many values of each sweep, evenly spread, first and last included."""
     out = []
     for m in methods.REGISTRY.values():
         if method_ids is not None and m.id not in method_ids:
             continue
         prop, values = m.budget if m.budget else (None, [None])
+        values = list(values)
+        n = budgets_per_method
+        if n is not None and 0 < n < len(values):
+            pick = sorted({round(i * (len(values) - 1) / max(n - 1, 1)) for i in range(n)})
+            values = [values[i] for i in pick]
         out += [(m, prop, v) for v in values]
     out.sort(key=lambda row: row[0].id != "REFERENCE")
     return out
@@ -211,7 +217,8 @@ class ReportRun:
     """
 
     def __init__(self, scene, out_dir, repeats=5, include_cycles=False, cycles_samples=64,
-                 stability=False, stability_resolution=16, method_ids=None, title=None):
+                 stability=False, stability_resolution=16, method_ids=None, title=None,
+                 budgets_per_method=None):
         self.scene = scene
         self.out_dir = pathlib.Path(out_dir)
         self.repeats = max(1, int(repeats))
@@ -220,13 +227,15 @@ class ReportRun:
         self.stability = stability
         self.stability_resolution = stability_resolution
         self.method_ids = method_ids
+        self.budgets_per_method = budgets_per_method
         self.title = title
         self.rows: list = []
         self.method_rows: list = []
         self.auto_rows: list = []
         self.warnings: list = []
         self.index: pathlib.Path | None = None
-        self.steps_total = len(sweep(method_ids)) + 3 + int(include_cycles) + int(stability)
+        self.steps_total = (len(sweep(method_ids, budgets_per_method)) + 3
+                            + int(include_cycles) + int(stability))
         self.steps_done = 0
         self._frames = 0
 
@@ -265,6 +274,7 @@ class ReportRun:
             raise RuntimeError("The report needs embreex for the precompute")
         saved = _settings_snapshot(scene)
         saved_report = scene.prt.last_report
+        images_before = {img.name for img in bpy.data.images}
         staging = self.out_dir.parent / f".{self.out_dir.name}.partial-{uuid.uuid4().hex[:8]}"
         staging.mkdir(parents=True, exist_ok=False)
         job = None
@@ -293,7 +303,7 @@ class ReportRun:
             ref_img = None
             images = {}
             per_method = {}
-            for method, prop, value in sweep(self.method_ids):
+            for method, prop, value in sweep(self.method_ids, self.budgets_per_method):
                 label = "" if prop is None else f"{prop}={value}"
                 yield f"{method.id} {label}".strip()
                 derive_s, derived_bytes = _configure(scene, job, method, prop, value)
@@ -381,7 +391,8 @@ class ReportRun:
 
             points = job.point_count
             report = dict(
-                title=self.title or f"PRT report: {bpy.path.display_name(bpy.data.filepath) or scene.name}",
+                title=self.title or "PRT report: " + (
+                    bpy.path.display_name(bpy.data.filepath) or scene.name),
                 scene=[("scene", scene.name), ("objects", len(job.objects)),
                        ("shading points", points), ("directions", f"6×{job.resolution}²"),
                        ("camera", f"{w}×{h}"), ("F12 supersampling", ss),
@@ -392,6 +403,9 @@ class ReportRun:
                 heat_max=heat_max, methods=self.method_rows, auto=self.auto_rows,
                 stability=stability, warnings=self.warnings)
             core_report.write_html(staging / "index.html", report)
+            (staging / "speed_error.svg").write_text(core_report.speed_error_svg(
+                self.rows, title="Per-frame time vs rel-L2 error against REFERENCE"),
+                encoding="utf-8")
             self.out_dir.mkdir(parents=True, exist_ok=True)
             for f in staging.iterdir():
                 shutil.move(str(f), str(self.out_dir / f.name))
@@ -414,6 +428,10 @@ class ReportRun:
                                 precompute.commit(scene, job)
                     else:
                         _clear_objects(job)
+                    # data other methods stored during the sweep under new names
+                    for img in [i for i in bpy.data.images if i.name not in images_before
+                                and i.type != "RENDER_RESULT"]:
+                        bpy.data.images.remove(img)
                 except Exception as exc:      # never hide the report's own outcome
                     print("PRT report: could not restore stored data:", exc)
                 _restore_settings(scene, saved)
@@ -584,14 +602,14 @@ def _build_black(scene):
                                               np.zeros((16, 32, 3), np.float32)))
 
 
-def _build_bad_pixels(bad):
+def _build_bad_pixels():
     def build(scene):
         _grid(scene)
         _suzanne(scene)
         px = np.full((16, 32, 3), 0.5, dtype=np.float32)
-        px[3, 7, 1] = bad
-        px[9, 20, :] = bad
-        return _case_scene(scene, _equirect_world(f"PRT stability {bad}", px))
+        px[3, 7, 1] = np.nan
+        px[9, 20, :] = np.inf
+        return _case_scene(scene, _equirect_world("PRT stability NaN/Inf", px))
     return build
 
 
@@ -619,10 +637,8 @@ BASE_CASES = [
     dict(name="1-pixel sun 1e6", description="black world with one pixel of radiance 1e6",
          build=_build_sun),
     dict(name="black world", description="all-zero environment", build=_build_black),
-    dict(name="NaN pixels", description="environment with NaN pixels (must be refused "
-         "with a message)", build=_build_bad_pixels(float("nan")), expect_error="NaN/Inf"),
-    dict(name="Inf pixels", description="environment with +Inf pixels (must be refused "
-         "with a message)", build=_build_bad_pixels(float("inf")), expect_error="NaN/Inf"),
+    dict(name="NaN/Inf pixels", description="environment with NaN and +Inf pixels (must "
+         "be refused with a message)", build=_build_bad_pixels(), expect_error="NaN/Inf"),
     dict(name="roughness → 0", description="Glossy GGX roughness 0 on Suzanne",
          build=_build_mirror),
     dict(name="grazing view", description="glossy grid seen from 0.25° above its plane",
@@ -800,6 +816,9 @@ class PRT_OT_report(bpy.types.Operator):
     cycles_samples: IntProperty(name="Cycles Samples", default=64, min=1, max=65536)
     stability: BoolProperty(name="Stability Table", default=True,
                             description="Run the hard cases through every method")
+    methods: StringProperty(name="Methods", default="",
+                            description="Comma-separated method ids to include (empty: "
+                                        "every registered method)")
 
     _timer = None
     _gen = None
@@ -808,9 +827,13 @@ class PRT_OT_report(bpy.types.Operator):
     def _make_run(self, context):
         out = pathlib.Path(bpy.path.abspath(self.directory)) if self.directory \
             else default_output_dir()
+        ids = {x.strip() for x in self.methods.split(",") if x.strip()} or None
+        if ids is not None:
+            ids.add("REFERENCE")                 # the yardstick is always measured
         return ReportRun(context.scene, out, repeats=self.repeats,
                          include_cycles=self.include_cycles,
-                         cycles_samples=self.cycles_samples, stability=self.stability)
+                         cycles_samples=self.cycles_samples, stability=self.stability,
+                         method_ids=ids)
 
     def execute(self, context):
         run = self._make_run(context)

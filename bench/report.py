@@ -72,7 +72,10 @@ def main(argv=None):
     p.add_argument("--target", type=float, default=0.02, help="AUTO error target")
     p.add_argument("--cycles", action="store_true", help="also compare with Cycles")
     p.add_argument("--cycles-samples", type=int, default=64)
-    p.add_argument("--stability", action="store_true", help="add the stability table")
+    p.add_argument("--stability", action="store_true",
+                   help="add the stability table (to the first scene's report)")
+    p.add_argument("--budgets", type=int, default=None,
+                   help="budget values per method (evenly spread; default: every value)")
     p.add_argument("--out", type=pathlib.Path, default=scenes.ROOT / "out/report")
     p.add_argument("--docs", action="store_true",
                    help="copy the demo report into docs/images/report/")
@@ -94,7 +97,9 @@ def main(argv=None):
         run = addon_report.ReportRun(scene, args.out / name, repeats=args.repeats,
                                      include_cycles=args.cycles,
                                      cycles_samples=args.cycles_samples,
-                                     stability=args.stability, title=f"PRT report: {name}")
+                                     stability=args.stability and name == args.scenes[0],
+                                     budgets_per_method=args.budgets,
+                                     title=f"PRT report: {name}")
         for step in run.steps():
             print(f"  [{time.perf_counter() - t0:6.1f} s] {name}: {step}", flush=True)
         index = run.index
@@ -121,7 +126,7 @@ def main(argv=None):
                     f"{'meets' if ok else 'MISSES'} the target, {ratio:.2f}x "
                     f"{'faster' if ratio > 1 else 'SLOWER'}")
             summary.append(line)
-        if args.stability and run.report.get("stability"):
+        if run.report.get("stability"):
             bad = [(c["name"], m) for c in run.report["stability"]["cases"]
                    for m, cell in c["cells"].items() if not cell["finite"]]
             summary.append(f"{name}: stability cells non-finite: {bad or 'none'}")
@@ -129,7 +134,7 @@ def main(argv=None):
             dst = scenes.ROOT / "docs/images/report"
             dst.mkdir(parents=True, exist_ok=True)
             for f in (args.out / name).iterdir():
-                if f.suffix in (".png", ".html"):
+                if f.suffix in (".png", ".html", ".svg"):
                     shutil.copy(f, dst / f.name)
     print("\n" + "\n".join(summary))
     (args.out / "summary.txt").write_text("\n".join(summary) + "\n")

@@ -114,20 +114,47 @@ def _tiny_scene():
 
 
 @pytest.mark.usefixtures("registered_addon")
-def test_report_covers_every_method_and_restores_the_scene(tmp_path):
+def test_sweep_covers_every_registered_method_and_budget():
+    from prt_relight.addon import report
+    rows = report.sweep()
+    assert rows[0][0].id == "REFERENCE"
+    for m in methods.REGISTRY.values():
+        values = [v for mm, _, v in rows if mm is m]
+        assert values == (list(m.budget[1]) if m.budget else [None]), m.id
+
+
+# Methods run in the Blender tests (the full sweep of every method is bench/report.py's
+# job; a method's slow derive would otherwise dominate the suite).
+FAST = {"REFERENCE", "SH", "WAVELET", "AUTO"}
+
+
+@pytest.fixture
+def fast_auto(monkeypatch):
+    from prt_relight.addon.methods import auto
+    every = auto.AutoMethod.candidates
+    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
+        lambda: [c for c in every() if c[0].id in FAST]))
+
+
+@pytest.mark.usefixtures("registered_addon", "fast_auto")
+def test_report_measures_each_method_and_restores_the_scene(tmp_path):
     from prt_relight.addon import report
     _tiny_scene()
     scene = bpy.context.scene
     scene.prt.method = "SH"
     scene.prt.sh_order = 3
     out = tmp_path / "rep"
-    run = report.ReportRun(scene, out, repeats=1)
+    images = sorted(i.name for i in bpy.data.images if i.type != "RENDER_RESULT")
+    run = report.ReportRun(scene, out, repeats=1, method_ids=FAST)
     index = run.run()
+    # nothing any method stored during the sweep is left behind
+    assert sorted(i.name for i in bpy.data.images if i.type != "RENDER_RESULT") == images
     assert index == out / "index.html" and index.is_file()
     text = index.read_text()
-    expected_rows = sum(len(m.budget[1]) if m.budget else 1 for m in methods.REGISTRY.values())
+    chosen = [m for m in methods.REGISTRY.values() if m.id in FAST]
+    expected_rows = sum(len(m.budget[1]) if m.budget else 1 for m in chosen)
     assert len(run.rows) == expected_rows
-    for m in methods.REGISTRY.values():
+    for m in chosen:
         assert f">{m.id}<" in text                               # in the plot's legend
         assert any(r["method"] == m.id for r in run.rows)
     ref = [r for r in run.rows if r["method"] == "REFERENCE"][0]
@@ -160,7 +187,7 @@ def test_report_cancel_leaves_no_half_report(tmp_path):
     scene.prt.method = "SH"
     scene.prt.sh_order = 2
     out = tmp_path / "rep"
-    run = report.ReportRun(scene, out, repeats=1)
+    run = report.ReportRun(scene, out, repeats=1, method_ids=FAST)
     steps = run.steps()
     next(steps)
     next(steps)
@@ -178,9 +205,11 @@ def test_report_cancel_leaves_no_half_report(tmp_path):
 def test_report_operator_in_background(tmp_path):
     _tiny_scene()
     out = tmp_path / "op"
-    result = bpy.ops.prt.report(directory=str(out), repeats=1, stability=False)
+    result = bpy.ops.prt.report(directory=str(out), repeats=1, stability=False,
+                                methods="SH")
     assert result == {"FINISHED"}
-    assert (out / "index.html").is_file()
+    text = (out / "index.html").read_text()
+    assert ">SH<" in text and ">REFERENCE<" in text and ">WAVELET<" not in text
 
 
 @pytest.mark.slow

@@ -1,26 +1,33 @@
-"""AUTO: per object, the cheapest registered representation that meets the scene's error
-target against REFERENCE (issue 6).
+"""AUTO: per object, the cheapest registered representation such that the frame meets
+the scene's error target against REFERENCE (issue 6).
 
-Selection (once per object, lighting content and target; cached, so only what changed
-is recomputed; turning the same environment keeps the choice): every other per-vertex method × every value of its budget is run on the
-object alone at a few probe views around it, timed, and its per-corner radiance compared
-with REFERENCE's (rel-L2 over the object's corners, worst probe).  The fastest candidate
-whose error is at most ``SAFETY × auto_error_target`` wins; REFERENCE when none does.
-The cost of a candidate is its relit shading time on the object (the lighting turned
-to a new angle, as in the report's per-frame timing).  A method shared by several objects
-pays its per-lighting work once, so the per-object mix is then timed, on the whole scene,
-against each single candidate that meets the target on every object; the faster wins.
-Per-object rel-L2 ≤ t for every object implies rel-L2 ≤ t for their union, so the whole
-frame meets the target where the camera sees what the probes saw; ``SAFETY`` leaves room
-for the camera's own view of glossy objects and for the pixel-space measure.
+Measurement (once per object, lighting content and target; cached, so only what changed
+is measured again; turning the same environment keeps it): REFERENCE and every other
+per-vertex method × every value of its budget are run on the object alone at a few
+probe views around it; each gives the squared error norm of its per-corner radiance
+against REFERENCE's (worst probe) and its *relit* shading time on the object (the
+lighting turned to an angle not used before, as in the report's per-frame timing).
 
-Shortcuts that make the selection itself cheap:
+Assignment: the frame's rel-L2 is ``sqrt(Σ_i ‖e_i‖² / Σ_i ‖b_i‖²)`` over the objects, so
+the cheapest assignment under ``Σ ‖e_i‖² ≤ (s·t)² Σ ‖b_i‖²`` (target ``t``, safety ``s``)
+is found by Lagrangian relaxation: each object takes the option minimising
+``time + λ‖e‖²`` with λ bisected to the smallest that fits.  An object that carries
+little of the image may so take a coarser method than a large one.  A method shared by
+several objects pays its per-lighting work once, so the mix is then timed on the whole
+scene against the few single candidates that also fit, and the faster assignment wins.
+``s`` leaves room for the camera's own view of glossy objects (:data:`SAFETY`) and for
+pixels weighting corners by screen area (:data:`SAFETY_DIFFUSE` for diffuse-only scenes).
+
+Shortcuts that make the measurement cheap:
 
 * diffuse-only objects (no glossy lobe, no dielectric layer) are view independent: one
   probe instead of three (and no candidate evaluates a BRDF table for them);
-* a candidate whose first probe already misses the target is not run at the others;
-* objects with the fully open hemisphere (no occluders) and low-frequency lighting are
-  where the cheapest candidates (SH) pass the measurement; the reason column says so.
+* a candidate :data:`REJECT` × the target off at a probe is not run at the others;
+* a method's budget values are listed cheapest first (SH order, wavelet terms, RSL
+  count, PCA error budget, BLOCKS tolerance), so values after the first one that meets
+  the target on the object are not timed: the count/order is sized to the target;
+* objects with no occluders and low-frequency lighting are where the cheapest
+  candidates (SH) pass; the reason column says so.
 
 Per-pixel methods (``draw_objects``) cannot be mixed per object and are left out of the
 candidates.  The choice per object is shown as a note in the panels/status bar, in the
@@ -44,6 +51,10 @@ from . import REGISTRY, Method, register
 #: error is the drawn per-corner error; pixels weight corners by screen area).
 SAFETY = 0.75
 SAFETY_DIFFUSE = 0.9
+#: A candidate this many times the target off at a probe is not measured further.
+REJECT = 4.0
+#: Single methods timed against the mix on the whole scene (the fastest by estimate).
+UNIFORM_TRIED = 3
 #: Relit shading passes timed per candidate (the fastest counts; each one resamples
 #: the environment for cubemap-based methods, the dominant cost of a selection).
 TIMED_FRAMES = 1
@@ -64,9 +75,8 @@ def _is_view_independent(st) -> bool:
         if st.materials else True
 
 
-def _probe_eyes(st, count: int):
-    """Camera positions around the object's bounding box (3 × its radius away)."""
-    p = st.points.positions
+def _probe_eyes(p, count: int):
+    """Camera positions around the bounding box of points ``p`` (3 × its radius away)."""
     lo, hi = p.min(axis=0), p.max(axis=0)
     centre = (lo + hi) / 2
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
@@ -97,14 +107,11 @@ def _rotated(world, angle: float):
     return out
 
 
-def _rel_l2(a, b) -> float:
-    a = np.asarray(a, np.float64)
-    b = np.asarray(b, np.float64)
-    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+def _rel(err2: float, ref2: float) -> float:
+    """rel-L2 from squared norms (the error itself against a black reference)."""
+    if not np.isfinite(err2):
         return float("inf")
-    nb = float(np.linalg.norm(b))
-    d = float(np.linalg.norm(a - b))
-    return d / nb if nb > 0 else d
+    return float(np.sqrt(err2 / ref2)) if ref2 > 0 else float(np.sqrt(err2))
 
 
 class AutoMethod(Method):
@@ -167,120 +174,166 @@ class AutoMethod(Method):
                 m.sync(state)
 
     # ------------------------------------------------------------ selection
-    def _select(self, state, st, target):
-        """Choice for one object: dict(method, setting, value, choice, error, reason)."""
+    def _measure(self, state, st, target):
+        """Per-object measurements: for each candidate (and REFERENCE) the squared error
+        norm against REFERENCE at the probes (worst probe), the relit shading time on
+        this object, plus the reference's squared norm (smallest probe)."""
         SELECTIONS[0] += 1
         ref = REGISTRY["REFERENCE"]
         view_free = _is_view_independent(st)
-        eyes = _probe_eyes(st, 1 if view_free else 3)
+        eyes = _probe_eyes(st.points.positions, 1 if view_free else 3)
         one = [st]
         truth = [ref.shade(_substate(state, one, "REFERENCE"), eye, None)[0] for eye in eyes]
+        ref_norm2 = min(float(np.sum(np.square(t, dtype=np.float64))) for t in truth)
         cube = directions.cubemap(state.resolution)
         open_sky = bool(np.array_equal(st.bits, runtime.open_visibility(st.points.normals,
                                                                         cube)))
         limit = (SAFETY_DIFFUSE if view_free else SAFETY) * target
-        tried = []
-        for m, prop, value in self.candidates():
+        options = []
+        met = set()         # methods whose cheaper budget already meets the target here
+
+        def relit_seconds(m, sub):
+            times = []
+            for _ in range(TIMED_FRAMES):
+                _ANGLE[0] += 0.61
+                sub.world = _rotated(state.world, _ANGLE[0])
+                t0 = time.perf_counter()
+                m.shade(sub, eyes[0], None)
+                times.append(time.perf_counter() - t0)
+            return min(times)
+
+        for m, prop, value in [(ref, None, None)] + self.candidates():
             sub = _substate(state, one, m.id, prop, value)
-            worst = 0.0
+            err2 = 0.0
             try:
-                for eye, expected in zip(eyes, truth):
-                    rad = m.shade(sub, eye, None)
-                    worst = float("inf") if rad is None else max(worst,
-                                                                 _rel_l2(rad[0], expected))
-                    if worst > limit:
-                        break                   # missed at this probe: skip the others
-                if worst > limit:
-                    tried.append((m, prop, value, float("inf"), worst))
+                if m is not ref:
+                    for eye, expected in zip(eyes, truth):
+                        rad = m.shade(sub, eye, None)
+                        e2 = (float("inf") if rad is None or not np.isfinite(rad[0]).all()
+                              else float(np.sum(np.square(rad[0] - expected,
+                                                          dtype=np.float64))))
+                        err2 = max(err2, e2)
+                        if err2 > (REJECT * target) ** 2 * ref_norm2:
+                            err2 = float("inf")     # far off at this probe: skip the others
+                            break
+                rel = _rel(err2, ref_norm2)
+                if not np.isfinite(err2) or m.id in met:
+                    # budgets are listed cheapest first: a later one of a method that
+                    # already met the target here is not timed (it is not its fastest)
+                    options.append(((m.id, prop, value), float("inf"), err2))
                     continue
-                # Cost: relit shading of this object (the lighting turned to angles not
-                # used before, as in the report's timing); geometry caches are warm now.
-                times = []
-                for _ in range(TIMED_FRAMES):
-                    _ANGLE[0] += 0.61
-                    sub.world = _rotated(state.world, _ANGLE[0])
-                    t0 = time.perf_counter()
-                    m.shade(sub, eyes[0], None)
-                    times.append(time.perf_counter() - t0)
+                if rel <= limit:
+                    met.add(m.id)
+                options.append(((m.id, prop, value), relit_seconds(m, sub), err2))
             except Exception as exc:            # a broken candidate is skipped, not fatal
                 print(f"PRT AUTO: {m.id} failed on '{st.name}': {exc}")
-                continue
-            tried.append((m, prop, value, min(times), worst))
-        meeting = [c for c in tried if c[4] <= limit]
-        notes = []
-        if open_sky:
-            notes.append("no occluders")
-        if view_free:
-            notes.append("diffuse only")
-        if meeting:
-            m, prop, value, seconds, err = min(meeting, key=lambda c: c[3])
-            why = (f"fastest of {len(meeting)}/{len(tried)} candidates within "
-                   f"{limit:.2%} at the probes ({seconds * 1e3:.2f} ms per relit frame "
-                   "on this object)")
-            return dict(object=st.name, method=m.id, setting=prop, value=value,
-                        choice=_label(m.id, prop, value), error=err, seconds=seconds,
-                        reason="; ".join(notes + [why]),
-                        meeting={(c[0].id, c[1], c[2]): c[4] for c in meeting})
-        best = min(tried, key=lambda c: c[4]) if tried else None   # noqa: F841
-        why = "no candidate meets the target: REFERENCE" + (
-            f" (best {best[0].id} {best[2]}: {100 * best[4]:.2f} %)" if best else "")
-        return dict(object=st.name, method="REFERENCE", setting=None, value=None,
-                    choice="REFERENCE", error=0.0, seconds=None,
-                    reason="; ".join(notes + [why]), meeting={})
+        notes = (["no occluders"] if open_sky else []) + (["diffuse only"] if view_free else [])
+        return dict(object=st.name, options=options, ref_norm2=ref_norm2, limit=limit,
+                    notes=notes)
 
     def choices(self, state):
-        """Per-object choices (cached per object), then one scene-level check: a method
-        that several objects share pays its per-lighting work once, so the fastest
-        per-object mix is timed against every single candidate that meets the target on
-        all objects (relit frames of the whole scene) and the faster assignment wins."""
+        """Per-object measurements (cached per object: only what changed is measured
+        again), then the assignment for the frame."""
         target = float(state.settings.get("auto_error_target", 0.02))
         key = runtime.env_key(state.world, state.resolution)
         env = (key[0], key[1], key[3])      # content and strength: a rotation keeps the choice
         names = tuple((m.id, prop, v) for m, prop, v in self.candidates())
-        per_object, keys = [], []
+        measured, keys = [], []
         for st in state.objects:
             key = (st.name, id(st.bits), env, target, repr(st.materials), names)
             keys.append(key)
-            per_object.append(runtime.per_visibility(
-                _CHOICE_CACHE, key, st.bits, lambda st=st: self._select(state, st, target),
+            measured.append(runtime.per_visibility(
+                _CHOICE_CACHE, key, st.bits, lambda st=st: self._measure(state, st, target),
                 limit=256))
         scene_key = tuple(keys)
         out = _SCENE_CACHE.get(scene_key)
         if out is None:
-            out = self._scene_choice(state, per_object)
+            out = self._assign(state, measured, target)
             _SCENE_CACHE.clear()
             _SCENE_CACHE[scene_key] = out
         LAST_CHOICES[:] = out
         return out
 
-    def _scene_choice(self, state, per_object):
-        mixed = [(c["method"], c["setting"], c["value"]) for c in per_object]
-        common = set(per_object[0]["meeting"]) if per_object else set()
-        for c in per_object[1:]:
-            common &= set(c["meeting"])
-        options = [mixed] + [[cand] * len(per_object) for cand in sorted(common, key=str)
-                             if [cand] * len(per_object) != mixed]
-        if len(options) == 1:
-            return per_object
-        timed = []
-        for assignment in options:
-            times = []
-            for _ in range(TIMED_FRAMES):
-                _ANGLE[0] += 0.61
-                sub = copy.copy(state)
-                sub.world = _rotated(state.world, _ANGLE[0])
-                t0 = time.perf_counter()
-                self._shade_assigned(sub, assignment, None, None)
-                times.append(time.perf_counter() - t0)
-            timed.append((min(times), assignment))
-        seconds, best = min(timed, key=lambda t: t[0])
-        if best == mixed:
-            return per_object
-        mid, prop, value = best[0]
-        note = (f"one method for the whole scene is faster ({seconds * 1e3:.2f} ms per "
-                f"relit frame vs {timed[0][0] * 1e3:.2f} ms for the per-object mix)")
-        return [dict(c, method=mid, setting=prop, value=value, choice=_label(mid, prop, value),
-                     error=c["meeting"][best[0]], reason=note) for c in per_object]
+    @staticmethod
+    def _mix(measured, budget2):
+        """Fastest per-object options with Σ err² ≤ ``budget2`` (Lagrangian relaxation:
+        each object minimises time + λ·err², λ bisected to the smallest that fits)."""
+        def pick(lam):
+            out = []
+            for m in measured:
+                ok = [o for o in m["options"] if np.isfinite(o[1]) and np.isfinite(o[2])]
+                out.append(min(ok, key=lambda o: (o[1] + lam * o[2], o[2])))
+            return out
+
+        if sum(o[2] for o in pick(0.0)) <= budget2:
+            return pick(0.0)
+        lo, hi = 0.0, 1.0
+        while sum(o[2] for o in pick(hi)) > budget2 and hi < 1e30:
+            lo, hi = hi, hi * 10.0
+        for _ in range(60):
+            mid = (lo + hi) / 2
+            if sum(o[2] for o in pick(mid)) <= budget2:
+                hi = mid
+            else:
+                lo = mid
+        return pick(hi)
+
+    def _assign(self, state, measured, target):
+        """The frame's assignment: the Lagrangian per-object mix against the whole scene's
+        rel-L2 budget, timed (relit frames of the whole scene) against each single
+        candidate that also fits the budget; the fastest wins."""
+        limit = min(m["limit"] for m in measured) if measured else target
+        total_ref2 = sum(m["ref_norm2"] for m in measured)
+        budget2 = (limit ** 2) * total_ref2
+        mix = self._mix(measured, budget2)
+        options = {"mix": [o[0] for o in mix]}
+        if len(measured) > 1:
+            uniform = []
+            for cand in {o[0] for o in measured[0]["options"]}:
+                per = [next((o for o in m["options"] if o[0] == cand), None) for m in measured]
+                if any(o is None or not np.isfinite(o[1]) or not np.isfinite(o[2])
+                       for o in per):
+                    continue
+                if sum(o[2] for o in per) <= budget2:
+                    uniform.append((sum(o[1] for o in per), cand))
+            for _, cand in sorted(uniform)[:UNIFORM_TRIED]:
+                if [cand] * len(measured) != options["mix"]:
+                    options[cand] = [cand] * len(measured)
+        timed = {}
+        if len(options) > 1:
+            eye = _probe_eyes(np.concatenate([st.points.positions for st in state.objects]),
+                              1)[0]
+            for name, assignment in options.items():
+                times = []
+                for _ in range(TIMED_FRAMES + 1):
+                    _ANGLE[0] += 0.61
+                    sub = copy.copy(state)
+                    sub.world = _rotated(state.world, _ANGLE[0])
+                    t0 = time.perf_counter()
+                    self._shade_assigned(sub, assignment, eye, None)
+                    times.append(time.perf_counter() - t0)
+                timed[name] = min(times)
+        best = min(timed, key=timed.get) if timed else "mix"
+        assignment = options[best]
+        scene_rel = _rel(sum(next(o[2] for o in m["options"] if o[0] == a)
+                             for m, a in zip(measured, assignment)), total_ref2)
+        if best == "mix":
+            why = (f"fastest mix within {limit:.2%} of the whole scene at the probes "
+                   f"({scene_rel:.2%})")
+            if timed:
+                why += f"; {timed['mix'] * 1e3:.2f} ms per relit frame, faster than " + \
+                    ", ".join(f"{_label(*k)} {v * 1e3:.2f} ms" for k, v in timed.items()
+                              if k != "mix")
+        else:
+            why = (f"one method for the whole scene is fastest ({timed[best] * 1e3:.2f} ms "
+                   f"per relit frame; the per-object mix {timed['mix'] * 1e3:.2f} ms)")
+        out = []
+        for m, a in zip(measured, assignment):
+            o = next(o for o in m["options"] if o[0] == a)
+            out.append(dict(object=m["object"], method=a[0], setting=a[1], value=a[2],
+                            choice=_label(*a), error=_rel(o[2], m["ref_norm2"]),
+                            seconds=o[1], reason="; ".join(m["notes"] + [why])))
+        return out
 
     def last_choices(self):
         return list(LAST_CHOICES)
