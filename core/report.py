@@ -397,7 +397,8 @@ def write_html(path, report: dict) -> pathlib.Path:
         if best is None:
             summary.append(f"<li>error ≤ {target:.0%}: no method</li>")
         else:
-            summary.append(f"<li>error ≤ {target:.0%}: <b style='color:{colours[best['method']]}'>"
+            colour = colours[best["method"]]
+            summary.append(f"<li>error ≤ {target:.0%}: <b style='color:{colour}'>"
                            f"{esc(best['method'])} {esc(str(best.get('label', '')))}</b> "
                            f"({_fmt_seconds(best['frame_seconds'])} per frame, "
                            f"{100 * best['error_ref']:.2f} %)</li>")
