@@ -18,6 +18,8 @@ DISK_RESOLUTION = 32
 VIEW_NODES = 32
 #: sub-samples per disk texel edge when tabulating a BRDF
 BRDF_SUBSAMPLES = 3
+#: sub-samples per disk texel edge when reading the visibility bits
+VISIBILITY_SUBSAMPLES = 2
 
 _LIGHTING: dict = {}        # unrotated cubemap lighting per (content, strength, resolution)
 _LIGHTS: dict = {}          # SquareLights per (lighting key, K / budget)
@@ -72,7 +74,7 @@ def brdf_tables(material: brdf.Material) -> rsl.BrdfTables:
 def derive_visibility(bits, normals, resolution: int) -> dict:
     """Per-vertex visibility maps in the disk map -> VDT (eq. 9) and visibility SAT."""
     cube = directions.cubemap(resolution)
-    maps = rsl.visibility_maps(bits, normals, cube, DISK_RESOLUTION)
+    maps = rsl.visibility_maps(bits, normals, cube, DISK_RESOLUTION, VISIBILITY_SUBSAMPLES)
     return {"VDT": rsl.visibility_distance_table(maps), "SAT": rsl.visibility_sat(maps)}
 
 
