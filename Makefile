@@ -6,6 +6,7 @@
 #   make test    run the test suite (PYTEST_ARGS="-k foo -x" to pass options)
 #   make demo    render the demo into out/demo
 #   make bench   run the precompute benchmark
+#   make report  speed/error report of every method into out/report
 #   make clean   remove dist/, out/, caches   (make distclean: also .venv, wheels/)
 
 SHELL := bash
@@ -30,7 +31,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test demo bench clean distclean
+.PHONY: setup apt venv wheels validate build test demo bench report clean distclean
 
 setup: apt venv
 
@@ -89,6 +90,10 @@ demo: setup
 
 bench: setup
 	$(VENV_PY) bench/bench_precompute.py
+
+# Speed/error report of every method on the held-out scenes (out/report/<scene>/index.html).
+report: setup
+	$(VENV_PY) bench/report.py --cycles --stability
 
 clean:
 	rm -rf $(DIST) out .pytest_cache

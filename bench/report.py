@@ -2,7 +2,7 @@
 """Speed-against-error reports (``prt.report``) on held-out scenes.
 
     .venv/bin/python bench/report.py [--scenes demo spot_courtyard teapot_forest]
-                                     [--resolution 240x180] [--repeats 3] [--cycles]
+                                     [--resolution 200x150] [--cuts 32] [--repeats 3] [--cycles]
                                      [--stability] [--out out/report] [--docs]
 
 Writes out/report/<scene>/index.html (images, error maps, plot, tables) and prints, per
@@ -66,8 +66,8 @@ def build(name: str, cuts: int):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--scenes", nargs="+", default=["demo", "spot_courtyard", "teapot_forest"])
-    p.add_argument("--resolution", default="240x180")
-    p.add_argument("--cuts", type=int, default=64, help="ground grid subdivisions")
+    p.add_argument("--resolution", default="200x150")
+    p.add_argument("--cuts", type=int, default=32, help="ground grid subdivisions")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--target", type=float, default=0.02, help="AUTO error target")
     p.add_argument("--cycles", action="store_true", help="also compare with Cycles")
