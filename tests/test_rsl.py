@@ -313,3 +313,11 @@ def test_offset_sat_keeps_float32_precision():
         err_offset.append(abs(got_offset - want) / want)
     assert np.max(err_offset) < 1e-4
     assert np.max(err_plain) > 10 * np.max(err_offset)
+
+
+def test_cube_texel_equals_direction_to_texel():
+    rng = np.random.default_rng(8)
+    d = rng.normal(size=(20000, 3))
+    d = np.concatenate([d, directions.fibonacci_sphere(500), np.eye(3), -np.eye(3),
+                        CUBE.directions, [[1, 1, 0], [1, -1, 1], [-1, -1, -1], [0, 1, -1]]])
+    np.testing.assert_array_equal(rsl.cube_texel(d, 32), directions.direction_to_texel(d, 32))
