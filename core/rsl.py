@@ -481,20 +481,20 @@ def visibility_distance_table(maps: np.ndarray, chunk: int = 1024) -> np.ndarray
         # distance from every texel to the nearest texel equal to `target`
         feat = vis == target
         # pass 1: along rows (1D distance to nearest feature in the same row)
-        g = np.full((P, n, n), big)
-        last = np.full((P, n), -big)
+        g = np.full((P, n, n), big, dtype=np.float32)
+        last = np.full((P, n), -big, dtype=np.float32)
         for j in range(n):
             last = np.where(feat[:, :, j], j, last)
             g[:, :, j] = j - last
-        last = np.full((P, n), big)
+        last = np.full((P, n), big, dtype=np.float32)
         for j in range(n - 1, -1, -1):
             last = np.where(feat[:, :, j], j, last)
             g[:, :, j] = np.minimum(g[:, :, j], last - j)
         g = np.minimum(g, big) ** 2                                    # (P, rows, cols)
         # pass 2: along columns: d²(i, j) = min_k g(k, j) + (i - k)²
-        d2 = np.full((P, n, n), np.inf)
+        d2 = np.empty((P, n, n), dtype=np.float32)
         for i in range(n):
-            d2[:, i, :] = np.min(g + ((i - idx) ** 2)[None, :, None], axis=1)
+            d2[:, i, :] = np.min(g + ((i - idx) ** 2).astype(np.float32)[None, :, None], axis=1)
         d = np.sqrt(d2) * h - 0.5 * h
         sel = vis != target          # texels of the other value measure to `target`
         out[sel] = np.where(target, -d, d)[sel]
