@@ -226,9 +226,11 @@ class RSLMethod(Method):
                                                   "the budget")],
                 default="COUNT"),
             "rsl_error_budget": FloatProperty(
-                name="Fitting Error", default=0.3, min=1e-4, max=1.0, update=upd,
-                description="Error budget mode: summed RSL fitting error relative to the "
-                            "lighting's squared energy"),
+                name="Fitting Error", default=0.5, min=1e-4, max=100.0, soft_max=10.0,
+                update=upd,
+                description="Error budget mode: the fewest lights whose summed squared "
+                            "intensity error is within this multiple of (integral of the "
+                            "luminance)^2 / 4 pi (sharp HDRIs need larger values)"),
             "rsl_visibility": EnumProperty(
                 name="Visibility", update=upd,
                 items=[("VDT", "Distance Table", "One look-up per light (eq. 9)"),
