@@ -5,7 +5,8 @@ Measurement (once per object, lighting content and target; cached, so only what 
 is measured again; turning the same environment keeps it): REFERENCE and every other
 per-vertex method × every value of its budget are run on the object alone at a few
 probe views around it; each gives the squared error norm of its per-corner radiance
-against REFERENCE's (worst probe) and its *relit* shading time on the object (the
+against REFERENCE's (worst probe; corners weighted by the surface area they stand for,
+as pixels are) and its *relit* shading time on the object (the
 lighting turned to an angle not used before, as in the report's per-frame timing).
 
 Assignment: the frame's rel-L2 is ``sqrt(Σ_i ‖e_i‖² / Σ_i ‖b_i‖²)`` over the objects, so
@@ -107,6 +108,24 @@ def _rotated(world, angle: float):
     return out
 
 
+def corner_area_weights(arrays) -> np.ndarray:
+    """Surface area each corner stands for (a third of each triangle it is in), so that
+    ``Σ_c w_c ‖x_c‖²`` is the surface L2 norm the image error approximates (pixels cover
+    surface area, not corners)."""
+    p = arrays.positions[arrays.corner_verts]
+    tri = arrays.triangles
+    area = 0.5 * np.linalg.norm(np.cross(p[tri[:, 1]] - p[tri[:, 0]],
+                                         p[tri[:, 2]] - p[tri[:, 0]]), axis=1)
+    w = np.zeros(len(p), dtype=np.float64)
+    for k in range(3):
+        np.add.at(w, tri[:, k], area / 3.0)
+    return w
+
+
+def _weighted_norm2(x, w) -> float:
+    return float(np.einsum("c,c->", w, np.sum(np.square(np.asarray(x, np.float64)), axis=-1)))
+
+
 def _rel(err2: float, ref2: float) -> float:
     """rel-L2 from squared norms (the error itself against a black reference)."""
     if not np.isfinite(err2):
@@ -175,8 +194,8 @@ class AutoMethod(Method):
 
     # ------------------------------------------------------------ selection
     def _measure(self, state, st, target):
-        """Per-object measurements: for each candidate (and REFERENCE) the squared error
-        norm against REFERENCE at the probes (worst probe), the relit shading time on
+        """Per-object measurements: for each candidate (and REFERENCE) the area-weighted
+        squared error norm against REFERENCE at the probes (worst probe), the relit shading time on
         this object, plus the reference's squared norm (smallest probe)."""
         SELECTIONS[0] += 1
         ref = REGISTRY["REFERENCE"]
@@ -184,7 +203,8 @@ class AutoMethod(Method):
         eyes = _probe_eyes(st.points.positions, 1 if view_free else 3)
         one = [st]
         truth = [ref.shade(_substate(state, one, "REFERENCE"), eye, None)[0] for eye in eyes]
-        ref_norm2 = min(float(np.sum(np.square(t, dtype=np.float64))) for t in truth)
+        w = corner_area_weights(st.arrays)
+        ref_norm2 = min(_weighted_norm2(t, w) for t in truth)
         cube = directions.cubemap(state.resolution)
         open_sky = bool(np.array_equal(st.bits, runtime.open_visibility(st.points.normals,
                                                                         cube)))
@@ -210,8 +230,7 @@ class AutoMethod(Method):
                     for eye, expected in zip(eyes, truth):
                         rad = m.shade(sub, eye, None)
                         e2 = (float("inf") if rad is None or not np.isfinite(rad[0]).all()
-                              else float(np.sum(np.square(rad[0] - expected,
-                                                          dtype=np.float64))))
+                              else _weighted_norm2(rad[0] - expected, w))
                         err2 = max(err2, e2)
                         if err2 > (REJECT * target) ** 2 * ref_norm2:
                             err2 = float("inf")     # far off at this probe: skip the others
@@ -288,14 +307,22 @@ class AutoMethod(Method):
         mix = self._mix(measured, budget2)
         options = {"mix": [o[0] for o in mix]}
         if len(measured) > 1:
+            def estimate(m, o):
+                """Time of an option; one not timed (a later budget of a method that
+                already met the target) is at least its method's timed ones."""
+                if np.isfinite(o[1]):
+                    return o[1]
+                same = [x[1] for x in m["options"] if x[0][0] == o[0][0] and np.isfinite(x[1])]
+                return max(same) if same else float("inf")
+
             uniform = []
             for cand in {o[0] for o in measured[0]["options"]}:
                 per = [next((o for o in m["options"] if o[0] == cand), None) for m in measured]
-                if any(o is None or not np.isfinite(o[1]) or not np.isfinite(o[2])
-                       for o in per):
+                if any(o is None or not np.isfinite(o[2]) for o in per):
                     continue
-                if sum(o[2] for o in per) <= budget2:
-                    uniform.append((sum(o[1] for o in per), cand))
+                est = sum(estimate(m, o) for m, o in zip(measured, per))
+                if sum(o[2] for o in per) <= budget2 and np.isfinite(est):
+                    uniform.append((est, cand))
             for _, cand in sorted(uniform)[:UNIFORM_TRIED]:
                 if [cand] * len(measured) != options["mix"]:
                     options[cand] = [cand] * len(measured)
