@@ -40,8 +40,11 @@ def cosine_of(settings) -> ssdf_sg.CosineLobes:
     return ssdf_sg.COSINE_MODELS.get(str(settings.get("ssdf_cosine", "SG7")), ssdf_sg.COSINE_SG7)
 
 
-def grid_from_settings(settings) -> ssdf.SSDFGrid:
-    return ssdf.SSDFGrid(int(settings.get("ssdf_resolution", 32)))
+#: the add-on's SSDF sampling: visibility boundary from a 2x supersampled square, distances
+#: at the texel centres (the 4x/2x grid like the paper's 512 -> 128 costs several times more
+#: per point; bench numbers of both in docs/measurements.md)
+def method_grid(resolution: int) -> ssdf.SSDFGrid:
+    return ssdf.SSDFGrid(int(resolution), visibility_supersample=2, distance_supersample=1)
 
 
 def pca_settings(settings):
@@ -52,7 +55,7 @@ def pca_settings(settings):
 def derive_object(bits, normals, cube, settings, cancel=None, progress=None):
     """(basis, coefficients) of one object's SSDFs (eq. 23-24)."""
     res, budget, max_terms = pca_settings(settings)
-    return ssdf.ssdf_pca(bits, normals, cube, ssdf.SSDFGrid(res), budget, max_terms,
+    return ssdf.ssdf_pca(bits, normals, cube, method_grid(res), budget, max_terms,
                          cancel=cancel, progress=progress)
 
 
@@ -144,7 +147,7 @@ class SSDFSGMethod(Method):
             "ssdf_resolution": IntProperty(
                 name="SSDF Resolution", default=32, min=8, max=64,
                 description="Texels per edge of each point's SSDF square (Shirley-Chiu map of "
-                            "the hemisphere); visibility is supersampled 2x inside it"),
+                            "the hemisphere); its visibility boundary is supersampled 2x"),
             "ssdf_error_budget": FloatProperty(
                 name="SSDF Error Budget", default=0.05, min=0.001, max=1.0, precision=3,
                 subtype="ANGLE",
@@ -211,6 +214,8 @@ class SSDFSGMethod(Method):
             loaded = read_image(st.name, st.points.count, state.resolution, res, budget, max_terms)
             if loaded is not None and st.status == "ok":
                 field = loaded
+            elif st.status == "missing":
+                field = open_field(st.points.count, res)        # no shadows: exact, instant
             else:
                 key = (st.name, id(st.bits), res, budget, max_terms, state.resolution)
                 field = runtime.per_visibility(
@@ -294,6 +299,15 @@ class StoredField:
     @property
     def terms(self):
         return len(self.eigen)
+
+
+def open_field(points, resolution):
+    """The SSDF of a fully open hemisphere for every point (objects without visibility
+    data): the elevation ``asin(z)`` of each texel (distance to the horizon), no PCA terms."""
+    mean = np.arcsin(np.clip(ssdf.square_centres(resolution)[..., 2], 0.0, 1.0)).reshape(-1)
+    D = resolution * resolution
+    return StoredField(mean, np.zeros((4, D), np.float32), np.zeros((points, 4), np.float32),
+                       resolution, 0.0)
 
 
 def _field_from(result):
