@@ -16,9 +16,16 @@ pytestmark = pytest.mark.usefixtures("registered_addon")
 @pytest.fixture(scope="module")
 def table(registered_addon):
     from prt_relight.addon import report
+    from prt_relight.addon.methods import auto
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scenes_before = len(bpy.data.scenes)
-    t = report.stability_table(resolution=16)
+    # AUTO runs through every case like any method, choosing among SH and WAVELET only
+    # here (its choice among all methods is bench/report.py's; this keeps the test short)
+    every = auto.AutoMethod.candidates
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(auto.AutoMethod, "candidates", staticmethod(
+            lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")]))
+        t = report.stability_table(resolution=16)
     assert len(bpy.data.scenes) == scenes_before          # temporary scenes are removed
     assert not bpy.data.meshes and not bpy.data.worlds     # and everything they made
     return t
