@@ -165,7 +165,12 @@ class FrameState:
                 orig.name)
             if data.coarse_warning and status == "ok":
                 self.warnings.append(data.coarse_warning)
-            objects.append(ObjectState(orig.name, arrays, points, mats, bits, status))
+            st = ObjectState(orig.name, arrays, points, mats, bits, status)
+            # the original material per slot, for methods with their own material settings
+            st.data["material_names"] = [
+                slot.material.original.name if slot.material is not None else None
+                for slot in ob.material_slots] or [None]
+            objects.append(st)
         self.warnings += scene_export.instance_warning(skipped)
         if missing:
             self.warnings.append("Not precomputed (drawn without shadows): " + ", ".join(missing))

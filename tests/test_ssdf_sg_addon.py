@@ -140,6 +140,16 @@ def test_f12_close_to_reference_and_sliders_need_no_recompute(tmp_path):
     glossy.inputs["Roughness"].default_value = 0.6
     rough = bs.render_exr(tmp_path / "rough.exr")
     assert bs.rel_l2(rotated, ours) > 0.05 and bs.rel_l2(rough, rotated) > 0.01
+    # the material's "PRT Reflectance" panel: its own model and sliders, no precompute
+    settings = bpy.data.materials["Glossy"].prt_sg
+    settings.use_blender_material = False
+    settings.model = "WARD"
+    settings.roughness = 0.2
+    ward = bs.render_exr(tmp_path / "ward.exr")
+    settings.roughness = 0.5
+    ward_rough = bs.render_exr(tmp_path / "ward_rough.exr")
+    assert np.isfinite(ward).all() and bs.rel_l2(ward, rough) > 0.01
+    assert bs.rel_l2(ward_rough, ward) > 0.002         # measured 0.0056 (Suzanne's share)
     assert {ob.name: ob.prt.precompute_id for ob in bpy.data.objects if ob.type == "MESH"} == ids
     assert not method._FIELD_CACHE                     # nothing derived at draw time
     state = _state()

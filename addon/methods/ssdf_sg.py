@@ -84,7 +84,17 @@ def world_sgs(world, fit):
 
 
 def sg_materials(materials):
-    return [sg_brdf.sg_material_from_brdf(m) for m in materials]
+    """SG materials (core.brdf.Material converted; SGMaterial passed through)."""
+    return [m if isinstance(m, sg_brdf.SGMaterial) else sg_brdf.sg_material_from_brdf(m)
+            for m in materials]
+
+
+def object_sg_materials(st):
+    """The SG material per slot of a synced object: the material's "PRT Reflectance"
+    settings (``addon/sg_material.py``) when synced, else converted from its Cycles
+    material."""
+    table = st.data.get("sg_materials")
+    return table if table is not None else sg_materials(st.materials)
 
 
 def shade_object(field, normals, positions, materials_of_points, materials, world, fit, pre,
@@ -169,7 +179,8 @@ class SSDFSGMethod(Method):
             layout.label(text=line)
 
     def view_dependent(self, state) -> bool:
-        return any(not m.is_diffuse_only for st in state.objects for m in st.materials)
+        return any(bool(np.any(np.asarray(m.specular) > 0) or np.any(np.asarray(m.metallic) > 0))
+                   for st in state.objects for m in object_sg_materials(st))
 
     # ------------------------------------------------------------- precompute
     def derive(self, job):
@@ -205,6 +216,14 @@ class SSDFSGMethod(Method):
 
     # ------------------------------------------------------------- sync
     def sync(self, state):
+        import bpy
+        from .. import sg_material
+        for st in state.objects:
+            names = st.data.get("material_names")
+            if names is not None:
+                st.data["sg_materials"] = [
+                    sg_material.export_sg_material(bpy.data.materials.get(n) if n else None,
+                                                   state.warnings) for n in names]
         cube = directions.cubemap(state.resolution)
         res, budget, max_terms = pca_settings(state.settings)
         derived_now = []
@@ -247,7 +266,7 @@ class SSDFSGMethod(Method):
                 field = st.data["ssdf_sg"]
             pts = st.points
             rad = shade_object(field.numpy, pts.normals, pts.positions, pts.materials,
-                               st.materials, state.world, fit, pre, eye, view_dir,
+                               object_sg_materials(st), state.world, fit, pre, eye, view_dir,
                                cosine=cosine_of(state.settings))
             out.append(rad[pts.point_of_corner].astype(np.float32))
         return out
@@ -258,8 +277,7 @@ class SSDFSGMethod(Method):
         if not state.objects:
             return None
         unsupported = [st.name for st in state.objects
-                       if any(sg_brdf.sg_material_from_brdf(m).is_anisotropic
-                              for m in st.materials)]
+                       if any(m.is_anisotropic for m in object_sg_materials(st))]
         if unsupported:
             state.note("SSDF_SG: anisotropic materials are shaded per vertex: "
                        + ", ".join(unsupported))
@@ -476,7 +494,7 @@ def environment_textures(fit, pre):
 
 def material_uniforms(material):
     """Push-constant values of one material slot (the CPU half of specular_lobes)."""
-    m = sg_brdf.sg_material_from_brdf(material)
+    m = sg_materials([material])[0]
     kd = np.asarray(sg_brdf.diffuse_albedo(m), np.float64).reshape(3) / np.pi
     lam, mu = sg_brdf.iso_ndf_sg(m.model, m.roughness)
     A, Bd, Bs = (np.asarray(x, np.float64).reshape(3) for x in sg_brdf.fresnel_coefficients(m))
@@ -550,8 +568,9 @@ def gpu_draws(state, fields, fit, pre, eye, view_dir):
     for st, field in zip(state.objects, fields):
         coeff_tex, eigen_tex, kt = field_textures(field)
         batches = object_batches(st, field)
+        table = object_sg_materials(st)
         params = {slot: parameter_texture(env_common, material_uniforms(
-                      st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material()),
+                      table[slot] if 0 <= slot < len(table) else core_brdf.Material()),
                       field.resolution, kt, eye4, cosine) for slot, _ in batches}
 
         def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
