@@ -540,6 +540,12 @@ def _suzanne(scene, location=(0.0, 0.0, 1.0), scale=0.8):
                         location=location, scale=scale)
 
 
+def _ball(scene, location=(0.0, 0.0, 1.0), radius=0.8):
+    import bmesh
+    return _mesh_object(scene, "Ball", lambda bm: bmesh.ops.create_uvsphere(
+        bm, u_segments=16, v_segments=8, radius=radius), location=location)
+
+
 def _glossy(name, roughness, colour=(0.8, 0.8, 0.8, 1.0), distribution="GGX"):
     mat = bpy.data.materials.new(name)
     if bpy.app.version < (5, 0, 0):
@@ -590,14 +596,14 @@ def _build_occluded(scene):
 
 def _build_sun(scene):
     _grid(scene)
-    _suzanne(scene)
+    _ball(scene)
     world = _equirect_world("PRT stability sun", _sun_pixels((0.4, -0.5, 0.77), 1e6))
     return _case_scene(scene, world)
 
 
 def _build_black(scene):
     _grid(scene)
-    _suzanne(scene)
+    _ball(scene)
     return _case_scene(scene, _equirect_world("PRT stability black",
                                               np.zeros((16, 32, 3), np.float32)))
 
@@ -605,7 +611,7 @@ def _build_black(scene):
 def _build_bad_pixels():
     def build(scene):
         _grid(scene)
-        _suzanne(scene)
+        _ball(scene)
         px = np.full((16, 32, 3), 0.5, dtype=np.float32)
         px[3, 7, 1] = np.nan
         px[9, 20, :] = np.inf
@@ -615,7 +621,7 @@ def _build_bad_pixels():
 
 def _build_mirror(scene):
     _grid(scene)
-    ob = _suzanne(scene)
+    ob = _ball(scene)
     ob.data.materials.append(_glossy("PRT stability mirror", 0.0))
     return _case_scene(scene, _hdri_world("PRT stability mirror"))
 
@@ -623,7 +629,7 @@ def _build_mirror(scene):
 def _build_grazing(scene):
     ob = _grid(scene, cuts=8)
     ob.data.materials.append(_glossy("PRT stability grazing", 0.15))
-    _suzanne(scene, scale=0.6)
+    _ball(scene, radius=0.5)
     return _case_scene(scene, _hdri_world("PRT stability grazing"), eye=(0.0, -12.0, 0.03))
 
 
@@ -639,7 +645,7 @@ BASE_CASES = [
     dict(name="black world", description="all-zero environment", build=_build_black),
     dict(name="NaN/Inf pixels", description="environment with NaN and +Inf pixels (must "
          "be refused with a message)", build=_build_bad_pixels(), expect_error="NaN/Inf"),
-    dict(name="roughness → 0", description="Glossy GGX roughness 0 on Suzanne",
+    dict(name="roughness → 0", description="Glossy GGX roughness 0 on a ball",
          build=_build_mirror),
     dict(name="grazing view", description="glossy grid seen from 0.25° above its plane",
          build=_build_grazing),
