@@ -229,3 +229,60 @@ def test_report_against_cycles(tmp_path):
     assert 0 < ref["error_cycles"] < 0.25
     assert "vs Cycles" in (out / "index.html").read_text()
     assert bpy.context.scene.render.engine == engine
+
+
+@pytest.mark.usefixtures("registered_addon", "fast_auto")
+def test_report_modal_steps_and_esc(tmp_path):
+    """The UI path driven headless with fake events: TIMER events step it to the end;
+    ESC between steps cancels with nothing written and the settings restored."""
+    import types
+
+    from prt_relight.addon import report
+
+    class Recorder:
+        def __init__(self):
+            self.reports = []
+            self._timer = None
+
+        def report(self, kind, message):
+            self.reports.append((set(kind), message))
+
+    _tiny_scene()
+    scene = bpy.context.scene
+    scene.prt.method = "SH"
+    status = []
+    wm = types.SimpleNamespace(progress_update=lambda v: None, progress_end=lambda: None,
+                               event_timer_remove=lambda t: None)
+    ctx = types.SimpleNamespace(window_manager=wm, scene=scene,
+                                workspace=types.SimpleNamespace(status_text_set=status.append))
+
+    def start(out):
+        op = Recorder()
+        op._run = report.ReportRun(scene, out, repeats=1, method_ids={"REFERENCE", "SH"})
+        op._gen = op._run.steps()
+        op._end = lambda c: report.PRT_OT_report._end(op, c)
+        return op
+
+    def event(op, kind):
+        return report.PRT_OT_report.modal(op, ctx, types.SimpleNamespace(type=kind))
+
+    op = start(tmp_path / "esc")
+    assert event(op, "MOUSEMOVE") == {"PASS_THROUGH"}
+    assert event(op, "TIMER") == {"RUNNING_MODAL"}
+    assert event(op, "TIMER") == {"RUNNING_MODAL"}
+    assert any("ESC to cancel" in (s or "") for s in status)
+    assert event(op, "ESC") == {"CANCELLED"}
+    assert not (tmp_path / "esc").exists() and scene.prt.method == "SH"
+    assert [p for p in tmp_path.iterdir()] == []
+
+    op = start(tmp_path / "done")
+    result = {"RUNNING_MODAL"}
+    steps = 0
+    while result == {"RUNNING_MODAL"}:
+        result = event(op, "TIMER")
+        steps += 1
+    # one event per step, the last one finishes; the progress count reaches its total
+    assert result == {"FINISHED"} and steps == op._run.steps_total
+    assert op._run.steps_done == op._run.steps_total
+    assert (tmp_path / "done" / "index.html").is_file()
+    assert status[-1] is None and scene.prt.method == "SH"
