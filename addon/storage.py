@@ -24,6 +24,39 @@ def _layout(point_count: int, floats_per_point: int):
     return width, height
 
 
+def write_float_image(name: str, flat: np.ndarray, width: int = MAX_WIDTH, image=None):
+    """Store ``flat`` float32 values (zero-padded to whole rows of ``width`` RGBA pixels)
+    in a packed, fake-user, Non-Color, full-precision float image: exact round trip
+    through save/reload.  ``image`` is reused when its size fits, else a new one is made."""
+    flat = np.asarray(flat, dtype=np.float32).reshape(-1)
+    height = max(1, -(-flat.size // (4 * width)))
+    data = np.zeros(width * height * 4, dtype=np.float32)
+    data[:flat.size] = flat
+    img = image
+    if img is not None and tuple(img.size) != (width, height):
+        bpy.data.images.remove(img)
+        img = None
+    if img is None:
+        img = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True,
+                                  is_data=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    img.use_fake_user = True
+    img.use_half_precision = False
+    img.pixels.foreach_set(data)
+    img.update()
+    img.pack()
+    return img
+
+
+def read_float_image(image) -> np.ndarray:
+    """Every float of an image written by :func:`write_float_image` (with its padding)."""
+    w, h = image.size
+    flat = np.empty(w * h * 4, dtype=np.float32)
+    image.pixels.foreach_get(flat)
+    return flat
+
+
 def create_visibility_image(name: str, bits: np.ndarray):
     """A new packed image holding ``bits`` (P, nbytes); the caller assigns it."""
     floats = bytes_to_float24(bits)                         # (P, F)
@@ -33,16 +66,7 @@ def create_visibility_image(name: str, bits: np.ndarray):
     width, height = _layout(P, F)
     flat = np.zeros(width * height * 4, dtype=np.float32)
     flat[: P * F] = floats.reshape(-1)
-    img = bpy.data.images.new(IMAGE_PREFIX + name, width, height, alpha=True,
-                              float_buffer=True, is_data=True)
-    img.colorspace_settings.name = "Non-Color"
-    img.alpha_mode = "CHANNEL_PACKED"
-    img.use_fake_user = True
-    img.use_half_precision = False
-    img.pixels.foreach_set(flat)
-    img.update()
-    img.pack()
-    return img
+    return write_float_image(IMAGE_PREFIX + name, flat, width)
 
 
 def read_visibility_image(image, point_count: int, nbytes: int) -> np.ndarray:
@@ -52,8 +76,7 @@ def read_visibility_image(image, point_count: int, nbytes: int) -> np.ndarray:
     if tuple(image.size) != (width, height):
         raise ValueError(f"image '{image.name}' has size {tuple(image.size)}, "
                          f"expected {(width, height)}")
-    flat = np.empty(width * height * 4, dtype=np.float32)
-    image.pixels.foreach_get(flat)
+    flat = read_float_image(image)
     return float24_to_bytes(flat[: point_count * F].reshape(point_count, F))
 
 

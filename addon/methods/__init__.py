@@ -68,6 +68,14 @@ class Method:
         """Write ``derived`` into the .blend (main thread, precompute commit)."""
 
 
+def glossy_or_layered(state) -> bool:
+    """Whether any synced material has a glossy lobe or Principled layering (its
+    radiance then depends on the view) -- the view dependence of per-vertex methods
+    that shade the full core.brdf material."""
+    return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
+               for st in state.objects for m in st.materials)
+
+
 def register(method: Method) -> Method:
     REGISTRY[method.id] = method
     return method

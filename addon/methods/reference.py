@@ -7,7 +7,7 @@ import numpy as np
 
 from ...core import directions, reference
 from .. import runtime
-from . import Method, register
+from . import Method, glossy_or_layered, register
 
 # View-independent diffuse sums per (object, visibility, lighting).
 _IRRADIANCE_CACHE: dict = {}
@@ -20,8 +20,7 @@ class ReferenceMethod(Method):
                    "cubemap; slowest)")
 
     def view_dependent(self, state) -> bool:
-        return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
-                   for st in state.objects for m in st.materials)
+        return glossy_or_layered(state)
 
     def shade(self, state, eye, view_dir):
         cube = directions.cubemap(state.resolution)

@@ -9,8 +9,8 @@ import dataclasses
 import numpy as np
 
 from ...core import brdf, directions, envmap, reference, rsl
-from .. import runtime
-from . import Method, register
+from .. import runtime, storage
+from . import Method, glossy_or_layered, register
 
 #: disk-map resolution of the BRDF SATs and visibility tables (§5.1: 32 x 32)
 DISK_RESOLUTION = 32
@@ -182,27 +182,11 @@ def unpack_cpca(flat: np.ndarray):
 
 
 def _write_image(name: str, flat: np.ndarray):
-    import bpy
-    rows = max(1, -(-len(flat) // _ROW_FLOATS))
-    data = np.zeros(rows * _ROW_FLOATS, np.float32)
-    data[:len(flat)] = flat
-    img = bpy.data.images.new(IMAGE_PREFIX + name, _ROW_FLOATS // 4, rows, alpha=True,
-                              float_buffer=True, is_data=True)
-    img.colorspace_settings.name = "Non-Color"
-    img.alpha_mode = "CHANNEL_PACKED"
-    img.use_fake_user = True
-    img.use_half_precision = False
-    img.pixels.foreach_set(data)
-    img.update()
-    img.pack()
-    return img
+    return storage.write_float_image(IMAGE_PREFIX + name, flat, _ROW_FLOATS // 4)
 
 
 def _read_image(img) -> np.ndarray:
-    w, h = img.size
-    flat = np.empty(w * h * 4, np.float32)
-    img.pixels.foreach_get(flat)
-    return flat
+    return storage.read_float_image(img)
 
 
 class RSLMethod(Method):
@@ -329,8 +313,7 @@ class RSLMethod(Method):
             st.data["rsl"] = got
 
     def view_dependent(self, state) -> bool:
-        return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
-                   for st in state.objects for m in st.materials)
+        return glossy_or_layered(state)
 
     def shade(self, state, eye, view_dir):
         lkey, lights = square_lights(state)

@@ -26,7 +26,7 @@ import numpy as np
 
 from ...core import directions, envmap, sg_brdf, sg_lighting, ssdf, ssdf_sg
 from ...core import brdf as core_brdf
-from .. import runtime
+from .. import runtime, storage
 from . import Method, register
 
 IMAGE_PREFIX = "PRT SSDF "
@@ -343,23 +343,8 @@ def write_image(name, basis, coeffs, precompute_id, cube_resolution):
     import bpy
     flat = np.concatenate([basis.mean.ravel(), basis.eigen.ravel(),
                            np.asarray(coeffs, np.float32).ravel()]).astype(np.float32)
-    height = max(1, -(-flat.size // _ROW_FLOATS))
-    data = np.zeros(height * _ROW_FLOATS, np.float32)
-    data[:flat.size] = flat
-    img = bpy.data.images.get(IMAGE_PREFIX + name)
-    if img is not None and tuple(img.size) != (_ROW_FLOATS // 4, height):
-        bpy.data.images.remove(img)
-        img = None
-    if img is None:
-        img = bpy.data.images.new(IMAGE_PREFIX + name, _ROW_FLOATS // 4, height, alpha=True,
-                                  float_buffer=True, is_data=True)
-    img.colorspace_settings.name = "Non-Color"
-    img.alpha_mode = "CHANNEL_PACKED"
-    img.use_fake_user = True
-    img.use_half_precision = False
-    img.pixels.foreach_set(data)
-    img.update()
-    img.pack()
+    img = storage.write_float_image(IMAGE_PREFIX + name, flat, _ROW_FLOATS // 4,
+                                    image=bpy.data.images.get(IMAGE_PREFIX + name))
     img["prt_precompute_id"] = precompute_id
     img["prt_ssdf_resolution"] = int(basis.resolution)
     img["prt_terms"] = int(basis.terms)
@@ -399,8 +384,7 @@ def read_image(name, points, cube_resolution, resolution, budget, max_terms):
     w, h = img.size
     if w * h * 4 < need:
         return None
-    flat = np.empty(w * h * 4, np.float32)
-    img.pixels.foreach_get(flat)
+    flat = storage.read_float_image(img)
     mean = flat[:D]
     eigen = flat[D:D + K * D].reshape(K, D)
     coeffs = flat[D + K * D:need].reshape(P, K)

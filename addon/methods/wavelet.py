@@ -7,7 +7,7 @@ import numpy as np
 
 from ...core import brdf, directions, haar, reference, wavelet
 from .. import runtime
-from . import Method, register
+from . import Method, glossy_or_layered, register
 
 # Sparse Haar transport per (object, visibility, kept terms).
 _TRANSFER_CACHE: dict = {}
@@ -54,8 +54,7 @@ class WaveletMethod(Method):
         }
 
     def view_dependent(self, state) -> bool:
-        return any(not m.is_diffuse_only or m.fresnel == "DIELECTRIC"
-                   for st in state.objects for m in st.materials)
+        return glossy_or_layered(state)
 
     def shade(self, state, eye, view_dir):
         cube = directions.cubemap(state.resolution)
