@@ -115,7 +115,7 @@ def diffuse_transfer(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
         np.maximum(t, 0.0, out=t)
         t *= unpack_visibility(vis_bits[a:b], S)
         t *= dw
-        idx, vals = haar.nonlinear_approximation(haar.cube_forward(t), m)
+        idx, vals = haar.nonlinear_approximation(haar.cube_forward(t, np.float32), m)
         idx_out[a:b] = idx
         val_out[a:b] = vals
 
@@ -210,14 +210,14 @@ def glossy_radiance(vis_bits: np.ndarray, normals: np.ndarray, view_dirs: np.nda
     if material.is_diffuse_only or P == 0:
         return out
     dirs = lighting.unit_directions
-    dw = cube.solid_angles
+    dw32 = cube.solid_angles.astype(np.float32)
     k = int(min(max(int(brdf_terms), 1), S))
 
     def block(a, b):
-        V = haar.cube_forward(unpack_visibility(vis_bits[a:b], S))
+        V = haar.cube_forward(unpack_visibility(vis_bits[a:b], S), np.float32)
         acc = np.zeros((b - a, 3))
         for lobe, weight in specular_terms(material, normals[a:b], view_dirs[a:b], dirs):
-            rho_full = haar.cube_forward(lobe.astype(np.float64) * dw)
+            rho_full = haar.cube_forward(lobe * dw32, np.float32)
             idx, vals = haar.nonlinear_approximation(rho_full, k)
             rho = np.zeros_like(rho_full)
             np.put_along_axis(rho, idx, vals, axis=1)
