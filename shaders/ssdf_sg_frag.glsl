@@ -64,7 +64,6 @@ const vec3 FRAME_REF = vec3(0.2672612419124244, 0.5345224838248488, 0.8017837257
 const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.5345224838248488);
 const float FRAME_SWITCH = 0.999;
 const float COS_MIN = 1e-4;
-const float COS_MIN_SINGULAR = 0.05;
 const float LAMBDA_MAX = 1e5;
 
 /* ------------------------------------------------------------ SG helpers (core/sg.py) */
@@ -73,23 +72,7 @@ float one_minus_exp_neg_over(float lam, float x)   /* (1 - exp(-lam x)) / lam */
   return lam > 1e-6 ? (1.0 - exp(-lam * x)) / lam : x;
 }
 
-float sg_integral(float lam) { return TWO_PI * one_minus_exp_neg_over(lam, 2.0); }
 float sg_hemisphere_integral(float lam) { return TWO_PI * one_minus_exp_neg_over(lam, 1.0); }
-
-/* eq. 5/45: product of G(p1, l1, 1) and G(p2, l2, 1): axis, sharpness, amplitude */
-void sg_product(vec3 p1, float l1, vec3 p2, float l2, out vec3 axis, out float lam,
-                out float amp)
-{
-  vec3 d = l1 * p1 + l2 * p2;
-  float dm = length(d);
-  vec3 diff = p1 - p2;
-  float omc = clamp(0.5 * dot(diff, diff), 0.0, 2.0);
-  float s = l1 + l2 + dm;
-  float defect = s > 0.0 ? 2.0 * l1 * l2 * omc / s : 0.0;
-  axis = dm > 0.0 ? d / dm : p1;
-  lam = dm;
-  amp = exp(-defect);
-}
 
 /* eq. 47-48 (refit in sqrt(lam), core/sg.py): f_h(theta_d, lam) / f_h(pi/2, lam) */
 float fh_hat(float theta_d, float lam)
@@ -165,29 +148,6 @@ vec4 coeff_fetch(float point, int l)
 }
 
 /* ------------------------------------------------------------ prefiltered environment */
-void face_coordinates(vec3 d, out int face, out float s, out float t)
-{
-  vec3 ad = abs(d);
-  if (ad.x >= ad.y && ad.x >= ad.z) {
-    float m = max(ad.x, 1e-30);
-    face = d.x < 0.0 ? 1 : 0;
-    s = (d.x < 0.0 ? d.z : -d.z) / m;
-    t = -d.y / m;
-  }
-  else if (ad.y >= ad.z) {
-    float m = max(ad.y, 1e-30);
-    face = d.y < 0.0 ? 3 : 2;
-    s = d.x / m;
-    t = (d.y < 0.0 ? -d.z : d.z) / m;
-  }
-  else {
-    float m = max(ad.z, 1e-30);
-    face = d.z < 0.0 ? 5 : 4;
-    s = (d.z < 0.0 ? -d.x : d.x) / m;
-    t = -d.y / m;
-  }
-}
-
 float level_coordinate(float lam)
 {
   lam = max(lam, 0.0);
@@ -225,7 +185,7 @@ vec3 env_lookup(vec3 world_dir, float lam)
   vec3 d = envRot * world_dir;
   int face;
   float s, t;
-  face_coordinates(d, face, s, t);
+  sg_face_coordinates(d, face, s, t);
   float x = level_coordinate(lam);
   int l0 = min(int(floor(x)), envLevels - 1);
   int l1 = min(l0 + 1, envLevels - 1);
@@ -234,43 +194,12 @@ vec3 env_lookup(vec3 world_dir, float lam)
 }
 
 /* ------------------------------------------------------------ BRDF view slice (core/sg_brdf.py) */
-float beckmann_lambda_raw(float a2, float c)
-{
-  c = clamp(c, 1e-12, 1.0);
-  float t2 = a2 * max(1.0 / (c * c) - 1.0, 0.0);
-  if (t2 < 0.39) {
-    return 0.0;
-  }
-  float a = 1.0 / sqrt(max(t2, 0.39));
-  return ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a);
-}
-
+/* M_o(i) of the slot's model (sg_common.glsl's sg_m_factor; brdfModel 0 CT/Blinn-Phong,
+ * 1 Ward, 2 Ashikhmin-Shirley -> core.sg_brdf.MODEL_INDEX 0, 2, 4) */
 float m_factor(float cos_i, float cos_o, float h_dot_i)
 {
-  if (brdfModel == 0) {            /* Cook-Torrance / Blinn-Phong: Smith Beckmann */
-    float ci = max(cos_i, COS_MIN), co = max(cos_o, COS_MIN);
-    float a2 = roughness * roughness;
-    return 1.0 / ((1.0 + beckmann_lambda_raw(a2, ci) + beckmann_lambda_raw(a2, co)) * 4.0 *
-                  ci * co);
-  }
-  float ci = max(cos_i, COS_MIN_SINGULAR), co = max(cos_o, COS_MIN_SINGULAR);
-  if (brdfModel == 1) {            /* Ward */
-    return 1.0 / (4.0 * sqrt(ci * co));
-  }
-  return 1.0 / (4.0 * max(h_dot_i, COS_MIN_SINGULAR) * max(ci, co));
-}
-
-float fresnel_eq14(float c, float eta)
-{
-  c = abs(c);
-  float g2 = eta * eta + c * c - 1.0;
-  if (g2 <= 0.0) {
-    return 1.0;
-  }
-  float g = sqrt(g2);
-  float a = (g - c) / (g + c);
-  float b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
-  return 0.5 * a * a * (1.0 + b * b);
+  return sg_m_factor(brdfModel == 0 ? 0 : (brdfModel == 1 ? 2 : 4), roughness, cos_i, cos_o,
+                     h_dot_i);
 }
 
 void main()
@@ -295,7 +224,7 @@ void main()
       vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */
       vec3 p;
       float lam, amp;
-      sg_product(cw, cosLambda, axis, al.w, p, lam, amp);
+      amp = sg_product(cw, cosLambda, axis, al.w, p, lam);
       vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
       float theta = ssdf_value(local, W);
       rd += mu * (cl.w * amp * fh_hat(theta, lam) * sg_hemisphere_integral(lam));
@@ -314,7 +243,7 @@ void main()
     float cos_o = dot(n, o);
     float m = m_factor(cos_i, cos_o, c) * (c > 0.0 ? 1.0 : 0.0);
     float cf = clamp(c, 0.0, 1.0);
-    vec3 fres = fresA.rgb + fresBd.rgb * fresnel_eq14(cf, ior) + fresBs.rgb * pow(1.0 - cf, 5.0);
+    vec3 fres = fresA.rgb + fresBd.rgb * sg_fresnel_eq14(cf, ior) + fresBs.rgb * pow(1.0 - cf, 5.0);
     if (principled != 0) {
       fres = max(fres, vec3(0.0));
     }
@@ -324,7 +253,7 @@ void main()
       vec3 cw = cl.x * t + cl.y * b + cl.z * n;
       vec3 p;
       float lam, amp;
-      sg_product(cw, cosLambda, pw, lam_w, p, lam, amp);
+      amp = sg_product(cw, cosLambda, pw, lam_w, p, lam);
       vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
       float theta = ssdf_value(local, W);
       float scale = cl.w * amp * fh_hat(theta, lam);

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...core import blocks as core_blocks, visibility
-from .. import runtime
+from .. import runtime, storage
 from . import Method, register
 
 IMAGE_PREFIX = "PRT Blocks "
@@ -60,19 +60,8 @@ def _image_size(nfloats: int):
 
 def write_stream_image(name: str, data: np.ndarray):
     """A packed, fake-user, Non-Color float image holding the byte stream ``data``."""
-    import bpy
     floats = bytes_to_floats(data)
-    width, height = _image_size(floats.size)
-    flat = np.zeros(width * height * 4, dtype=np.float32)
-    flat[:floats.size] = floats
-    img = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True, is_data=True)
-    img.colorspace_settings.name = "Non-Color"
-    img.alpha_mode = "CHANNEL_PACKED"
-    img.use_fake_user = True
-    img.use_half_precision = False
-    img.pixels.foreach_set(flat)
-    img.update()
-    img.pack()
+    img = storage.write_float_image(name, floats, _image_size(floats.size)[0])
     img["prt_nbytes"] = int(np.asarray(data).size)
     return img
 
@@ -81,9 +70,7 @@ def read_stream_image(img) -> np.ndarray:
     nbytes = int(img.get("prt_nbytes", -1))
     if nbytes < 0:
         raise ValueError(f"image '{img.name}' holds no BLOCKS stream")
-    width, height = img.size
-    flat = np.empty(width * height * 4, dtype=np.float32)
-    img.pixels.foreach_get(flat)
+    flat = storage.read_float_image(img)
     nfloats = -(-nbytes // 3)
     if nfloats > flat.size:
         raise ValueError(f"image '{img.name}' is too small for its stream")

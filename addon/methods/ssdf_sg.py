@@ -426,7 +426,10 @@ def _gpu_shader():
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
         info.vertex_source((SHADER_DIR / "ssdf_sg_vert.glsl").read_text())
-        info.fragment_source((SHADER_DIR / "ssdf_sg_frag.glsl").read_text())
+        # sg_common.glsl: the SG algebra, BRDF factors and cube-face lookup shared with
+        # the material helpers' GLSL twin (tested against numpy there)
+        info.fragment_source((SHADER_DIR / "sg_common.glsl").read_text()
+                             + (SHADER_DIR / "ssdf_sg_frag.glsl").read_text())
         sh = _GPU["shader"] = gpu.shader.create_from_info(info)
     return sh
 
