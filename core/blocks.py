@@ -823,10 +823,13 @@ def integrate_vertex(dv: DiffVisibility, light: BlockLighting, rho, mode="adapti
 #   pixel (line 6) or every *visible* pixel (line 11, occluded runs skipped).
 
 import os as _os
+import threading as _threading
 import time as _time
 from concurrent.futures import ThreadPoolExecutor as _Pool
 
 from . import brdf as _brdf
+
+_DECODE_LOCK = _threading.Lock()
 
 #: Default rule thresholds on q = D(closest half-vector) / D(peak) (see glossy_levels).
 DEFAULT_LEVEL_THRESHOLDS = (1e-2, 1e-3, 1e-4, 1e-9)
@@ -881,6 +884,30 @@ class ActivePairs:
     def count(self) -> int:
         return self.p.size
 
+    def decoded_bits(self):
+        """Binary maps only: every mixed pair's block decoded once (§4.4's scatter and
+        running sum) and kept bit-packed, (mixed pairs, 32) uint8, with the row of each
+        pair (-1: not mixed).  Frames that only move the camera then unpack bits instead
+        of decoding the differential stream again; 32 bytes per mixed pair (the bunny
+        at 6x64^2: ~20 MB).  None for quantized (grey) visibility."""
+        if self.dv.values is not None:
+            return None
+        cache = self.__dict__.get("_decoded")
+        if cache is None:
+            with _DECODE_LOCK:
+                cache = self.__dict__.get("_decoded")
+                if cache is None:
+                    mixed = np.nonzero(~self.one)[0]
+                    row_of = np.full(self.count, -1, dtype=np.int64)
+                    row_of[mixed] = np.arange(mixed.size)
+                    bits = np.empty((mixed.size, BLOCK_PIXELS // 8), dtype=np.uint8)
+                    for a in range(0, mixed.size, 65536):
+                        sel = mixed[a:a + 65536]
+                        bits[a:a + sel.size] = np.packbits(
+                            _decode_mixed(self, sel, np.float32) > 0.5, axis=1)
+                    cache = self.__dict__["_decoded"] = (bits, row_of)
+        return cache
+
 
 def active_pairs(dv: DiffVisibility) -> ActivePairs:
     nb = dv.blocks
@@ -913,20 +940,33 @@ def _entry_weights(pairs: ActivePairs, sel: np.ndarray, row: np.ndarray, ent: np
     return (1 - 2 * (pos & 1)).astype(np.float64)
 
 
-def _decompress(pairs: ActivePairs, sel: np.ndarray, dtype=np.float64) -> np.ndarray:
-    """Dense visibility (len(sel), 256) in [0, 1] of pairs ``sel`` (§4.4: the change
-    indices scattered and summed along the concatenated rows)."""
+def _decode_mixed(pairs: ActivePairs, sel: np.ndarray, dtype) -> np.ndarray:
+    """Dense visibility (len(sel), 256) of non-constant pairs ``sel``: the change
+    indices scattered and summed along the concatenated rows (§4.4)."""
+    row, ent = _entries(pairs, sel)
+    w = _entry_weights(pairs, sel, row, ent)
+    acc = np.zeros((sel.size, BLOCK_PIXELS), dtype=dtype)
+    acc[row, pairs.dv.indices[ent].astype(np.int64)] = w         # indices unique per block
+    np.cumsum(acc, axis=1, out=acc)
+    return acc
+
+
+def _decompress(pairs: ActivePairs, sel: np.ndarray, dtype=np.float64,
+                cached: bool = True) -> np.ndarray:
+    """Dense visibility (len(sel), 256) in [0, 1] of pairs ``sel``: constant-1 blocks
+    filled, mixed ones decoded (binary maps: from :meth:`ActivePairs.decoded_bits`
+    unless ``cached`` is False)."""
     out = np.zeros((sel.size, BLOCK_PIXELS), dtype=dtype)
     one = pairs.one[sel]
     out[one] = 1.0
     mixed = np.nonzero(~one)[0]
     if mixed.size:
-        row, ent = _entries(pairs, sel[mixed])
-        w = _entry_weights(pairs, sel[mixed], row, ent)
-        acc = np.zeros((mixed.size, BLOCK_PIXELS), dtype=dtype)
-        acc[row, pairs.dv.indices[ent].astype(np.int64)] = w     # indices unique per block
-        np.cumsum(acc, axis=1, out=acc)
-        out[mixed] = acc
+        decoded = pairs.decoded_bits() if cached else None
+        if decoded is None:
+            out[mixed] = _decode_mixed(pairs, sel[mixed], dtype)
+        else:
+            bits, row_of = decoded
+            out[mixed] = np.unpackbits(bits[row_of[sel[mixed]]], axis=1)
     return out
 
 

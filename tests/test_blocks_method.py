@@ -9,6 +9,7 @@ import pytest
 from prt_relight.core import blocks as B, brdf, reference
 from prt_relight.core.directions import cubemap
 from prt_relight.core.envmap import CubeLighting
+from prt_relight.core.visibility import unpack_visibility
 
 
 def _scene(n, rng, P=40):
@@ -99,6 +100,21 @@ def test_batched_equals_per_vertex_integrator(mode):
     active = int((dv.kind != B.ZERO).sum())
     assert st.cases[1:].sum() == active
     assert st.levels[B.PIXEL if mode == "pixel" else mode] == active
+
+
+def test_cached_decoded_blocks_equal_the_differential_decode():
+    """The per-frame unpack of cached decoded blocks == decoding V_d again == the bits."""
+    rng = np.random.default_rng(11)
+    n = 32
+    pos, nrm, bits, light = _scene(n, rng)
+    dv = B.encode_visibility(bits, n)
+    pairs = B.active_pairs(dv)
+    sel = np.arange(pairs.count)[::-1]
+    fresh = B._decompress(pairs, sel, np.float32, cached=False)
+    assert (~pairs.one).any() and pairs.decoded_bits()[0].shape[1] == 32
+    np.testing.assert_array_equal(B._decompress(pairs, sel, np.float32), fresh)
+    dense = B.to_blocks(unpack_visibility(bits, 6 * n * n).T, n)       # (blocks, 256, P)
+    np.testing.assert_array_equal(fresh, dense[pairs.b[sel], :, pairs.p[sel]])
 
 
 def test_level_rule_follows_the_lobe():
