@@ -830,6 +830,14 @@ class PRT_OT_report(bpy.types.Operator):
     _gen = None
     _run = None
 
+    @classmethod
+    def poll(cls, context):
+        from .operators import RUNNING
+        if RUNNING:
+            cls.poll_message_set("A precompute is running")
+            return False
+        return True
+
     def _make_run(self, context):
         out = pathlib.Path(bpy.path.abspath(self.directory)) if self.directory \
             else default_output_dir()
