@@ -116,6 +116,7 @@ class FrameState:
         self.resolution = 32
         self.method = "REFERENCE"
         self.settings: dict = {}     # scene.prt values of every method's settings
+        self.lamps: list = []        # core.sg_lighting.Lamp of the visible lights
         self.background = None       # (world, GPU texture) cached by the engine
 
     # ------------------------------------------------------------------ sync
@@ -182,6 +183,14 @@ class FrameState:
             self.warnings.append("Scene geometry changed since precompute (objects added, "
                                  "removed or moved): shadows are stale, press Precompute")
         self.objects = objects
+        from . import sg_material
+        lamp_warnings = []
+        self.lamps = sg_material.export_lamps(depsgraph, lamp_warnings)
+        if getattr(self.method_impl, "draws_lamps", False):
+            self.warnings += lamp_warnings
+        elif self.lamps or lamp_warnings:
+            self.warnings.append(f"Lights are drawn by SSDF_SG only; {self.method} lights the "
+                                 "scene from the World")
         self.method_impl.sync(self)
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
 

@@ -194,11 +194,13 @@ def specular_radiance(field, rows, normals, lobe_axes, lobe_lam, lobe_mu, env_lo
 
 
 def lamp_radiance(field, rows, normals, lamp_axes, lamp_lam, lamp_mu, kd, lobe_axes=None,
-                  lobe_lam=None, lobe_mu=None, tangents=None, bitangents=None, exact_fh=False):
+                  lobe_lam=None, lobe_mu=None, tangents=None, bitangents=None, exact_fh=False,
+                  cosine=COSINE_EQ40):
     """Eq. 42 + 43 for SG lights ``(lamp_axes (R, J, 3), lamp_lam (R, J), lamp_mu (R, J, 3))``:
-    ``kd R_d + R_s`` (R, 3); ``kd`` (3,) or (R, 3) is ``albedo / pi``."""
+    ``kd R_d + R_s`` (R, 3); ``kd`` (3,) or (R, 3) is ``albedo / pi``; ``cosine`` the
+    clamped-cosine mixture of the diffuse part (eq. 42), as for the environment."""
     out = diffuse_transfer(field, rows, normals, lamp_axes, lamp_lam, lamp_mu, tangents,
-                           bitangents, exact_fh) * np.asarray(kd, np.float64)
+                           bitangents, exact_fh, cosine=cosine) * np.asarray(kd, np.float64)
     if lobe_axes is None or np.shape(lobe_axes)[1] == 0:
         return out
     n = np.asarray(normals, np.float64)

@@ -154,3 +154,41 @@ def test_f12_close_to_reference_and_sliders_need_no_recompute(tmp_path):
     assert not method._FIELD_CACHE                     # nothing derived at draw time
     state = _state()
     assert all(st.data["ssdf_sg"].precompute_id == ids[st.name] for st in state.objects)
+
+
+def test_sun_lamp_lights_an_open_plane_like_lambert_and_moves_live():
+    """A Blender sun lamp as an SG (eq. 33, 42): an open Lambert plane under a black world
+    gets albedo/pi * strength * cos(theta); turning the lamp needs no recompute.  Other
+    methods say that they light from the World only."""
+    bs.reset()
+    bs.add_world(image=bs.float_image("black", np.zeros((8, 16, 3), np.float32)))
+    ground = bs.add_ground(size=4.0, cuts=4)
+    ground.data.materials.append(bs.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
+                                                  Color=(0.8, 0.8, 0.8, 1.0)))
+    sun = bpy.data.lights.new("Sun", "SUN")
+    sun.energy, sun.angle = 3.0, 0.05
+    lamp = bpy.data.objects.new("Sun", sun)
+    bpy.context.scene.collection.objects.link(lamp)
+    lamp.rotation_euler = (np.radians(30.0), 0.0, 0.0)          # 30 degrees from the zenith
+    bs.add_camera()
+    scene = bpy.context.scene
+    scene.prt.method = "SSDF_SG"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    pid = ground.prt.precompute_id
+    eye = np.array(scene.camera.matrix_world.translation)
+
+    def ground_radiance():
+        state = _state()
+        assert len(state.lamps) == 1
+        return state.shade(eye)[0], state
+
+    rad, state = ground_radiance()
+    expected = 0.8 / np.pi * 3.0 * np.cos(np.radians(30.0))
+    assert np.all(np.isfinite(rad))
+    np.testing.assert_allclose(rad, expected, rtol=0.05)       # SG cosine + lamp lobe
+    lamp.rotation_euler = (np.radians(60.0), 0.0, 0.0)
+    turned, _ = ground_radiance()
+    np.testing.assert_allclose(turned, 0.8 / np.pi * 3.0 * 0.5, rtol=0.05)
+    assert ground.prt.precompute_id == pid
+    scene.prt.method = "REFERENCE"
+    assert any("Lights are drawn by SSDF_SG only" in w for w in _state().warnings)

@@ -98,8 +98,9 @@ def object_sg_materials(st):
 
 
 def shade_object(field, normals, positions, materials_of_points, materials, world, fit, pre,
-                 eye=None, view_dir=None, chunk=4096, cosine=ssdf_sg.COSINE_EQ40):
-    """Per-point radiance (P, 3) by eq. 39 + 41 (numpy, per vertex)."""
+                 eye=None, view_dir=None, chunk=4096, cosine=ssdf_sg.COSINE_EQ40, lamps=()):
+    """Per-point radiance (P, 3) by eq. 39 + 41, plus eq. 42 + 43 for Blender lamps
+    (``core.sg_lighting.Lamp``, one SG each per point: eq. 32-33) (numpy, per vertex)."""
     P = len(normals)
     out = np.zeros((P, 3))
     axes, lam, mu = world_sgs(world, fit)
@@ -123,6 +124,7 @@ def shade_object(field, normals, positions, materials_of_points, materials, worl
             t, b = ssdf.ssdf_frames(n)
             rd = ssdf_sg.diffuse_transfer(field, sel, n, axes, lam, mu, t, b, cosine=cosine)
             out[sel] = rd * kd
+            lobes = (None, None, None)
             if glossy:
                 if view_dir is not None:
                     v = np.broadcast_to(np.asarray(view_dir, np.float64), n.shape)
@@ -130,13 +132,20 @@ def shade_object(field, normals, positions, materials_of_points, materials, worl
                     v = positions[sel] - 0.0
                     v = np.asarray(eye, np.float64)[None, :] - v
                     v = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
-                la, ll, lm = sg_brdf.specular_lobes(mat, n, v)
-                out[sel] += ssdf_sg.specular_radiance(field, sel, n, la, ll, lm, env_lookup, t, b,
+                lobes = sg_brdf.specular_lobes(mat, n, v)
+                out[sel] += ssdf_sg.specular_radiance(field, sel, n, *lobes, env_lookup, t, b,
                                                       cosine=cosine)
+            if lamps:
+                la, ll, lm = sg_lighting.lamp_sgs(lamps, positions[sel])
+                out[sel] += ssdf_sg.lamp_radiance(field, sel, n, la, ll, lm, kd, *lobes, t, b,
+                                                  cosine=cosine)
     return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
 
 
 class SSDFSGMethod(Method):
+    #: Blender point/sun/spot lights are drawn (eq. 32-33, 42-43); FrameState notes
+    #: that other methods light the scene from the World only
+    draws_lamps = True
     id = "SSDF_SG"
     label = "SSDF + Spherical Gaussians"
     description = ("Per-pixel all-frequency shading (Wang et al. 2009): spherical-Gaussian "
@@ -267,7 +276,7 @@ class SSDFSGMethod(Method):
             pts = st.points
             rad = shade_object(field.numpy, pts.normals, pts.positions, pts.materials,
                                object_sg_materials(st), state.world, fit, pre, eye, view_dir,
-                               cosine=cosine_of(state.settings))
+                               cosine=cosine_of(state.settings), lamps=state.lamps)
             out.append(rad[pts.point_of_corner].astype(np.float32))
         return out
 
@@ -281,6 +290,10 @@ class SSDFSGMethod(Method):
         if unsupported:
             state.note("SSDF_SG: anisotropic materials are shaded per vertex: "
                        + ", ".join(unsupported))
+            return None
+        if state.lamps:
+            state.note("SSDF_SG: scenes with lights are shaded per vertex (eq. 42-43; the "
+                       "per-pixel shader draws the World only)")
             return None
         fields = []
         for st in state.objects:
