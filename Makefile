@@ -31,7 +31,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test demo bench report clean distclean
+.PHONY: setup apt venv wheels validate build test demo bench bench-methods report clean distclean
 
 setup: apt venv
 
@@ -90,6 +90,13 @@ demo: setup
 
 bench: setup
 	$(VENV_PY) bench/bench_precompute.py
+
+# Each method against REFERENCE on its held-out scenes (long: tens of minutes on 2 cores).
+bench-methods: setup
+	$(VENV_PY) bench/bench_methods.py
+	$(VENV_PY) bench/bench_blocks.py
+	$(VENV_PY) bench/bench_rsl.py
+	$(VENV_PY) bench/bench_ssdf_sg.py
 
 # Speed/error report of every method on the held-out scenes (out/report/<scene>/index.html).
 report: setup
