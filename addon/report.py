@@ -31,7 +31,7 @@ from bpy.props import BoolProperty, IntProperty, StringProperty
 
 from ..core import report as core_report
 from ..core import visibility
-from . import methods, precompute, scene_export
+from . import methods, precompute, scene_build, scene_export
 from .runtime import FrameState
 
 _GPU_READY = False
@@ -547,21 +547,8 @@ def _ball(scene, location=(0.0, 0.0, 1.0), radius=0.8):
 
 
 def _glossy(name, roughness, colour=(0.8, 0.8, 0.8, 1.0), distribution="GGX"):
-    mat = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    nt = mat.node_tree
-    for node in list(nt.nodes):
-        if node.type == "BSDF_PRINCIPLED":
-            nt.nodes.remove(node)
-    node = nt.nodes.new("ShaderNodeBsdfGlossy")
-    node.distribution = distribution
-    node.inputs["Roughness"].default_value = roughness
-    node.inputs["Color"].default_value = colour
-    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
-    nt.links.new(node.outputs[0], out.inputs["Surface"])
-    return mat
-
+    return scene_build.bsdf_material(name, "ShaderNodeBsdfGlossy", distribution=distribution,
+                                     Roughness=roughness, Color=colour)
 
 def _camera(scene, eye, target=(0.0, 0.0, 0.5)):
     from mathutils import Vector

@@ -178,19 +178,8 @@ def add_bsdf_material(ob, name: str, node_type: str = "ShaderNodeBsdfGlossy", **
         add_bsdf_material(ob, "Glossy", "ShaderNodeBsdfGlossy", distribution="BECKMANN",
                           Roughness=0.25)
     """
-    import bpy
-    mat = bpy.data.materials.new(name)
-    nt = mat.node_tree
-    for node in list(nt.nodes):
-        if node.type == "BSDF_PRINCIPLED":
-            nt.nodes.remove(node)
-    node = nt.nodes.new(node_type)
-    for key, value in inputs.items():
-        if key == "distribution":
-            node.distribution = value
-        else:
-            node.inputs[key].default_value = value
-    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    from prt_relight.addon.scene_build import bsdf_material
+    mat = bsdf_material(name, node_type, **inputs)
     ob.data.materials.clear()
     ob.data.materials.append(mat)
     return mat

@@ -111,8 +111,9 @@ def _texel_mean_directions(n, weights, sub=8):
     return means / quad_area[:, None]
 
 
-def direction_to_texel(dirs: np.ndarray, resolution: int) -> np.ndarray:
-    """Flat cubemap texel index for world directions ``dirs`` (..., 3)."""
+def face_coordinates(dirs):
+    """``(face, s, t)`` of directions (..., 3): the cube face and the coordinates in
+    [-1, 1] on it (``s`` grows with the column, ``t`` with the row)."""
     d = np.asarray(dirs, dtype=np.float64)
     ax = np.abs(d)
     major = np.argmax(ax, axis=-1)
@@ -123,6 +124,12 @@ def direction_to_texel(dirs: np.ndarray, resolution: int) -> np.ndarray:
     axes = FACE_AXES[face]                                    # (..., 3, 3)
     s = np.einsum("...k,...k->...", d, axes[..., 1, :]) / m
     t = np.einsum("...k,...k->...", d, axes[..., 2, :]) / m
+    return face, s, t
+
+
+def direction_to_texel(dirs: np.ndarray, resolution: int) -> np.ndarray:
+    """Flat cubemap texel index for world directions ``dirs`` (..., 3)."""
+    face, s, t = face_coordinates(dirs)
     n = int(resolution)
     col = np.clip(((s + 1.0) * 0.5 * n).astype(np.int64), 0, n - 1)
     row = np.clip(((t + 1.0) * 0.5 * n).astype(np.int64), 0, n - 1)

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import sg as core_sg
-from .directions import FACE_AXES, Cubemap, cubemap, direction_to_texel
+from .directions import Cubemap, cubemap, direction_to_texel, face_coordinates
 
 __all__ = [
     "fit_environment_sgs", "environment_irradiance", "sg_mixture_radiance",
@@ -215,22 +215,6 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
 
 
 # --------------------------------------------------------------------------- prefiltered environment
-
-def face_coordinates(dirs):
-    """(face, s, t) of directions (..., 3) in the cubemap convention of
-    :mod:`.directions` (s grows with the column, t with the row, both in [-1, 1])."""
-    d = np.asarray(dirs, dtype=np.float64)
-    ax = np.abs(d)
-    major = np.argmax(ax, axis=-1)
-    comp = np.take_along_axis(d, major[..., None], axis=-1)[..., 0]
-    face = 2 * major + (comp < 0)
-    m = np.take_along_axis(ax, major[..., None], axis=-1)[..., 0]
-    m = np.where(m > 0, m, 1.0)
-    axes = FACE_AXES[face]
-    s = np.einsum("...k,...k->...", d, axes[..., 1, :]) / m
-    t = np.einsum("...k,...k->...", d, axes[..., 2, :]) / m
-    return face, s, t
-
 
 def _downsample(L, N, Ns):
     """Solid-angle weighted box filter of a (6N^2, 3) cube to Ns texels per edge:

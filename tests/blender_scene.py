@@ -7,6 +7,8 @@ import math
 import bpy
 import numpy as np
 
+from prt_relight.addon import scene_build
+
 try:
     import OpenImageIO as oiio
 except ImportError:  # pragma: no cover
@@ -58,24 +60,8 @@ def float_image(name: str, pixels_top_first: np.ndarray):
 
 
 def bsdf_material(name: str, node_type: str, **inputs):
-    """A material whose surface is one BSDF node; ``inputs`` by socket name
-    (``distribution=`` sets the node's distribution)."""
-    mat = bpy.data.materials.new(name)
-    if bpy.app.version < (5, 0, 0):
-        mat.use_nodes = True
-    nt = mat.node_tree
-    for node in list(nt.nodes):
-        if node.type == "BSDF_PRINCIPLED":
-            nt.nodes.remove(node)
-    node = nt.nodes.new(node_type)
-    for key, value in inputs.items():
-        if key == "distribution":
-            node.distribution = value
-        else:
-            node.inputs[key].default_value = value
-    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
-    return mat
-
+    """A material whose surface is one BSDF node (``addon.scene_build.bsdf_material``)."""
+    return scene_build.bsdf_material(name, node_type, **inputs)
 
 def add_ground(size=6.0, cuts=32):
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=cuts, y_subdivisions=cuts, size=size)
