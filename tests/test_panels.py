@@ -1,0 +1,81 @@
+"""Every panel's draw() runs for every method and material model, and each property or
+operator it shows exists (the UI draws are not exercised by the headless renders)."""
+
+from __future__ import annotations
+
+import types
+
+import bpy
+import pytest
+
+from prt_relight.addon import methods, panels, sg_material
+
+from . import blender_scene as bs
+
+pytestmark = pytest.mark.usefixtures("registered_addon")
+
+
+class FakeLayout:
+    """Records what a draw() puts in the layout and checks it against the RNA."""
+
+    def __init__(self, log):
+        self.log = log
+        self.enabled = True
+        self.active = True
+
+    def _child(self, *args, **kwargs):
+        return FakeLayout(self.log)
+
+    column = row = box = split = _child
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, f"{data!r} has no property {name!r}"
+        self.log.append(("prop", name))
+
+    def operator(self, idname, **kwargs):
+        category, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, category), name), f"no operator {idname}"
+        self.log.append(("operator", idname))
+
+    def label(self, text="", **kwargs):
+        assert isinstance(text, str)
+        self.log.append(("label", text))
+
+    def separator(self, **kwargs):
+        pass
+
+
+class FakeContext:
+    def __init__(self, scene, material=None):
+        self.scene = scene
+        self.active_object = scene.objects.get("Suzanne")
+        self.material = material
+        self.engine = "PRT_RELIGHT"
+
+
+def test_settings_panel_draws_for_every_method():
+    bs.reset()
+    bs.add_suzanne(subdiv=0)
+    scene = bpy.context.scene
+    for method_id in methods.REGISTRY:
+        scene.prt.method = method_id
+        log = []
+        panels.draw_settings(FakeLayout(log), FakeContext(scene))
+        shown = {name for kind, name in log if kind == "prop"}
+        assert "method" in shown
+        budget = methods.REGISTRY[method_id].budget
+        if budget:
+            assert budget[0] in shown, (method_id, shown)
+        assert ("operator", "prt.precompute") in log
+
+
+@pytest.mark.parametrize("model", [m for m, *_ in sg_material.MODEL_ITEMS])
+def test_material_panel_draws_every_model(model):
+    bs.reset()
+    mat = bpy.data.materials.new("panel")
+    mat.prt_sg.use_blender_material = False
+    mat.prt_sg.model = model
+    log = []
+    panel = types.SimpleNamespace(layout=FakeLayout(log))       # stands in for the Panel
+    sg_material.PRT_PT_sg_material.draw(panel, FakeContext(bpy.context.scene, mat))
+    assert ("prop", "model") in log and len(log) >= 5
