@@ -30,10 +30,12 @@ The contract of a method:
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 REGISTRY: dict = {}
 
 
-class Method:
+class Method(ABC):
     id = ""
     label = ""
     description = ""
@@ -53,8 +55,10 @@ class Method:
     def sync(self, state):
         """Called at the end of FrameState.sync (load stored per-method data)."""
 
+    @abstractmethod
     def shade(self, state, eye, view_dir):
-        raise NotImplementedError
+        """Per-corner radiance (C, 3) float32 for each of ``state.objects`` (every method
+        implements it; a subclass without it cannot be instantiated)."""
 
     def draw_objects(self, state, eye, view_dir):
         """Per-pixel drawing hook; None means: draw ``shade``'s per-corner radiance."""
