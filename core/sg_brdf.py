@@ -95,6 +95,7 @@ import numpy as np
 
 from . import brdf as core_brdf
 from .directions import orthonormal_frame
+from .fitting import levenberg_marquardt
 
 __all__ = [
     "MODELS", "ISOTROPIC_MODELS", "FRESNEL_MODES", "MAX_LOBES", "ALPHA_MIN",
@@ -461,33 +462,9 @@ def fit_anisotropic_ndf(model, p, q, n_pairs=None, iterations=60):
             _, r = _project(B, d, w)
             return r
 
-        r = resid(x)
-        cost = float(r @ r)
-        damp = 1e-2
-        for _ in range(iterations):
-            J = np.empty((r.size, x.size))
-            for j in range(x.size):
-                e = 1e-6 * max(1.0, abs(x[j]))
-                xp = x.copy()
-                xp[j] += e
-                J[:, j] = (resid(xp) - r) / e
-            JTJ = J.T @ J
-            g = J.T @ r
-            improved = False
-            for _ in range(12):
-                step = np.linalg.solve(JTJ + damp * np.diag(np.diag(JTJ) + 1e-12), -g)
-                xn = x + step
-                rn = resid(xn)
-                cn = float(rn @ rn)
-                if cn < cost:
-                    rel = (cost - cn) / cost
-                    x, r, cost = xn, rn, cn
-                    damp = max(damp / 3.0, 1e-9)
-                    improved = True
-                    break
-                damp *= 4.0
-            if not improved or rel < 1e-9:
-                break
+        x, _ = levenberg_marquardt(resid, x, iterations,
+                                   fd_step=lambda v: 1e-6 * max(1.0, abs(v)), tries=12,
+                                   min_gain=1e-9)
         B, axes, lams = _aniso_design(x, npairs, h, wide_x)
         coef, r = _project(B, d, w)
         err = math.sqrt(float(r @ r)) / dn

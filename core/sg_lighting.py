@@ -28,6 +28,7 @@ import numpy as np
 
 from . import sg as core_sg
 from .directions import Cubemap, cubemap, direction_to_texel, face_coordinates
+from .fitting import levenberg_marquardt
 
 __all__ = [
     "fit_environment_sgs", "environment_irradiance", "sg_mixture_radiance",
@@ -172,33 +173,8 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
         J = len(axes)
         # refine all lobes on the irradiance error
         x = np.concatenate([np.array(axes).reshape(-1), np.log(np.array(lamv))])
-        r = irr_resid(x, J)
-        cost = float(r @ r)
-        damp = 1e-2
-        for _ in range(refine_iterations):
-            Jm = np.empty((r.size, x.size))
-            for j in range(x.size):
-                e = 1e-5
-                xp = x.copy()
-                xp[j] += e
-                Jm[:, j] = (irr_resid(xp, J) - r) / e
-            JTJ = Jm.T @ Jm
-            g = Jm.T @ r
-            improved = False
-            for _ in range(8):
-                step = np.linalg.solve(JTJ + damp * np.diag(np.diag(JTJ) + 1e-12), -g)
-                xn = x + step
-                rn = irr_resid(xn, J)
-                cn = float(rn @ rn)
-                if cn < cost:
-                    rel_gain = (cost - cn) / max(cost, 1e-300)
-                    x, r, cost = xn, rn, cn
-                    damp = max(damp / 3.0, 1e-9)
-                    improved = True
-                    break
-                damp *= 4.0
-            if not improved or rel_gain < 1e-6:
-                break
+        x, _ = levenberg_marquardt(lambda xx, J=J: irr_resid(xx, J), x, refine_iterations,
+                                   fd_step=lambda v: 1e-5, tries=8, min_gain=1e-6)
         ax = x[:3 * J].reshape(J, 3)
         ax /= np.linalg.norm(ax, axis=1, keepdims=True)
         axes = list(ax)
