@@ -43,6 +43,16 @@ def _finish(context, op, job):
         area.tag_redraw()
 
 
+def end_modal(op, context):
+    """Stop a modal operator's timer, progress bar and status text (``op._timer``)."""
+    wm = context.window_manager
+    if op._timer is not None:
+        wm.event_timer_remove(op._timer)
+        op._timer = None
+    wm.progress_end()
+    context.workspace.status_text_set(None)
+
+
 class PRT_OT_precompute(bpy.types.Operator):
     """Trace visibility for every visible mesh and store it in the .blend"""
 
@@ -95,13 +105,8 @@ class PRT_OT_precompute(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def _end(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
+        end_modal(self, context)
         RUNNING.discard(id(self))
-        context.workspace.status_text_set(None)
 
     def modal(self, context, event):
         job = self._job

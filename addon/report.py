@@ -32,6 +32,7 @@ from bpy.props import BoolProperty, IntProperty, StringProperty
 from ..core import report as core_report
 from ..core import visibility
 from . import methods, precompute, scene_build, scene_export
+from .operators import RUNNING, end_modal
 from .runtime import FrameState
 
 _GPU_READY = False
@@ -819,7 +820,6 @@ class PRT_OT_report(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        from .operators import RUNNING
         if RUNNING:
             cls.poll_message_set("A precompute is running")
             return False
@@ -858,12 +858,7 @@ class PRT_OT_report(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def _end(self, context):
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
-        context.workspace.status_text_set(None)
+        end_modal(self, context)
 
     def modal(self, context, event):
         if event.type == "ESC":

@@ -265,14 +265,18 @@ class SSDFSGMethod(Method):
         lobes = int(state.settings.get("sg_environment_lobes", 8))
         return environment_lighting(state.world, state.resolution, lobes)
 
+    def _field(self, state, st):
+        """The object's SSDF field (``sync`` loads or derives it when a state was built
+        without it)."""
+        if st.data.get("ssdf_sg") is None:
+            self.sync(state)
+        return st.data["ssdf_sg"]
+
     def shade(self, state, eye, view_dir):
         fit, pre = self._lighting(state)
         out = []
         for st in state.objects:
-            field = st.data.get("ssdf_sg")
-            if field is None:
-                self.sync(state)
-                field = st.data["ssdf_sg"]
+            field = self._field(state, st)
             pts = st.points
             rad = shade_object(field.numpy, pts.normals, pts.positions, pts.materials,
                                object_sg_materials(st), state.world, fit, pre, eye, view_dir,
@@ -297,10 +301,7 @@ class SSDFSGMethod(Method):
             return None
         fields = []
         for st in state.objects:
-            field = st.data.get("ssdf_sg")
-            if field is None:
-                self.sync(state)
-                field = st.data["ssdf_sg"]
+            field = self._field(state, st)
             if field.terms + 1 > 4 * MAX_COEFF_TEXELS:
                 return None
             fields.append(field)
