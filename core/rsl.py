@@ -31,7 +31,6 @@ from . import brdf
 from .directions import Cubemap, direction_to_texel, hemisphere_to_rsl_disk, orthonormal_frame
 from .directions import rsl_disk_to_hemisphere
 from .envmap import LUMINANCE, CubeLighting
-from .visibility import unpack_visibility
 
 # --------------------------------------------------------------------------- #
 # §4.1  Light decomposition

@@ -637,11 +637,6 @@ def _local_ndf_lobes(material, P):
     return np.array([[[0.0, 0.0, 1.0]]]), lam, mu
 
 
-def _per_point(x, P, tail=()):
-    a = np.asarray(x, dtype=np.float64)
-    return np.broadcast_to(a, (P,) + tail) if a.ndim and a.shape[0] == P else a
-
-
 def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     """The view slice ``ks rho_s(o, i)`` of the specular BRDF as an SG mixture in
     ``i`` (eq. 15-22), without the cosine ``n . i``.

@@ -80,13 +80,6 @@ def rotate_to_world(axes, rotation):
     return np.asarray(axes, dtype=np.float64) @ np.asarray(rotation, dtype=np.float64)
 
 
-def _tangent_basis(p):
-    a = np.where(np.abs(p[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
-    t = np.cross(p, a)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    return t, np.cross(p, t)
-
-
 #: finer cubemaps are box-filtered to this resolution before the diffuse SG fit.
 FIT_RESOLUTION = 32
 

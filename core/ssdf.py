@@ -151,11 +151,6 @@ def _cube_texel_xyz(x, y, z, resolution):
     return (face * n + row) * n + col
 
 
-def _cube_texel_f32(d, resolution):
-    """``directions.direction_to_texel`` for float32 (..., 3)."""
-    return _cube_texel_xyz(d[..., 0], d[..., 1], d[..., 2], resolution)
-
-
 def square_visibility(bits, normals, cube, size: int, tangents=None, bitangents=None):
     """Binary visibility (P, size*size) bool in each point's ``size x size`` square,
     by nearest-texel lookup of the direction in the bit-packed cubemap visibility."""

@@ -38,7 +38,6 @@ AUTO box of the settings and in the report (:meth:`AutoMethod.last_choices`).
 from __future__ import annotations
 
 import copy
-import statistics
 import time
 
 import numpy as np
