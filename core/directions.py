@@ -127,13 +127,31 @@ def face_coordinates(dirs):
     return face, s, t
 
 
+def texel_of_components(x, y, z, resolution: int) -> np.ndarray:
+    """Flat cubemap texel index of directions given as component arrays ``x, y, z`` (same
+    shape), computed in their float type (float32 stays float32: the hot sample loops of
+    SSDF and RSL).  The face coordinates of :data:`FACE_AXES` written out per major axis:
+    +X (s, t) = (-z, -y)/|x|, -X (z, -y), +Y (x, z), -Y (x, -z), +Z (x, -y), -Z (-x, -y)."""
+    ax, ay, az = np.abs(x), np.abs(y), np.abs(z)
+    is_x = (ax >= ay) & (ax >= az)
+    is_y = ~is_x & (ay >= az)
+    m = np.where(is_x, ax, np.where(is_y, ay, az))
+    m = np.where(m > 0, m, 1)
+    s = np.where(is_x, np.where(x < 0, z, -z), np.where(is_y, x, np.where(z < 0, -x, x))) / m
+    t = np.where(is_y, np.where(y < 0, -z, z), -y) / m
+    face = np.where(is_x, (x < 0).astype(np.int64), np.where(is_y, 2 + (y < 0), 4 + (z < 0)))
+    n = int(resolution)
+    col = np.clip(((s + 1) * (0.5 * n)).astype(np.int64), 0, n - 1)
+    row = np.clip(((t + 1) * (0.5 * n)).astype(np.int64), 0, n - 1)
+    return (face * n + row) * n + col
+
+
 def direction_to_texel(dirs: np.ndarray, resolution: int) -> np.ndarray:
     """Flat cubemap texel index for world directions ``dirs`` (..., 3)."""
-    face, s, t = face_coordinates(dirs)
-    n = int(resolution)
-    col = np.clip(((s + 1.0) * 0.5 * n).astype(np.int64), 0, n - 1)
-    row = np.clip(((t + 1.0) * 0.5 * n).astype(np.int64), 0, n - 1)
-    return (face * n + row) * n + col
+    d = np.asarray(dirs)
+    if not np.issubdtype(d.dtype, np.floating):
+        d = d.astype(np.float64)
+    return texel_of_components(d[..., 0], d[..., 1], d[..., 2], resolution)
 
 
 def orthonormal_frame(normals: np.ndarray):

@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import brdf
-from .directions import Cubemap, direction_to_texel, hemisphere_to_rsl_disk, orthonormal_frame
+from .directions import (Cubemap, direction_to_texel, hemisphere_to_rsl_disk,
+                         orthonormal_frame, texel_of_components)
 from .directions import rsl_disk_to_hemisphere
 from .envmap import LUMINANCE, CubeLighting
 
@@ -401,30 +402,6 @@ def _clipped_area(px, py, half):
 # §4.3  Visibility in the disk map: maps, VDT (eq. 9), SAT
 # --------------------------------------------------------------------------- #
 
-def cube_texel(dirs: np.ndarray, resolution: int) -> np.ndarray:
-    """:func:`..directions.direction_to_texel` without the per-direction face-axis gather
-    (the face coordinates of each major axis written out), for the many sample
-    directions of :func:`visibility_maps`."""
-    return _cube_texel_xyz(dirs[..., 0], dirs[..., 1], dirs[..., 2], resolution)
-
-
-def _cube_texel_xyz(x, y, z, resolution: int) -> np.ndarray:
-    ax, ay, az = np.abs(x), np.abs(y), np.abs(z)
-    is_x = (ax >= ay) & (ax >= az)
-    is_y = ~is_x & (ay >= az)
-    m = np.where(is_x, ax, np.where(is_y, ay, az))
-    m = np.where(m > 0, m, 1.0)
-    # FACE_AXES: +X (s=-z, t=-y) -X (z, -y) +Y (x, z) -Y (x, -z) +Z (x, -y) -Z (-x, -y)
-    s_num = np.where(is_x, np.where(x >= 0, -z, z), np.where(is_y, x, np.where(z >= 0, x, -x)))
-    t_num = np.where(is_y, np.where(y >= 0, z, -z), -y)
-    face = np.where(is_x, (x < 0).astype(np.int64),
-                    np.where(is_y, 2 + (y < 0), 4 + (z < 0)))
-    n = int(resolution)
-    col = np.clip(((s_num / m + 1.0) * 0.5 * n).astype(np.int64), 0, n - 1)
-    row = np.clip(((t_num / m + 1.0) * 0.5 * n).astype(np.int64), 0, n - 1)
-    return (face * n + row) * n + col
-
-
 def visibility_maps(bits: np.ndarray, normals: np.ndarray, cube: Cubemap, resolution: int = 32,
                     sub: int = 2, chunk: int = 512) -> np.ndarray:
     """Per-vertex visibility in its local disk map, (P, N, N) float32 in [0, 1].
@@ -450,7 +427,7 @@ def visibility_maps(bits: np.ndarray, normals: np.ndarray, cube: Cubemap, resolu
     for a in range(0, P, chunk):
         e = min(P, a + chunk)
         world = np.matmul(frames[a:e], local_t)                       # (p, 3, S)
-        tex = _cube_texel_xyz(world[:, 0], world[:, 1], world[:, 2], cube.resolution)
+        tex = texel_of_components(world[:, 0], world[:, 1], world[:, 2], cube.resolution)
         # read the packed bits directly (np.packbits order: most significant bit first)
         byte = np.take_along_axis(packed[a:e], tex >> 3, axis=1) if nbytes else tex * 0
         got = ((byte >> (7 - (tex & 7)).astype(np.uint8)) & 1).astype(np.float32)

@@ -59,7 +59,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .directions import shirley_chiu_to_hemisphere
+from .directions import shirley_chiu_to_hemisphere, texel_of_components
 from .visibility import unpack_visibility
 
 #: square samples of binary visibility per SSDF texel edge (step 1)
@@ -124,33 +124,6 @@ def _boundary_candidates(h: int):
     return d, first, second, mid
 
 
-def _cube_texel_xyz(x, y, z, resolution):
-    """``directions.direction_to_texel`` for float32 component arrays ``x, y, z`` (same shape).
-
-    Face coordinates of ``FACE_AXES``: X major ``s = -z/x, t = -y/|x|``; Y major
-    ``s = x/|y|, t = z/y``; Z major ``s = x/z, t = -y/|z|``.
-    """
-    ax, ay, az = np.abs(x), np.abs(y), np.abs(z)
-    is_x = (ax >= ay) & (ax >= az)
-    is_y = (ay >= az) & ~is_x
-    is_z = ~(is_x | is_y)
-    major = np.maximum(np.maximum(ax, ay), az)
-    np.maximum(major, np.float32(1e-30), out=major)
-    s = np.where(is_x, -z, x)
-    s /= np.where(is_x, x, np.where(is_y, ay, z))
-    t = np.where(is_y, z, -y)
-    t /= np.where(is_y, y, major)
-    n = int(resolution)
-    half = np.float32(0.5 * n)
-    col = ((s + 1.0) * half).astype(np.int32)
-    row = ((t + 1.0) * half).astype(np.int32)
-    np.clip(col, 0, n - 1, out=col)
-    np.clip(row, 0, n - 1, out=row)
-    face = is_y.astype(np.int32) * 2 + is_z.astype(np.int32) * 4
-    face += np.where(is_x, x < 0, np.where(is_y, y < 0, z < 0))
-    return (face * n + row) * n + col
-
-
 def square_visibility(bits, normals, cube, size: int, tangents=None, bitangents=None):
     """Binary visibility (P, size*size) bool in each point's ``size x size`` square,
     by nearest-texel lookup of the direction in the bit-packed cubemap visibility."""
@@ -161,7 +134,7 @@ def square_visibility(bits, normals, cube, size: int, tangents=None, bitangents=
     frame = np.stack([tangents, bitangents, normals], axis=1).astype(np.float32)   # (P, 3, 3)
     # world component c of every sample: frame[:, :, c] (P, 3) @ local^T (3, Q)
     xyz = [np.ascontiguousarray(frame[:, :, c]) @ local_t for c in range(3)]
-    texel = _cube_texel_xyz(xyz[0], xyz[1], xyz[2], cube.resolution)
+    texel = texel_of_components(xyz[0], xyz[1], xyz[2], cube.resolution)
     vis = unpack_visibility(np.asarray(bits), cube.size)
     return np.take_along_axis(vis, texel, axis=1)
 

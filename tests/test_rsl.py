@@ -315,9 +315,13 @@ def test_offset_sat_keeps_float32_precision():
     assert np.max(err_plain) > 10 * np.max(err_offset)
 
 
-def test_cube_texel_equals_direction_to_texel():
+def test_texel_of_components_equals_the_face_axis_lookup():
     rng = np.random.default_rng(8)
     d = rng.normal(size=(20000, 3))
     d = np.concatenate([d, directions.fibonacci_sphere(500), np.eye(3), -np.eye(3),
                         CUBE.directions, [[1, 1, 0], [1, -1, 1], [-1, -1, -1], [0, 1, -1]]])
-    np.testing.assert_array_equal(rsl.cube_texel(d, 32), directions.direction_to_texel(d, 32))
+    face, s, t = directions.face_coordinates(d)              # FACE_AXES dot products
+    col = np.clip(((s + 1.0) * 0.5 * 32).astype(np.int64), 0, 31)
+    row = np.clip(((t + 1.0) * 0.5 * 32).astype(np.int64), 0, 31)
+    np.testing.assert_array_equal(directions.direction_to_texel(d, 32),
+                                  (face * 32 + row) * 32 + col)
