@@ -67,7 +67,8 @@ def test_method_renders_and_follows_world_rotation(registered_addon):
     bpy.ops.mesh.primitive_cube_add(size=1, location=(0, 0, 0.5))
     world = bpy.data.worlds.new("W")
     scene.world = world
-    world.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
     nt = world.node_tree
     img = bpy.data.images.new("sky", 64, 32, float_buffer=True)
     px = _sky_with_sun(32, 64, sun=(8, 20), sun_value=2000.0)

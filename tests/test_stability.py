@@ -81,6 +81,9 @@ def test_method_declared_cases_are_included(monkeypatch):
     class Declares(methods.Method):
         id = "DECLARES"
 
+        def shade(self, state, eye, view_dir):
+            return methods.get("REFERENCE").shade(state, eye, view_dir)
+
         def stability_cases(self):
             return [dict(name="sharp lobe", description="λ = 1e5", build=lambda s: None)]
 
