@@ -79,7 +79,9 @@ independent, cached per lighting); (2) the microfacet rule adds a fifth class,
 contributes 0 (the paper samples such a block once); (3) the line-9 products
 ``S_b`` are cached per lighting, so a frame with only the camera moved does not
 redo them (a relight frame does); (4) pixel-basis products run as dense matrix
-products with occluded pixels multiplied by 0 rather than skipped run by run.
+products with occluded pixels multiplied by 0 rather than skipped run by run;
+(5) the 4 / 16 coefficient products with mixed visibility (line 11) use eq. 6's
+change-index sums on the DCT-projected lighting instead of decompressing.
 """
 
 from __future__ import annotations
@@ -795,8 +797,9 @@ def integrate_vertex(dv: DiffVisibility, light: BlockLighting, rho, mode="adapti
 #
 # The per-vertex :func:`integrate_vertex` above is the readable statement of
 # Algorithm 1; what follows evaluates the same cases for many vertices at once
-# (numpy over every active (vertex, block) pair of a chunk of vertices, chunks on
-# all cores -- numpy releases the GIL).  The BRDF x cos of a material
+# (numpy over every active (vertex, block) pair of a chunk of vertices; the
+# per-level batches and pixel-basis groups shared out to threads -- numpy releases
+# the GIL in its array passes).  The BRDF x cos of a material
 # (:mod:`.brdf`) is sampled per vertex for the current view at the pixels each
 # block's representation needs.
 #
@@ -818,9 +821,19 @@ def integrate_vertex(dv: DiffVisibility, light: BlockLighting, rho, mode="adapti
 #   NDF at the block's closest half-vector relative to its peak.
 #   Level 1 (constant) blocks of both line 6 and line 9 are ``rho_1 * S_b`` with
 #   ``S_b = L_int . V_d`` (line 9's light-vis product, = the block's visible light
-#   for constant-1 blocks), cached per lighting; 4/16: eq. 4 fit, line 6 as a DCT
-#   dot product, line 11 by decompressing ``V_d`` and integrating; pixel: every
-#   pixel (line 6) or every *visible* pixel (line 11, occluded runs skipped).
+#   for constant-1 blocks), cached per lighting; 4/16: eq. 4 fit, lines 6 and 11 as
+#   the dot product of the BRDF's coefficients with ``V_d . H_b`` -- the visible
+#   light projected on the DCT functions, a sum over the change indices of the
+#   suffix sums of ``H_b[p, k] = Phi_k(p) L~_p`` (eq. 6 applied to the DCT
+#   lighting: line 11's triple product without decompressing the block; a
+#   constant-1 block reads the total, the lighting's DCT); pixel: every pixel,
+#   ``(rho * V) @ L~_b`` with the block decompressed (occluded pixels times 0).
+#
+# Speed (numpy on 2 shared cores, where the passes over (pairs x 256) arrays are
+# bound by memory bandwidth): pixel-basis groups are evaluated 1024 pairs at a
+# time with the Beckmann lobe's sums folded into matrix products
+# (:meth:`GlossyLobe._beckmann_shared`), and pairs whose block is wholly above the
+# lobe's horizon_cos skip the per-sample horizon and grazing-light checks.
 
 import os as _os
 import threading as _threading
@@ -978,7 +991,10 @@ class LightTables:
     (blocks, 256, 12): eq. 6 suffix sums of ``[L~, L~ w_x, L~ w_y, L~ w_z]`` (w: the
     lighting's mean direction vector per texel, as REFERENCE's diffuse cosine);
     ``unit_dirs`` (blocks, 256, 3) unit directions REFERENCE samples the glossy
-    lobe at."""
+    lobe at; ``dct_suffix`` (blocks, 256, 48): eq. 6 suffix sums of
+    ``H_b[p, k, c] = Phi_k(p) L~_pc`` (the lighting's product with the 16 DCT
+    functions, :data:`DCT_ORDER`, column ``3 k + c``), so that ``V_d . H_b`` of a
+    stored differential visibility is a sum over its change indices only."""
 
     resolution: int
     pixel: np.ndarray
@@ -987,16 +1003,17 @@ class LightTables:
     unit_dirs: np.ndarray
     mean_dirs: np.ndarray
     pixel32: np.ndarray = None
-    dct_light: np.ndarray = None
+    dct_suffix: np.ndarray = None
     unit_dirs32: np.ndarray = None
     integral12_t: np.ndarray = None        # (12, blocks, 256): the same, channel-major
 
-    def dct_light_of(self, k: int, dtype=np.float32) -> np.ndarray:
-        """``H`` for the first ``k`` DCT functions, (blocks, 256, 3k) contiguous (cached)."""
-        cache = self.__dict__.setdefault("_h_cache", {})
+    def dct_suffix_of(self, k: int, dtype=np.float32) -> np.ndarray:
+        """:attr:`dct_suffix` for the first ``k`` DCT functions, (blocks, 256, 3k)
+        contiguous (cached per ``k`` and dtype)."""
+        cache = self.__dict__.setdefault("_suffix_cache", {})
         key = (k, np.dtype(dtype).str)
         if key not in cache:
-            cache[key] = np.ascontiguousarray(self.dct_light[:, :, :3 * k], dtype=dtype)
+            cache[key] = np.ascontiguousarray(self.dct_suffix[:, :, :3 * k], dtype=dtype)
         return cache[key]
 
 
@@ -1018,12 +1035,15 @@ def light_tables(lighting, resolution: int) -> LightTables:
     integral12 = np.ascontiguousarray(np.cumsum(t12[:, ::-1], axis=1)[:, ::-1])
     integral12_t = np.ascontiguousarray(np.moveaxis(integral12, 2, 0))
     dct = np.einsum("kp,bpc->bkc", dct_basis(), pix)
-    # H_b[p, k, c] = Phi_k(p) L~_pc: V @ H_b projects the visible light on the DCT functions
-    dct_light = (dct_basis().T[None, :, :, None] * pix[:, :, None, :]).astype(np.float32)
+    # H_b[p, k, c] = Phi_k(p) L~_pc: V . H_b projects the visible light on the DCT
+    # functions; its suffix sums along the pixels make that product eq. 6's sum over
+    # the change indices
+    dct_light = (dct_basis().T[None, :, :, None] * pix[:, :, None, :]).reshape(
+        pix.shape[0], BLOCK_PIXELS, 48)
+    dct_suffix = np.ascontiguousarray(np.cumsum(dct_light[:, ::-1], axis=1)[:, ::-1])
     ub = to_blocks(unit, n)
     return LightTables(n, pix, dct, integral12, ub, mb, pix.astype(np.float32),
-                       np.ascontiguousarray(dct_light.reshape(pix.shape[0], BLOCK_PIXELS, 48)),
-                       ub.astype(np.float32), integral12_t)
+                       dct_suffix, ub.astype(np.float32), integral12_t)
 
 
 @dataclass
@@ -1081,6 +1101,48 @@ def _segment_sums(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return out
 
 
+def dct_light_vis(pairs: ActivePairs, tables: LightTables, sel: np.ndarray, k: int,
+                  dtype=np.float32) -> np.ndarray:
+    """``V_d . H_b`` for the first ``k`` DCT functions of pairs ``sel``, (len(sel), k, 3):
+    the visible light projected on the block's DCT functions (Alg. 1 lines 6/11 with
+    ``k`` coefficients), as eq. 6 does for line 9 -- a sum over the stored change
+    indices of the lighting's suffix sums (:attr:`LightTables.dct_suffix`), so that
+    the block is never decompressed; a constant-1 block takes the total."""
+    sel = np.asarray(sel, dtype=np.int64)
+    suffix = tables.dct_suffix_of(k, dtype)               # (blocks, 256, 3k)
+    out = np.empty((sel.size, 3 * k), dtype=dtype)
+    one = pairs.one[sel]
+    at = np.nonzero(one)[0]
+    out[at] = suffix[pairs.b[sel[at]], 0]
+    at = np.nonzero(~one)[0]
+    if at.size:
+        # entry j of every pair with more than j entries, pairs by decreasing count so
+        # that those are a prefix: one gather and one add per entry position
+        mixed = sel[at]
+        count = pairs.entry_count[mixed]
+        order = np.argsort(-count, kind="stable")
+        mixed, count = mixed[order], count[order]
+        start = pairs.entry_start[mixed]
+        base = pairs.b[mixed] * BLOCK_PIXELS
+        flat = suffix.reshape(-1, 3 * k)
+        indices, values = pairs.dv.indices, pairs.dv.values
+        acc = np.zeros((mixed.size, 3 * k), dtype=dtype)
+        active = np.searchsorted(-count, -np.arange(1, int(count[0]) + 1), side="right")
+        for j, n in enumerate(active.tolist()):           # n pairs have > j entries
+            ent = start[:n] + j
+            term = flat[base[:n] + indices[ent]]
+            if values is None:                            # binary: +1, -1, +1, ...
+                if j & 1:
+                    acc[:n] -= term
+                else:
+                    acc[:n] += term
+            else:
+                term *= (values[ent] / pairs.dv.levels).astype(dtype)[:, None]
+                acc[:n] += term
+        out[at[order]] = acc
+    return out.reshape(sel.size, k, 3)
+
+
 def lambert_irradiance(light_vis: LightVis, normals: np.ndarray) -> np.ndarray:
     """E = n . sum_k L~_k w_k V_k per vertex (P, 3): the Lambert layer's integral
     (REFERENCE's ``diffuse_irradiance``), exact because the cosine is linear in w."""
@@ -1088,52 +1150,101 @@ def lambert_irradiance(light_vis: LightVis, normals: np.ndarray) -> np.ndarray:
     return np.einsum("pcd,pd->pc", light_vis.moment, n)
 
 
-def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: bool = True):
+def _beckmann_grazing(val, cos_i, a2, lam_o, lowest):
+    """Beckmann's ``G2``: ``val`` computed with ``Lambda_i = 0`` gets
+    ``(1 + Lambda_o) / (1 + Lambda_o + Lambda_i)`` where the light is grazing enough for
+    ``Lambda_i > 0`` (``a2 tan^2(theta_i) >= 0.39``), in place.  ``lowest``: the
+    smallest ``cos_i`` (a float: nothing to do above the cut), or per row of a 2-D
+    ``cos_i`` (only the rows that reach below the cut are looked at)."""
+    f32 = np.float32
+    one = f32(1.0)
+    top = f32(np.sqrt(float(a2) / (float(a2) + 0.39) * 1.001))
+    shape = np.shape(cos_i)
+    if np.ndim(lowest):
+        rows = np.flatnonzero(lowest <= top)
+        if not rows.size:
+            return
+        sub = cos_i[rows]
+        g = np.flatnonzero((sub <= top) & (sub > 0.0))    # below the horizon: zeroed anyway
+        at = (rows[g // shape[1]], g % shape[1])
+        g = at[0] * shape[1] + at[1]
+    elif lowest > top:
+        return
+    else:
+        ci = np.asarray(cos_i)
+        g = np.flatnonzero((ci <= top) & (ci > 0.0))
+        at = np.unravel_index(g, shape)
+    if g.size:
+        ci = np.asarray(cos_i)[at]
+        t2 = a2 * np.maximum(one / (ci * ci) - one, f32(0.0))
+        a = one / np.sqrt(np.maximum(t2, f32(0.39)))
+        lg = ((f32(0.396) * a - f32(1.259)) * a + one) / ((f32(2.181) * a + f32(3.535)) * a)
+        lg[t2 < f32(0.39)] = 0.0
+        lo = np.broadcast_to(lam_o, shape)[at]
+        val.reshape(-1)[g] *= (one + lo) / (one + lo + lg)
+
+
+def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: bool = True,
+                    split: bool = False):
     """``D(h) G2 / (4 cos_o)`` and ``h.wi`` from cosines, float32 -- the formulas of
     :func:`.brdf.microfacet_D`, :func:`.brdf.smith_lambda` and ``brdf._specular_terms``
     (Cycles' ``bsdf_microfacet_eval``) written for float32 arrays of any shape
     (``cos_o``/``lam_o`` broadcast; float64 inputs are computed in float64).
     Zero where ``cos_i <= 0``.  Grazing directions overflow to inf on purpose
-    (``G2 -> 0``): callers hold ``np.errstate`` (see :func:`glossy_blocks`)."""
+    (``G2 -> 0``): callers hold ``np.errstate`` (see :func:`glossy_blocks`).
+
+    ``split``: return ``(val, h, k)`` with the per-vertex factor ``k`` (shape of
+    ``cos_o``) left out of ``val`` (the lobe is ``val * k``), so that a caller
+    summing ``val`` against the lighting applies it once per vertex; ``k`` is None
+    when the distribution has no such factor (GGX: already in ``val``).  ``val`` and
+    ``dot_io`` may be overwritten (pass copies to keep them)."""
     f32 = np.float32
     one = f32(1.0)
     floor = f32(_brdf._HALF_LEN2_FLOOR)
-    len2 = dot_io * f32(2.0)
-    len2 += f32(2.0)
-    shape = np.shape(len2)
-    degenerate = None
-    if len2.size and len2.min() <= floor:           # wi = -wo exactly: no half-vector
-        degenerate = len2 <= floor
-        np.maximum(len2, floor, out=len2)
-    c = cos_i + cos_o
-    c *= c
-    c /= len2                                       # cos_h^2
-    np.minimum(c, one, out=c)
+    shape = np.shape(cos_i)
+    # Nothing is below the horizon (every direction has cos_i > 0, so wi != -wo as cos_o
+    # > 0) for most blocks: one minimum spares the masks below.
+    lowest = float(cos_i.min()) if np.size(cos_i) else 1.0
+    vertex_factor = None
+    h = np.sqrt(np.clip(f32(0.5) * (one + dot_io), f32(0.0), one)) if want_h else None
     if distribution == "BECKMANN":
         # D = exp(-tan^2 / a2) / (pi a2 cos^4); G2 = 1 / (1 + Lambda_i + Lambda_o), and
         # Lambda_i = 0 unless t2 = a2 tan^2(theta_i) >= 0.39 (grazing light): the
         # per-vertex part 1 / (pi a2 4 cos_o (1 + Lambda_o)) is one factor, the grazing
         # directions get (1 + Lambda_o) / (1 + Lambda_o + Lambda_i) afterwards.
-        np.maximum(c, f32(1e-30), out=c)
-        r = np.divide(one, c, out=c)                # 1 / cos_h^2
-        val = r - one                               # tan^2
-        val *= -one / a2
+        # With r = 1 / cos_h^2 = |wo + wi|^2 / (cos_i + cos_o)^2 (clamped to [1, 1e30]):
+        # D G2 / (4 cos_o) = exp((1 - r) / a2) r^2 / (pi a2 4 cos_o (1 + Lambda_o)).
+        r = np.multiply(dot_io, f32(2.0), out=dot_io if np.ndim(dot_io) else None)
+        r += f32(2.0)                               # |wo + wi|^2
+        degenerate = None
+        if lowest <= 0.0 and r.size and r.min() <= floor:   # wi = -wo: no half-vector
+            degenerate = r <= floor
+        c = cos_i + cos_o
+        c *= c
+        r /= c
+        np.clip(r, one, f32(1e30), out=r)
+        val = np.subtract(one, r)
+        val *= one / a2
         np.exp(val, out=val)
+        r *= r
         val *= r
-        val *= r
-        val *= one / ((f32(np.pi) * a2) * f32(4.0) * cos_o * (one + lam_o))
-        cut = float(a2) / (float(a2) + 0.39) * 1.001
-        g = np.flatnonzero(cos_i <= f32(np.sqrt(cut)))
-        if g.size:
-            at = np.unravel_index(g, shape)
-            ci = np.clip(np.asarray(cos_i)[at], f32(1e-12), one)
-            t2 = a2 * np.maximum(one / (ci * ci) - one, f32(0.0))
-            a = one / np.sqrt(np.maximum(t2, f32(0.39)))
-            lg = ((f32(0.396) * a - f32(1.259)) * a + one) / ((f32(2.181) * a + f32(3.535)) * a)
-            lg[t2 < f32(0.39)] = 0.0
-            lo = np.broadcast_to(lam_o, shape)[at]
-            val.reshape(-1)[g] *= (one + lo) / (one + lo + lg)
+        vertex_factor = one / ((f32(np.pi) * a2) * f32(4.0) * cos_o * (one + lam_o))
+        _beckmann_grazing(val, cos_i, a2, lam_o, lowest)
+        if not split:
+            val *= vertex_factor
+        if degenerate is not None:
+            val[degenerate] = 0.0
     else:
+        len2 = dot_io * f32(2.0)
+        len2 += f32(2.0)
+        degenerate = None
+        if lowest <= 0.0 and len2.size and len2.min() <= floor:
+            degenerate = len2 <= floor
+            np.maximum(len2, floor, out=len2)
+        c = cos_i + cos_o
+        c *= c
+        c /= len2                                   # cos_h^2
+        np.minimum(c, one, out=c)
         den = one - c + a2 * c
         val = a2 / (f32(np.pi) * den * den)
         ci = np.clip(cos_i, f32(1e-12), one)
@@ -1142,12 +1253,12 @@ def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: 
         lam += one + lam_o
         lam *= f32(4.0) * cos_o
         val /= lam
-    val[cos_i <= 0.0] = 0.0
-    if degenerate is not None:
-        val[degenerate] = 0.0
-    h = None
-    if want_h:
-        h = np.sqrt(np.clip(f32(0.5) * (one + dot_io), f32(0.0), one))
+        if degenerate is not None:
+            val[degenerate] = 0.0
+    if lowest <= 0.0:
+        val[cos_i <= 0.0] = 0.0
+    if split:
+        return val, h, vertex_factor
     return val, h
 
 
@@ -1214,6 +1325,12 @@ class GlossyLobe:
         self.lam_o32 = self.lam_o.astype(dt)
         # a scalar lobe: colour applied per vertex after the sums
         self.scalar = len(terms) == 1 and terms[0][0] == "one"
+        self._fused = None
+        if self.distribution == "BECKMANN" and dt is np.float32 and self.a2 >= 5e-5 \
+                and self.cos_o32.size and float(self.cos_o32.min()) >= 0.5e-4:
+            one = np.ones((n.shape[0], 1), dtype=dt)
+            self._fused = (np.hstack([self.n32, self.cos_o32[:, None]]),
+                           np.hstack([self.v32, one]) * (dt(2.0) / self.a2))
         return self
 
     def _terms_of(self, val, h, p):
@@ -1244,16 +1361,76 @@ class GlossyLobe:
             out += f[:, None] * w
         return out
 
-    def dense(self, p, d):
-        """Terms at every (vertex ``p`` (k,), direction ``d`` (D, 3)) combination:
-        [(factor (k, D) float32, weight (k, 3))]; BRDF x cos = sum factor * weight."""
-        dt = np.ascontiguousarray(np.asarray(d, dtype=self.dtype).T)
-        cos_i = self.n32[p] @ dt
-        dot_io = self.v32[p] @ dt
-        val, h = microfacet_lobe(self.distribution, self.a2, cos_i, dot_io,
-                                 self.cos_o32[p][:, None], self.lam_o32[p][:, None],
-                                 not self.scalar)
-        return self._terms_of(val, h, p)
+    def dense(self, p, d, edge: bool = True):
+        """Terms at every (vertex ``p`` (k,), direction) combination, the directions
+        shared ``d`` (D, 3) or per vertex ``d`` (k, D, 3): [(factor (k, D) float32,
+        weight (k, 3))]; BRDF x cos = sum factor * weight (the per-vertex factor of
+        the lobe is on the weights).  ``edge=False`` promises that every direction is
+        well above every vertex's horizon (:meth:`horizon_cos` < every ``cos_i``), which
+        spares the fused path its horizon and grazing-light checks."""
+        d = np.asarray(d, dtype=self.dtype)
+        if d.ndim == 2 and self._fused is not None:
+            return self._beckmann_shared(p, d, edge)
+        if d.ndim == 2:
+            dt = np.ascontiguousarray(d.T)
+            cos_i = self.n32[p] @ dt
+            dot_io = self.v32[p] @ dt
+        else:
+            cos_i = np.einsum("kc,kjc->kj", self.n32[p], d)
+            dot_io = np.einsum("kc,kjc->kj", self.v32[p], d)
+        val, h, k = microfacet_lobe(self.distribution, self.a2, cos_i, dot_io,
+                                    self.cos_o32[p][:, None], self.lam_o32[p][:, None],
+                                    not self.scalar, split=True)
+        terms = self._terms_of(val, h, p)
+        if k is not None:                   # the per-vertex factor, on the (k, 3) weights
+            terms = [(f, w * k) for f, w in terms]
+        return terms
+
+    def horizon_cos(self) -> float:
+        """``cos_i`` below which a direction needs more than the lobe's main formula
+        (Beckmann: the grazing-light ``Lambda_i``; every lobe: zero below the horizon)."""
+        if self.distribution == "BECKMANN":
+            return float(np.sqrt(float(self.a2) / (float(self.a2) + 0.39) * 1.001))
+        return 1.0
+
+    def _beckmann_shared(self, p, d, edge=True):
+        """:meth:`dense` for Beckmann in float32 against shared directions ``d`` (D, 3),
+        with the additions folded into matrix products: ``[n, cos_o] . [d, 1]`` is
+        ``cos_i + cos_o`` and ``[2 wo, 2] . [d, 1] / a2`` is ``|wo + wi|^2 / a2``, so
+        ``r / a2 = |wo + wi|^2 / (a2 (cos_i + cos_o)^2)`` (``r = 1 / cos_h^2``) and
+        ``D G2 / (4 cos_o) = exp(1/a2 - r/a2) (r/a2)^2 * a2 / (4 pi cos_o (1 + Lambda_o))``.
+        Only for ``a2 >= 5e-5`` and views not below ``cos_o = 0.5e-4`` (:attr:`_fused`),
+        where ``(r/a2)^2`` cannot overflow; float32 rounding of ``r`` moves the exponent
+        by about ``3e-7 / a2``, as in the general path."""
+        f32 = np.float32
+        n4, v4 = self._fused
+        dt = np.ascontiguousarray(d.T)
+        d1 = np.vstack([dt, np.ones((1, dt.shape[1]), dtype=f32)])
+        cos_i = self.n32[p] @ dt if edge else None
+        c = n4[p] @ d1                                     # cos_i + cos_o
+        r = v4[p] @ d1                                     # |wo + wi|^2 / a2
+        h = None if self.scalar else np.sqrt(np.clip(r * (self.a2 / f32(4.0)), 0.0, 1.0))
+        c *= c
+        r /= c                                             # r / a2
+        # |wo + wi| >= n.(wo + wi) = cos_i + cos_o >= cos_o where cos_i > 0, so r >= 1
+        # holds in float32 unless cos_o is tiny (a bent grazing view, wi ~ -wo): clamp
+        # those rows only (cos_i <= 0 is zeroed below)
+        low = np.flatnonzero(self.cos_o32[p] < f32(0.05))
+        if low.size:
+            r[low] = np.maximum(r[low], f32(1.0) / self.a2)
+        val = np.subtract(f32(1.0) / self.a2, r)
+        np.exp(val, out=val)
+        r *= r
+        val *= r
+        if edge:
+            lowest = cos_i.min(axis=1) if cos_i.size else np.ones(len(p), dtype=f32)
+            _beckmann_grazing(val, cos_i, self.a2, self.lam_o32[p][:, None], lowest)
+            rows = np.flatnonzero(lowest <= 0.0)
+            if rows.size:                      # below the horizon (and wi = -wo: nan)
+                g = np.flatnonzero(cos_i[rows] <= 0.0)
+                val[rows[g // val.shape[1]], g % val.shape[1]] = 0.0
+        k = self.a2 / (f32(4.0 * np.pi) * self.cos_o32[p] * (f32(1.0) + self.lam_o32[p]))
+        return [(f, w * k[:, None]) for f, w in self._terms_of(val, h, p)]
 
     def peak_ratio(self, cos_h) -> np.ndarray:
         """``D(cos_h) / D(1)``: how far a half-vector is from the lobe peak."""
@@ -1343,17 +1520,38 @@ def _group_bounds(keys: np.ndarray):
     return list(zip(starts.tolist(), stops.tolist()))
 
 
+#: pairs of one pixel-basis group evaluated together ((rows, 256) float32 arrays of 1 MB:
+#: few numpy calls per sample, which is what bounds the speed here)
+_PIXEL_ROWS = 1024
+#: pairs of one 1 / 4 / 16 coefficient batch
+_LEVEL_PAIRS = 32768
+#: vertices of one glossy_blocks call in shade_points (its per-pair arrays: ~100 B per
+#: active pair)
+_GLOSSY_VERTICES = 65536
 _QUIET = dict(over="ignore", under="ignore", divide="ignore", invalid="ignore")
 
 
 def glossy_blocks(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, lobe: GlossyLobe,
                   verts: np.ndarray, mode="adaptive", thresholds=DEFAULT_LEVEL_THRESHOLDS,
-                  stats: BlocksStats | None = None) -> np.ndarray:
+                  stats: BlocksStats | None = None, threads: int | None = 1) -> np.ndarray:
     with np.errstate(**_QUIET):
-        return _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats)
+        return _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats,
+                              threads)
 
 
-def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats):
+def _in_threads(tasks, fn, threads):
+    """``fn(task_list)`` for ``threads`` interleaved shares of ``tasks`` (in this thread
+    when there is one share); numpy releases the GIL inside the large array passes."""
+    threads = max(1, min(int(threads or _os.cpu_count() or 1), len(tasks)))
+    if threads <= 1:
+        fn(tasks)
+        return
+    with _Pool(max_workers=threads) as pool:
+        for f in [pool.submit(fn, tasks[i::threads]) for i in range(threads)]:
+            f.result()
+
+
+def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats, threads=1):
     # body of glossy_blocks (under np.errstate)
     """Glossy radiance (len(verts), 3) of vertices ``verts`` by Algorithm 1 over their
     active pairs.
@@ -1363,13 +1561,14 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats):
     (:func:`glossy_levels`), "pixel" (every block in the pixel basis) or a fixed
     1 / 4 / 16.
 
-    Level-1 pairs are evaluated all at once (one sample each, times the cached
-    ``S_b``); the others are grouped by (block, level) so that the BRDF samples of a
-    group are matrix products against the block's sample directions, and the
-    products with the lighting are matrix products too: line 6/11 with ``l x l``
-    coefficients is ``A . (V @ H_b)`` with ``H_b[p, k] = Phi_k(p) L~_p`` (for a
-    constant-1 block ``V @ H_b`` is the DCT of the lighting), line 6/11 in the
-    pixel basis ``(rho * V) @ L~_b`` (occluded pixels contribute 0)."""
+    Pairs with 1 / 4 / 16 coefficients are evaluated per level in large batches
+    (their samples at the eq. 4 nodes of each pair's block): level 1 is ``rho_1 S_b``
+    with the cached line-9 product, 4 and 16 are ``A . (V_d . H_b)`` with ``A`` the
+    eq. 4 coefficients and ``V_d . H_b`` from the change indices
+    (:func:`dct_light_vis`).  Pixel-basis pairs are grouped by block so that the BRDF
+    samples of a group are matrix products against the block's directions, and
+    line 6/11 is ``(rho * V) @ L~_b`` (occluded pixels contribute 0).  ``threads``
+    share the batches and groups."""
     st = stats if stats is not None else BlocksStats()
     t0 = _time.perf_counter()
     verts = np.asarray(verts, dtype=np.int64)
@@ -1393,63 +1592,74 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats):
     unit_dirs = tables.unit_dirs if wide else tables.unit_dirs32
     pixel = tables.pixel if wide else tables.pixel32
     per_pair = np.zeros((idx.size, 3), dtype=lobe.dtype)
-    # level 1 (line 6 with one coefficient, line 9): rho_1 * S_b
-    s = np.nonzero(levels == 1)[0]
-    if s.size:
-        pix1, _ = projection_system(1)
-        f = lobe.sample(P[s], unit_dirs[:, pix1[0]][Bk[s]])
-        f *= sums.S[idx[s]]
-        per_pair[s] = f
-        st.samples += s.size
-    t0 = _tick(st, "level 1", t0)
-    # 4 / 16 / 256, grouped by block
-    rest = np.nonzero(levels > 1)[0]
-    code = Bk[rest] * 4 + np.searchsorted(np.array([4, 16, PIXEL]), levels[rest])
-    order = np.argsort(code, kind="stable")
-    rest, code = rest[order], code[order]
-    t1 = _time.perf_counter()
-    vis_all = _decompress(pairs, idx[rest], lobe.dtype)      # §4.4, once for all groups
-    t0 = _tick(st, "decompress", t1)
-    sel_of = {lv: np.nonzero(levels == lv)[0] for lv in (4, 16)}
-    where = np.full(idx.size, -1, dtype=np.int64)
-    W_of = {}
-    for lv in (4, 16):
-        where[sel_of[lv]] = np.arange(sel_of[lv].size)
-        W_of[lv] = np.empty((sel_of[lv].size, lv, 3), dtype=lobe.dtype)
-    for lo, hi in _group_bounds(code):
-        rows = rest[lo:hi]
-        blk = int(Bk[rows[0]])
-        lv = int(levels[rows[0]])
-        p = P[rows]
-        vis = None if one[rows].all() else vis_all[lo:hi]
-        if lv == PIXEL:
-            Lb = pixel[blk]
-            for f, w in lobe.dense(p, unit_dirs[blk]):
+    lock = _threading.Lock()
+
+    def timed_add(key, seconds):
+        with lock:
+            st.times[key] = st.times.get(key, 0.0) + seconds
+
+    # 1 / 4 / 16: all pairs of a level sampled at once at the eq. 4 nodes of their
+    # blocks; coefficients A = inv @ samples; line 6 / 11 = A . W with W = V_d . H_b
+    # from the change indices (eq. 6); one coefficient: rho * S_b (line 9's product).
+    # Pairs are cut in pieces of _LEVEL_PAIRS for the threads.
+    def run_levels(tasks):
+        for lv, l, s in tasks:
+            t1 = _time.perf_counter()
+            pix, inv = projection_system(l)
+            d = unit_dirs[Bk[s][:, None], pix[None, :]]              # (m, lv, 3)
+            if lv == 1:
+                W = sums.S[idx[s]][:, None, :].astype(lobe.dtype, copy=False)
+            else:
+                W = dct_light_vis(pairs, tables, idx[s], lv, lobe.dtype)
+            inv_t = np.ascontiguousarray(inv.T, dtype=lobe.dtype)
+            for f, w in lobe.dense(P[s], d):
+                A = f if lv == 1 else f @ inv_t                      # (m, lv)
+                per_pair[s] += np.einsum("mk,mkc->mc", A, W) * w
+            timed_add(f"level {lv}", _time.perf_counter() - t1)
+
+    tasks = []
+    for lv, l in ((1, 1), (4, 2), (16, 4)):
+        s = np.nonzero(levels == lv)[0]
+        st.samples += s.size * lv
+        tasks += [(lv, l, s[a:a + _LEVEL_PAIRS]) for a in range(0, s.size, _LEVEL_PAIRS)]
+    _in_threads(tasks, run_levels, threads)
+    # pixel basis (line 6/11 with 256 samples), grouped by block: the BRDF samples of a
+    # group are matrix products against the block's directions, the product with the
+    # lighting is ``(rho * V) @ L~_b`` (occluded pixels contribute 0); the groups
+    # (cut at _PIXEL_ROWS pairs) are shared out to the threads
+    rest = np.nonzero(levels == PIXEL)[0]
+    # a pair whose block lies wholly above the lobe's horizon_cos (angle to the normal
+    # plus the block's radius) skips the per-sample horizon checks: grouped apart
+    top = np.arccos(np.float32(min(lobe.horizon_cos(), 1.0)))
+    ang = np.arccos(np.clip(np.einsum("ij,ij->i", lobe.n32[P[rest]],
+                                      geometry.centre[Bk[rest]].astype(np.float32)), -1.0, 1.0))
+    edge = (ang + geometry.radius32[Bk[rest]]) >= top
+    order = np.lexsort((edge, Bk[rest]))
+    rest, edge = rest[order], edge[order]
+    st.samples += rest.size * BLOCK_PIXELS
+
+    def run_pixels(tasks):
+        decompress = 0.0
+        t1 = _time.perf_counter()
+        for blk, near, rows in tasks:
+            vis = None
+            if not one[rows].all():
+                t2 = _time.perf_counter()
+                vis = _decompress(pairs, idx[rows], lobe.dtype)     # §4.4
+                decompress += _time.perf_counter() - t2
+            for f, w in lobe.dense(P[rows], unit_dirs[blk], near):
                 if vis is not None:
                     f *= vis
-                per_pair[rows] += (f @ Lb) * w
-            st.samples += rows.size * BLOCK_PIXELS
-        else:                                          # only W here; samples below
-            H = tables.dct_light_of(lv, lobe.dtype)[blk]
-            if vis is None:                           # constant 1: the lighting's DCT
-                W_of[lv][where[rows]] = H.sum(axis=0).reshape(1, lv, 3)
-            else:
-                W_of[lv][where[rows]] = (vis @ H).reshape(rows.size, lv, 3)
-        t0 = _tick(st, "pixel" if lv == PIXEL else f"level {lv}", t0)
-    # 4 / 16: all pairs of a level sampled at once (eq. 4 nodes), A = inv @ samples,
-    # line 6 / 11 = A . W
-    for lv, l in ((4, 2), (16, 4)):
-        s = sel_of[lv]
-        if not s.size:
-            continue
-        pix, inv = projection_system(l)
-        d = unit_dirs[Bk[s][:, None], pix[None, :]].reshape(-1, 3)
-        f = lobe.sample(np.repeat(P[s], lv), d).reshape(s.size, lv, 3)
-        A = np.matmul(inv.astype(lobe.dtype), f)                 # (m, lv, 3)
-        A *= W_of[lv]
-        per_pair[s] += A.sum(axis=1)
-        st.samples += s.size * lv
-        t0 = _tick(st, f"level {lv}", t0)
+                per_pair[rows] += (f @ pixel[blk]) * w
+        timed_add("pixel", _time.perf_counter() - t1 - decompress)
+        timed_add("decompress", decompress)
+
+    tasks = [(int(Bk[rest[lo]]), bool(edge[lo]), rest[a:min(hi, a + _PIXEL_ROWS)])
+             for lo, hi in _group_bounds(Bk[rest] * 2 + edge)
+             for a in range(lo, hi, _PIXEL_ROWS)]
+    tasks.sort(key=lambda t: -t[2].size)               # largest first: balanced shares
+    _in_threads(tasks, run_pixels, threads)
+    t0 = _time.perf_counter()
     out = np.zeros((verts.size, 3))
     for c in range(3):
         out[:, c] = np.bincount(P, weights=per_pair[:, c], minlength=verts.size)
@@ -1522,18 +1732,16 @@ def shade_points(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, posi
             st.cases[2] += int((~ones).sum())
             continue
 
-        def run(a, b, sel=sel, vd=vd, mat=mat):
-            cs = BlocksStats()
-            lobe = GlossyLobe(mat).prepare(normals[sel[a:b]], vd[a:b])
-            return glossy_blocks(pairs, sums, tables, lobe, sel[a:b], mode, thresholds, cs), cs
-
+        # vertices in pieces of ``chunk`` (bounds the per-pair arrays); inside a piece the
+        # threads share the BRDF batches and pixel-basis groups (large numpy passes
+        # that release the GIL, not many small per-thread ones)
         t0 = _time.perf_counter()
-        workers = threads or _os.cpu_count() or 1
-        size = chunk or int(np.clip(-(-sel.size // (2 * workers)), 256, 8192))
-        parts = for_chunks(sel.size, size, run, threads)
-        for (g, cs) in parts:
-            st.add(cs)
-        out[sel] += np.concatenate([g for g, _ in parts])
+        size = chunk or _GLOSSY_VERTICES
+        for a in range(0, sel.size, size):
+            b = min(sel.size, a + size)
+            lobe = GlossyLobe(mat).prepare(normals[sel[a:b]], vd[a:b])
+            out[sel[a:b]] += glossy_blocks(pairs, sums, tables, lobe, sel[a:b], mode,
+                                           thresholds, st, threads=threads)
         st.times["glossy wall"] = st.times.get("glossy wall", 0.0) + _time.perf_counter() - t0
     st.cases[0] += pairs.dv.count * pairs.dv.blocks - pairs.count
     return out

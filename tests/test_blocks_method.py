@@ -72,13 +72,15 @@ def test_pixel_basis_equals_reference(name):
     assert errors[0] < 1e-2 and errors[1] <= max(errors[0], 2e-3), errors
 
 
+@pytest.mark.parametrize("material", ["principled", "glossy beckmann"])
 @pytest.mark.parametrize("mode", [1, 4, 16, "pixel"])
-def test_batched_equals_per_vertex_integrator(mode):
+def test_batched_equals_per_vertex_integrator(mode, material):
     """glossy_blocks (all vertices at once, grouped by block) = integrate_vertex (Algorithm 1
-    one vertex at a time) for each fixed BRDF representation."""
+    one vertex at a time) for each fixed BRDF representation; the float32 frame path
+    (Beckmann: the fused dense lobe) within float rounding of it."""
     n, rng = 32, np.random.default_rng(2)
     pos, nrm, bits, light = _scene(n, rng, P=12)
-    mat = MATERIALS["principled"]
+    mat = MATERIALS[material]
     views = reference.view_directions(pos, np.array([0.0, -3.0, 1.5]))
     dv = B.encode_visibility(bits, n)
     pairs = B.active_pairs(dv)
@@ -94,12 +96,50 @@ def test_batched_equals_per_vertex_integrator(mode):
     unit = light.unit_directions
     for p in range(len(pos)):
         rho = brdf.specular_cosine(mat, nrm[p:p + 1], views[p:p + 1], unit)[0].astype(np.float64)
+        if rho.ndim == 1:                   # scalar lobe (no Fresnel): colour not included
+            rho = rho[:, None] * np.asarray(mat.specular_color)[None, :]
         want = B.integrate_vertex(dv.vertex(p), block_light, rho, mode=mode)
         np.testing.assert_allclose(batched[p], want.radiance, rtol=1e-6,
-                                   atol=1e-9 * np.abs(want.radiance).max())
+                                   atol=1e-9 * np.abs(batched).max())
     active = int((dv.kind != B.ZERO).sum())
     assert st.cases[1:].sum() == active
     assert st.levels[B.PIXEL if mode == "pixel" else mode] == active
+
+
+@pytest.mark.parametrize("roughness", [0.1, 0.25, 0.6, 1.0])
+def test_fused_beckmann_lobe_equals_the_general_formula(roughness):
+    """GlossyLobe.dense's fused float32 Beckmann path (matrix products with the sums folded
+    in) against the float64 general formula, at directions all around the sphere: below
+    the horizon (0), grazing light (Lambda_i > 0), grazing and backward views, wi = -wo."""
+    rng = np.random.default_rng(7)
+    P, D = 64, 400
+    nrm = rng.normal(size=(P, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    views = rng.normal(size=(P, 3))
+    views[:8] = -nrm[:8] + 0.01 * rng.normal(size=(8, 3))     # views from below: bent
+    views[8:16] -= nrm[8:16] * np.einsum("ij,ij->i", views[8:16], nrm[8:16])[:, None]
+    views /= np.linalg.norm(views, axis=1, keepdims=True)
+    d = rng.normal(size=(D, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[:P // 4] = -views[:P // 4]                              # wi = -wo for a few vertices
+    mat = brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 0.9, 0.8),
+                        roughness=roughness, distribution="BECKMANN")
+    fast = B.GlossyLobe(mat).prepare(nrm, views)
+    assert fast._fused is not None
+    slow = B.GlossyLobe(mat, np.float64).prepare(nrm, views)
+    with np.errstate(all="ignore"):
+        got = sum(f[:, :, None] * w[:, None, :] for f, w in fast.dense(np.arange(P), d))
+        want = sum(f[:, :, None] * w[:, None, :] for f, w in slow.dense(np.arange(P), d))
+    assert np.isfinite(got).all() and (got >= 0.0).all()
+    scale = float(np.abs(want).max())
+    # float32 rounding of 1 / cos_h^2 moves the exponent by ~3e-7 / alpha^2; where
+    # |wo + wi|^2 < 0.05 (wi ~ -wo, grazing views) float32 cannot resolve the half-vector,
+    # nor the horizon at |cos_i| < 1e-5: only finite there
+    v = B.GlossyLobe(mat).prepare(nrm, views).v
+    resolved = ((2.0 + 2.0 * v @ d.T) > 0.05) & (np.abs(nrm @ d.T) > 1e-5)
+    np.testing.assert_allclose(got[resolved], want[resolved], rtol=2e-4 + 1e-6 / mat.alpha ** 2,
+                               atol=1e-6 * scale)
+    assert (got[(nrm @ d.T) < -1e-5] == 0.0).all()
 
 
 def test_cached_decoded_blocks_equal_the_differential_decode():
