@@ -1,7 +1,10 @@
 """AUTO: per-object choice meets the error target against REFERENCE, falls back to
-REFERENCE when nothing does, and is cached (only what changed is selected again)."""
+REFERENCE when nothing does, is cached (only what changed is selected again) and sizes
+integer budgets (RSL light count) between the listed values."""
 
 from __future__ import annotations
+
+import types
 
 import bpy
 import numpy as np
@@ -120,3 +123,71 @@ def test_auto_falls_back_to_reference_when_nothing_meets_the_target(monkeypatch)
     assert all(c["method"] == "REFERENCE" for c in auto.LAST_CHOICES)
     for a, b in zip(got, truth):
         np.testing.assert_array_equal(a, b)
+
+
+def test_budget_between_hooks():
+    """RSL bisects light counts, WAVELET term counts (geometric); SH orders are
+    consecutive and the default has nothing between."""
+    rsl, wav, sh = REGISTRY["RSL"], REGISTRY["WAVELET"], REGISTRY["SH"]
+    assert rsl.budget_between(10, 30) == 20
+    assert rsl.budget_between(20, 30) == 25
+    assert rsl.budget_between(29, 30) is None
+    assert wav.budget_between(32, 128) == 64
+    assert wav.budget_between(128, 512) == 256
+    assert wav.budget_between(32, 33) is None
+    assert sh.budget_between(2, 3) is None
+    for m in REGISTRY.values():
+        prop_values = m.budget[1] if m.budget else []
+        for lo, hi in zip(prop_values, prop_values[1:]):
+            mid = m.budget_between(lo, hi)
+            assert mid is None or lo < mid < hi, (m.id, lo, hi, mid)
+
+
+def _virtual_clock(monkeypatch, costs):
+    """AUTO's timings from a cost model (seconds per shaded point, per method, from the
+    settings) instead of the wall clock: the choice then does not hang on timing noise."""
+    clock = [0.0]
+    monkeypatch.setattr(auto, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    for mid, cost in costs.items():
+        cls = type(REGISTRY[mid])
+        real = cls.shade
+
+        def shade(self, state, eye, view_dir, real=real, cost=cost):
+            clock[0] += cost(state.settings) * sum(st.points.count for st in state.objects)
+            return real(self, state, eye, view_dir)
+        monkeypatch.setattr(cls, "shade", shade)
+
+
+def test_auto_sizes_the_light_count_between_the_listed_values(monkeypatch):
+    """RSL only, its per-frame cost linear in the light count, on the ground alone
+    (shadowed by Suzanne): AUTO bisects between the last listed count missing the target
+    and the first meeting it, and takes a count that is not one of the listed ones, cheaper
+    than the cheapest listed count that meets the target, and still meeting it."""
+    every = auto.AutoMethod.candidates
+    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
+        lambda: [c for c in every() if c[0].id == "RSL"]))
+    _virtual_clock(monkeypatch, {"REFERENCE": lambda s: 1e-2,
+                                 "RSL": lambda s: 1e-5 * s["rsl_lights"]})
+    _scene()
+    eye = np.array(bpy.context.scene.camera.matrix_world.translation)
+    target, listed = 0.03, REGISTRY["RSL"].budget[1]
+
+    def ground(state):
+        state.objects = [st for st in state.objects if st.name == "Grid"]
+        return state
+
+    truth = ground(_state("REFERENCE")).shade(eye)
+    auto._CHOICE_CACHE.clear()
+    state = ground(_state("AUTO", auto_error_target=target))
+    got = state.shade(eye)
+    (choice,) = auto.LAST_CHOICES
+    area = _area(state.objects)
+    error = _rel(got, truth, area)
+    assert choice["method"] == "RSL" and choice["value"] not in listed, choice
+    assert choice["error"] == pytest.approx(error, rel=1e-3, abs=1e-6), choice
+    assert error <= 0.9 * target
+    # the listed counts that meet the target are all dearer than the one taken
+    meeting = [k for k in listed
+               if _rel(ground(_state("RSL", rsl_lights=k)).shade(eye), truth, area)
+               <= 0.9 * target]
+    assert meeting and choice["value"] < min(meeting), (choice, meeting)

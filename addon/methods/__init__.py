@@ -19,6 +19,9 @@ The contract of a method:
 * ``scene_properties()`` returns ``{name: bpy.props.*Property(...)}`` added to
   ``scene.prt`` (its budgets and sliders); ``budget`` names the one swept by the
   benchmarks/report as ``(property name, values)``; ``draw_settings`` shows them.
+  ``budget_between(lower, upper)`` (optional) gives a value strictly between two
+  of those values (cheaper than ``upper``) or None: AUTO bisects with it to size
+  an integer budget (light count, term count) to its error target.
 * ``derive(job)`` (optional, no bpy, runs in the precompute worker after the
   visibility is traced; may raise ``core.visibility.Cancelled`` when
   ``job.cancel_requested``) returns method data for ``job.objects``;
@@ -48,6 +51,12 @@ class Method(ABC):
     def draw_settings(self, layout, prt):
         for name in self.scene_properties():
             layout.prop(prt, name)
+
+    def budget_between(self, lower, upper):
+        """A budget value strictly between ``lower`` and ``upper`` (two values of
+        :attr:`budget`, ``lower`` the cheaper), cheaper than ``upper``; None when there
+        is none (the default: AUTO then only tries the listed values)."""
+        return None
 
     def view_dependent(self, state) -> bool:
         return False

@@ -9,13 +9,24 @@ against REFERENCE's (worst probe; corners weighted by the surface area they stan
 as pixels are) and its *relit* shading time on the object (the
 lighting turned to an angle not used before, as in the report's per-frame timing).
 
+Sizing: integer budgets are sized to the target between the listed values.  When a
+method's first value meeting the object's limit is not its first one, AUTO bisects
+between the previous (missing) value and it with :meth:`Method.budget_between` (RSL
+light count: midpoint; wavelet terms: geometric mean; at most :data:`BETWEEN_STEPS`
+steps), each value measured like a listed one (error at the probes with the early
+reject, relit time) and kept as an option.  Objects so differ in the values they have
+measured.  SH orders are consecutive; BLOCKS and SSDF_SG only try their listed values.
+
 Assignment: the frame's rel-L2 is ``sqrt(Σ_i ‖e_i‖² / Σ_i ‖b_i‖²)`` over the objects, so
 the cheapest assignment under ``Σ ‖e_i‖² ≤ (s·t)² Σ ‖b_i‖²`` (target ``t``, safety ``s``)
 is found by Lagrangian relaxation: each object takes the option minimising
-``time + λ‖e‖²`` with λ bisected to the smallest that fits.  An object that carries
-little of the image may so take a coarser method than a large one.  A method shared by
-several objects pays its per-lighting work once, so the mix is then timed on the whole
-scene against the few single candidates that also fit, and the faster assignment wins.
+``time + λ‖e‖²`` with λ bisected to the smallest that fits; the relaxation only reaches
+options on each object's lower convex hull of (error, time), so the slack it leaves is
+then spent greedily on cheaper options off the hull (a budget sized between two listed
+values often is).  An object that carries little of the image may so take a coarser
+method than a large one.  A method shared by several objects pays its per-lighting work
+once, so the mix is then timed on the whole scene against the few single candidates that
+also fit (budget values every object measured), and the faster assignment wins.
 ``s`` leaves room for the camera's own view of glossy objects (:data:`SAFETY`) and for
 pixels weighting corners by screen area (:data:`SAFETY_DIFFUSE` for diffuse-only scenes).
 
@@ -26,7 +37,7 @@ Shortcuts that make the measurement cheap:
 * a candidate :data:`REJECT` × the target off at a probe is not run at the others;
 * a method's budget values are listed cheapest first (SH order, wavelet terms, RSL
   count, PCA error budget, BLOCKS tolerance), so values after the first one that meets
-  the target on the object are not timed: the count/order is sized to the target;
+  the target on the object are not timed;
 * objects with no occluders and low-frequency lighting are where the cheapest
   candidates (SH) pass; the reason column says so.
 
@@ -55,6 +66,10 @@ SAFETY_DIFFUSE = 0.9
 REJECT = 4.0
 #: Single methods timed against the mix on the whole scene (the fastest by estimate).
 UNIFORM_TRIED = 3
+#: Bisection steps between a method's last budget value missing the target on an object
+#: and its first one meeting it (:meth:`Method.budget_between`: RSL light count, wavelet
+#: terms); each step is one more measured option.
+BETWEEN_STEPS = 3
 #: Relit shading passes timed per candidate (the fastest counts; each one resamples
 #: the environment for cubemap-based methods, the dominant cost of a selection).
 TIMED_FRAMES = 1
@@ -73,6 +88,15 @@ SELECTIONS = [0]
 def _is_view_independent(st) -> bool:
     return all(m.is_diffuse_only and m.fresnel != "DIELECTRIC" for m in st.materials) \
         if st.materials else True
+
+
+def _materials_key(st) -> str:
+    """``repr`` of an object's materials, built once per synced object (its frames reuse
+    it; part of the per-object cache key)."""
+    got = st.data.get("auto_materials")
+    if got is None or got[0] is not st.materials:
+        got = st.data["auto_materials"] = (st.materials, repr(st.materials))
+    return got[1]
 
 
 def _probe_eyes(p, count: int):
@@ -193,9 +217,10 @@ class AutoMethod(Method):
 
     # ------------------------------------------------------------ selection
     def _measure(self, state, st, target):
-        """Per-object measurements: for each candidate (and REFERENCE) the area-weighted
-        squared error norm against REFERENCE at the probes (worst probe), the relit shading time on
-        this object, plus the reference's squared norm (smallest probe)."""
+        """Per-object measurements: for each candidate (and REFERENCE, and budget values
+        sized between a method's listed ones) the area-weighted squared error norm against
+        REFERENCE at the probes (worst probe), the relit shading time on this object, plus
+        the reference's squared norm (smallest probe)."""
         SELECTIONS[0] += 1
         ref = REGISTRY["REFERENCE"]
         view_free = _is_view_independent(st)
@@ -209,7 +234,6 @@ class AutoMethod(Method):
                                                                         cube)))
         limit = (SAFETY_DIFFUSE if view_free else SAFETY) * target
         options = []
-        met = set()         # methods whose cheaper budget already meets the target here
 
         def relit_seconds(m, sub):
             times = []
@@ -221,28 +245,48 @@ class AutoMethod(Method):
                 times.append(time.perf_counter() - t0)
             return min(times)
 
-        for m, prop, value in [(ref, None, None)] + self.candidates():
+        def measure(m, prop, value, timed=True) -> bool:
+            """Adds the option ``(m.id, prop, value)`` (error at the probes, relit time
+            unless ``timed`` is false or it is far off); whether it meets ``limit``."""
             sub = _substate(state, one, m.id, prop, value)
             err2 = 0.0
+            if m is not ref:
+                for eye, expected in zip(eyes, truth):
+                    rad = m.shade(sub, eye, None)
+                    e2 = (float("inf") if rad is None or not np.isfinite(rad[0]).all()
+                          else _weighted_norm2(rad[0] - expected, w))
+                    err2 = max(err2, e2)
+                    if err2 > (REJECT * target) ** 2 * ref_norm2:
+                        err2 = float("inf")     # far off at this probe: skip the others
+                        break
+            finite = bool(np.isfinite(err2))
+            seconds = relit_seconds(m, sub) if timed and finite else float("inf")
+            options.append(((m.id, prop, value), seconds, err2))
+            return finite and _rel(err2, ref_norm2) <= limit
+
+        met = set()         # methods whose cheaper budget already meets the target here
+        below: dict = {}    # per method: its last measured value that does not meet it
+        for m, prop, value in [(ref, None, None)] + self.candidates():
             try:
-                if m is not ref:
-                    for eye, expected in zip(eyes, truth):
-                        rad = m.shade(sub, eye, None)
-                        e2 = (float("inf") if rad is None or not np.isfinite(rad[0]).all()
-                              else _weighted_norm2(rad[0] - expected, w))
-                        err2 = max(err2, e2)
-                        if err2 > (REJECT * target) ** 2 * ref_norm2:
-                            err2 = float("inf")     # far off at this probe: skip the others
-                            break
-                rel = _rel(err2, ref_norm2)
-                if not np.isfinite(err2) or m.id in met:
+                if m.id in met:
                     # budgets are listed cheapest first: a later one of a method that
                     # already met the target here is not timed (it is not its fastest)
-                    options.append(((m.id, prop, value), float("inf"), err2))
-                    continue
-                if rel <= limit:
+                    measure(m, prop, value, timed=False)
+                elif not measure(m, prop, value):
+                    below[m.id] = value
+                else:
                     met.add(m.id)
-                options.append(((m.id, prop, value), relit_seconds(m, sub), err2))
+                    # size the budget to the target: bisect between the last value that
+                    # misses and this one (Method.budget_between; integer counts)
+                    lo, hi = below.get(m.id), value
+                    for _ in range(BETWEEN_STEPS if lo is not None else 0):
+                        mid = m.budget_between(lo, hi)
+                        if mid is None:
+                            break
+                        if measure(m, prop, mid):
+                            hi = mid
+                        else:
+                            lo = mid
             except Exception as exc:            # a broken candidate is skipped, not fatal
                 print(f"PRT AUTO: {m.id} failed on '{st.name}': {exc}")
         notes = (["no occluders"] if open_sky else []) + (["diffuse only"] if view_free else [])
@@ -252,36 +296,58 @@ class AutoMethod(Method):
     def choices(self, state):
         """Per-object measurements (cached per object: only what changed is measured
         again), then the assignment for the frame."""
+        return self._selection(state)[0]
+
+    def _selection(self, state):
+        """(choices, assignment, status note) of the frame; the per-frame work on a hit is
+        the cache keys (the materials' repr is kept per synced object)."""
         target = float(state.settings.get("auto_error_target", 0.02))
         key = runtime.env_key(state.world, state.resolution)
         env = (key[0], key[1], key[3])      # content and strength: a rotation keeps the choice
         names = tuple((m.id, prop, v) for m, prop, v in self.candidates())
         measured, keys = [], []
         for st in state.objects:
-            key = (st.name, id(st.bits), env, target, repr(st.materials), names)
+            key = (st.name, id(st.bits), env, target, _materials_key(st), names)
             keys.append(key)
             measured.append(runtime.per_visibility(
                 _CHOICE_CACHE, key, st.bits, lambda st=st: self._measure(state, st, target),
                 limit=256))
         scene_key = tuple(keys)
-        out = _SCENE_CACHE.get(scene_key)
-        if out is None:
+        got = _SCENE_CACHE.get(scene_key)
+        if got is None:
             out = self._assign(state, measured, target)
+            note = ("AUTO: " + ", ".join(f"{c['object']} → {c['choice']}" for c in out)
+                    if out else None)
+            got = (out, [(c["method"], c["setting"], c["value"]) for c in out], note)
             _SCENE_CACHE.clear()
-            _SCENE_CACHE[scene_key] = out
-        LAST_CHOICES[:] = out
-        return out
+            _SCENE_CACHE[scene_key] = got
+        LAST_CHOICES[:] = got[0]
+        return got
 
     @staticmethod
     def _mix(measured, budget2):
         """Fastest per-object options with Σ err² ≤ ``budget2`` (Lagrangian relaxation:
-        each object minimises time + λ·err², λ bisected to the smallest that fits)."""
+        each object minimises time + λ·err², λ bisected to the smallest that fits; then
+        the slack left is spent on cheaper options the relaxation cannot reach)."""
+        usable = [[o for o in m["options"] if np.isfinite(o[1]) and np.isfinite(o[2])]
+                  for m in measured]
+
         def pick(lam):
-            out = []
-            for m in measured:
-                ok = [o for o in m["options"] if np.isfinite(o[1]) and np.isfinite(o[2])]
-                out.append(min(ok, key=lambda o: (o[1] + lam * o[2], o[2])))
-            return out
+            return [min(ok, key=lambda o: (o[1] + lam * o[2], o[2])) for ok in usable]
+
+        def spend_slack(chosen):
+            """The relaxation only reaches each object's lower convex hull of (err², time)
+            (e.g. a light count sized between two listed ones is often off it): swap in
+            the cheaper option that saves the most time while Σ err² still fits."""
+            chosen = list(chosen)
+            while True:
+                slack = budget2 - sum(o[2] for o in chosen)
+                swaps = [(c[1] - o[1], i, o) for i, (ok, c) in enumerate(zip(usable, chosen))
+                         for o in ok if o[1] < c[1] and o[2] - c[2] <= slack]
+                if not swaps:
+                    return chosen
+                _, i, o = max(swaps, key=lambda x: x[0])
+                chosen[i] = o
 
         if sum(o[2] for o in pick(0.0)) <= budget2:
             return pick(0.0)
@@ -294,7 +360,8 @@ class AutoMethod(Method):
                 hi = mid
             else:
                 lo = mid
-        return pick(hi)
+        best = pick(hi)
+        return spend_slack(best) if sum(o[2] for o in best) <= budget2 else best
 
     def _assign(self, state, measured, target):
         """The frame's assignment: the Lagrangian per-object mix against the whole scene's
@@ -305,6 +372,7 @@ class AutoMethod(Method):
         budget2 = (limit ** 2) * total_ref2
         mix = self._mix(measured, budget2)
         options = {"mix": [o[0] for o in mix]}
+        by_key = [{o[0]: o for o in m["options"]} for m in measured]
         if len(measured) > 1:
             def estimate(m, o):
                 """Time of an option; one not timed (a later budget of a method that
@@ -314,15 +382,18 @@ class AutoMethod(Method):
                 same = [x[1] for x in m["options"] if x[0][0] == o[0][0] and np.isfinite(x[1])]
                 return max(same) if same else float("inf")
 
+            # a single candidate for every object: only budget values every object has
+            # measured (values sized between the listed ones differ between objects)
+            shared = set(by_key[0]).intersection(*by_key[1:])
             uniform = []
-            for cand in {o[0] for o in measured[0]["options"]}:
-                per = [next((o for o in m["options"] if o[0] == cand), None) for m in measured]
-                if any(o is None or not np.isfinite(o[2]) for o in per):
+            for cand in shared:
+                per = [k[cand] for k in by_key]
+                if any(not np.isfinite(o[2]) for o in per):
                     continue
                 est = sum(estimate(m, o) for m, o in zip(measured, per))
                 if sum(o[2] for o in per) <= budget2 and np.isfinite(est):
-                    uniform.append((est, cand))
-            for _, cand in sorted(uniform)[:UNIFORM_TRIED]:
+                    uniform.append((est, _label(*cand), cand))
+            for _, _, cand in sorted(uniform)[:UNIFORM_TRIED]:
                 if [cand] * len(measured) != options["mix"]:
                     options[cand] = [cand] * len(measured)
         timed = {}
@@ -341,8 +412,7 @@ class AutoMethod(Method):
                 timed[name] = min(times)
         best = min(timed, key=timed.get) if timed else "mix"
         assignment = options[best]
-        scene_rel = _rel(sum(next(o[2] for o in m["options"] if o[0] == a)
-                             for m, a in zip(measured, assignment)), total_ref2)
+        scene_rel = _rel(sum(k[a][2] for k, a in zip(by_key, assignment)), total_ref2)
         if best == "mix":
             why = (f"fastest mix within {limit:.2%} of the whole scene at the probes "
                    f"({scene_rel:.2%})")
@@ -354,8 +424,8 @@ class AutoMethod(Method):
             why = (f"one method for the whole scene is fastest ({timed[best] * 1e3:.2f} ms "
                    f"per relit frame; the per-object mix {timed['mix'] * 1e3:.2f} ms)")
         out = []
-        for m, a in zip(measured, assignment):
-            o = next(o for o in m["options"] if o[0] == a)
+        for m, k, a in zip(measured, by_key, assignment):
+            o = k[a]
             out.append(dict(object=m["object"], method=a[0], setting=a[1], value=a[2],
                             choice=_label(*a), error=_rel(o[2], m["ref_norm2"]),
                             seconds=o[1], reason="; ".join(m["notes"] + [why])))
@@ -379,11 +449,10 @@ class AutoMethod(Method):
         return out
 
     def shade(self, state, eye, view_dir):
-        chosen = self.choices(state)
-        out = self._shade_assigned(state, [(c["method"], c["setting"], c["value"])
-                                           for c in chosen], eye, view_dir)
-        if chosen:
-            state.note("AUTO: " + ", ".join(f"{c['object']} → {c['choice']}" for c in chosen))
+        _, assignment, note = self._selection(state)
+        out = self._shade_assigned(state, assignment, eye, view_dir)
+        if note:
+            state.note(note)
         return out
 
 

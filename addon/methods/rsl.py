@@ -196,6 +196,11 @@ class RSLMethod(Method):
                    "tables, visibility from distance tables (Wang et al.)")
     budget = ("rsl_lights", [10, 30, 60, 100])
 
+    def budget_between(self, lower, upper):
+        """Light count halfway (the per-frame cost is about linear in it)."""
+        mid = (int(lower) + int(upper)) // 2
+        return mid if lower < mid < upper else None
+
     def scene_properties(self):
         from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
         upd = runtime.redraw_viewports

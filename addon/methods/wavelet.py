@@ -33,6 +33,11 @@ class WaveletMethod(Method):
                    "lighting and BRDF coefficients for glossy materials (Ng 2004)")
     budget = ("wavelet_terms", [32, 128, 512, 2048])
 
+    def budget_between(self, lower, upper):
+        """Term count at the geometric mean (the values are spaced by factors)."""
+        mid = int(round(float(np.sqrt(float(lower) * float(upper)))))
+        return mid if lower < mid < upper else None
+
     def scene_properties(self):
         from bpy.props import FloatProperty, IntProperty
         upd = runtime.redraw_viewports
