@@ -17,6 +17,7 @@ F12 path (the scene's supersampling) at the scene's own lighting.
 
 from __future__ import annotations
 
+import copy
 import math
 import pathlib
 import shutil
@@ -233,9 +234,12 @@ class ReportRun:
         self.rows: list = []
         self.method_rows: list = []
         self.auto_rows: list = []
+        #: AUTO against the fastest fixed method meeting its target, timed interleaved
+        self.auto_check: dict | None = None
         self.warnings: list = []
         self.index: pathlib.Path | None = None
-        self.steps_total = (len(sweep(method_ids, budgets_per_method)) + 3
+        self._has_auto = any(m.id == "AUTO" for m, _, _ in sweep(method_ids, budgets_per_method))
+        self.steps_total = (len(sweep(method_ids, budgets_per_method)) + 3 + int(self._has_auto)
                             + int(include_cycles) + int(stability))
         self.steps_done = 0
         self._frames = 0
@@ -265,6 +269,52 @@ class ReportRun:
                 times.append(time.perf_counter() - t0)
         state.world, state.background = world, background
         return times
+
+    def _head_to_head(self, states, view, projection, w, h, persp):
+        """Relit frames of several states *interleaved* (one frame each per round, every
+        frame at an angle not drawn before), ``3 * repeats`` rounds after a warm-up one:
+        the machine's load then weighs on each alike (for the AUTO check)."""
+        from .engine import render_pixels
+        times = [[] for _ in states]
+        saved = [(st.world, st.background) for st in states]
+        for k in range(3 * self.repeats + 1):
+            for i, st in enumerate(states):
+                world, background = saved[i]
+                self._frames += 1
+                st.world = rotated_world(world, 0.05 + 0.37 * self._frames)
+                if background is not None:
+                    st.background = (st.world, background[1])
+                t0 = time.perf_counter()
+                render_pixels(st, view, projection, w, h, True, persp, 1)
+                if k:
+                    times[i].append(time.perf_counter() - t0)
+        for st, (world, background) in zip(states, saved):
+            st.world, st.background = world, background
+        return times
+
+    def _auto_check(self, auto_state, target, view, projection, w, h, persp):
+        """AUTO against the fastest fixed method/budget of the sweep that meets AUTO's
+        target, timed interleaved (:meth:`_head_to_head`) with the stored data AUTO set up
+        (a fixed method reads the same stored data, with its budget as the setting)."""
+        fixed = core_report.fastest_meeting([r for r in self.rows if r["method"] != "AUTO"],
+                                            target)
+        auto_row = next((r for r in self.rows if r["method"] == "AUTO"), None)
+        if fixed is None or auto_row is None:
+            return None
+        method = methods.get(fixed["method"])
+        other = copy.copy(auto_state)
+        other.method = method.id
+        other.settings = dict(auto_state.settings)
+        if method.budget and fixed["label"]:
+            prop = method.budget[0]
+            other.settings[prop] = type(getattr(self.scene.prt, prop))(fixed["label"])
+        t_auto, t_fixed = self._head_to_head([auto_state, other], view, projection, w, h,
+                                             persp)
+        a, f = statistics.median(t_auto), statistics.median(t_fixed)
+        return dict(target=target, fixed=f"{fixed['method']} {fixed['budget']}".strip(),
+                    fixed_error=fixed.get("error_ref"), auto_error=auto_row.get("error_ref"),
+                    auto_seconds=a, fixed_seconds=f, ratio=f / a if a > 0 else math.nan,
+                    rounds=len(t_auto))
 
     # -------------------------------------------------------------- steps
     def steps(self):
@@ -304,6 +354,7 @@ class ReportRun:
             ref_img = None
             images = {}
             per_method = {}
+            auto_frame = None
             for method, prop, value in sweep(self.method_ids, self.budgets_per_method):
                 label = "" if prop is None else f"{prop}={value}"
                 yield f"{method.id} {label}".strip()
@@ -331,11 +382,21 @@ class ReportRun:
                 self.rows.append(row)
                 if method.id == "AUTO" and img is not None:
                     self.auto_rows = list(getattr(method, "last_choices", lambda: [])())
+                    auto_frame = (state, view, projection, persp)
                 pm = per_method.setdefault(method.id, dict(
                     id=method.id, label=method.label, precompute_seconds=trace_seconds,
                     storage_bytes=vis_bytes, derive=[]))
                 if has_derive(method):
                     pm["derive"].append((label, derive_s, derived_bytes))
+                self.steps_done += 1
+
+            if self._has_auto:
+                yield "AUTO against the fastest fixed method (interleaved frames)"
+                if auto_frame is not None:
+                    st_auto, view, projection, persp = auto_frame
+                    self.auto_check = self._auto_check(
+                        st_auto, float(scene.prt.auto_error_target), view, projection, w, h,
+                        persp)
                 self.steps_done += 1
 
             cycles_img = None
@@ -402,6 +463,7 @@ class ReportRun:
                 rows=self.rows, reference_image=ref_name, cycles_image=cycles_name,
                 cycles_note=f"{self.cycles_samples} spp, direct light" if cycles_name else "",
                 heat_max=heat_max, methods=self.method_rows, auto=self.auto_rows,
+                auto_check=self.auto_check,
                 stability=stability, warnings=self.warnings)
             core_report.write_html(staging / "index.html", report)
             (staging / "speed_error.svg").write_text(core_report.speed_error_svg(

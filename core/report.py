@@ -481,6 +481,16 @@ def write_html(path, report: dict) -> pathlib.Path:
                               _fmt(100 * a["error"] if a.get("error") is not None else None,
                                    ".2f", " %"), esc(a.get("reason", ""))]
                              for a in report["auto"]]))
+    check = report.get("auto_check")
+    if check:
+        verdict = "faster" if check["ratio"] > 1.0 else "not faster"
+        parts.append(
+            f"<p>AUTO ({_fmt(100 * check['auto_error'], '.2f', ' %')} against REFERENCE) "
+            f"against the fastest fixed method within {100 * check['target']:.3g} %, "
+            f"{esc(check['fixed'])} ({_fmt(100 * check['fixed_error'], '.2f', ' %')}), "
+            f"timed on {check['rounds']} interleaved relit frames each: "
+            f"{1e3 * check['auto_seconds']:.2f} ms against {1e3 * check['fixed_seconds']:.2f} ms "
+            f"(median), {check['ratio']:.2f}× — AUTO is {verdict}.</p>")
     if report.get("stability"):
         parts.append("<h2>Stability: hard cases × methods</h2>")
         parts.append(stability_html(report["stability"]))

@@ -163,6 +163,16 @@ def test_report_measures_each_method_and_restores_the_scene(tmp_path):
         assert np.isfinite(r["frame_seconds"]) and r["frame_seconds"] > 0, r
         assert r["error_ref"] is not None and np.isfinite(r["error_ref"]), r
         assert (out / r["image"]).is_file() and (out / r["heatmap"]).is_file()
+    # AUTO against the fastest fixed method within its target, timed interleaved
+    target = scene.prt.auto_error_target
+    fastest = core_report.fastest_meeting([r for r in run.rows if r["method"] != "AUTO"], target)
+    check = run.auto_check
+    assert (check is None) == (fastest is None)
+    if check is not None:
+        assert check["fixed"] == f"{fastest['method']} {fastest['budget']}".strip()
+        assert check["rounds"] == 3 and check["auto_seconds"] > 0 and check["fixed_seconds"] > 0
+        assert check["ratio"] == pytest.approx(check["fixed_seconds"] / check["auto_seconds"])
+        assert "interleaved relit frames" in text
     # SH is a truncation of the same transfer: wrong, but not wildly
     sh = {r["label"]: r["error_ref"] for r in run.rows if r["method"] == "SH"}
     assert 0 < sh["5"] < 0.5
