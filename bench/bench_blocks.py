@@ -7,7 +7,8 @@ BSDF on a diffuse ground grid, lit by a bundled HDRI, cubemap 6 x N x N.  Printe
 one run on the same CPU:
 
 * accuracy: F12 of BLOCKS against F12 of REFERENCE (PSNR with REFERENCE's peak, rel-L2,
-  pixels with alpha > 0.5) and per-vertex PSNR of the glossy object;
+  pixels with alpha > 0.5) and per-vertex PSNR of the glossy object; SH (orders 2-5) and
+  WAVELET (1 % of the coefficients) on the same scene against the same REFERENCE image;
 * speed: per-frame shading (camera moved, lighting unchanged: what the viewport redoes)
   of ``FrameState.shade`` and of the core ``shade_points`` of each method, and a relight
   frame (every lighting-dependent cache dropped);
@@ -66,6 +67,8 @@ def main(argv=None):
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--ref-repeats", type=int, default=2)
     p.add_argument("--tolerances", default="1.0,0.3,0.1,0.01,0.001")
+    p.add_argument("--skip-bases", action="store_true",
+                   help="leave out the SH / WAVELET rows on the same scene")
     p.add_argument("--out", type=pathlib.Path, default=scenes.ROOT / "out/bench/blocks.txt")
     args = p.parse_args(argv)
     w, h = (int(v) for v in args.image.lower().split("x"))
@@ -111,6 +114,28 @@ def main(argv=None):
         f"PSNR of the images clipped to [0, 1] (display range) {psnr_display(img, ref_img):.2f} dB "
         f"(paper, Fig. 5: 45.67 dB against its reference)")
     say(f"sources of the differential visibility at sync: {method.LAST_STATS['sources']}")
+
+    # ---------------------------------------------------------------- SH and WAVELET
+    # issue 5: the classical bases on the same scene, same resolution, against REFERENCE
+    if not args.skip_bases:
+        say("")
+        say("the same scene with the classical bases (F12 against REFERENCE's F12; WAVELET keeps "
+            "1 % of the lighting's and of each BRDF's Haar coefficients, Ng 04, and 1 % of the "
+            "lighting for the diffuse ground, Ng 03; paper: 33.5 dB at 1 %):")
+        say(f"  {'method':22s} {'F12':>8s} {'PSNR':>9s} {'rel-L2':>9s} {'PSNR [0,1]':>10s}")
+        runs = [("SH", "sh_order", v) for v in (2, 3, 4, 5)]
+        runs.append(("WAVELET", "wavelet_terms", max(1, round(0.01 * 6 * args.directions ** 2))))
+        for mid, setting, value in runs:
+            prt.method = mid
+            setattr(prt, setting, value)
+            if mid == "WAVELET":
+                prt.wavelet_glossy_percent = 1.0
+            path = out_dir / f"blocks_scene_{mid}_{value}.exr"
+            t = scenes.render_prt(path)
+            timg = scenes.read_exr(path)
+            say(f"  {mid + ' ' + setting + '=' + str(value):22s} {t:7.2f}s {psnr(timg, ref_img):8.2f}dB "
+                f"{scenes.rel_l2(timg, ref_img):9.2e} {psnr_display(timg, ref_img):9.2f}dB")
+        prt.method = "BLOCKS"
 
     # ---------------------------------------------------------------- frame timings
     state = runtime.FrameState()

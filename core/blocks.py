@@ -1418,7 +1418,7 @@ class GlossyLobe:
         low = np.flatnonzero(self.cos_o32[p] < f32(0.05))
         if low.size:
             r[low] = np.maximum(r[low], f32(1.0) / self.a2)
-        val = np.subtract(f32(1.0) / self.a2, r)
+        val = np.subtract(f32(1.0) / self.a2, r, out=c)   # c is not needed any more
         np.exp(val, out=val)
         r *= r
         val *= r
