@@ -1572,10 +1572,17 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats, th
     st = stats if stats is not None else BlocksStats()
     t0 = _time.perf_counter()
     verts = np.asarray(verts, dtype=np.int64)
-    starts = pairs.first[verts]
-    counts = pairs.first[verts + 1] - starts
-    P = np.repeat(np.arange(verts.size), counts)            # local vertex of each pair
-    idx = np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
+    if verts.size and verts[-1] - verts[0] + 1 == verts.size and (np.diff(verts) == 1).all():
+        # a run of vertices (one material on the object): its pairs are one slice
+        a, b = int(pairs.first[verts[0]]), int(pairs.first[verts[-1] + 1])
+        idx = np.arange(a, b)
+        P = pairs.p[a:b] - verts[0]                          # local vertex of each pair
+    else:
+        starts = pairs.first[verts]
+        counts = pairs.first[verts + 1] - starts
+        P = np.repeat(np.arange(verts.size), counts)
+        idx = np.repeat(starts - (np.cumsum(counts) - counts), counts) + \
+            np.arange(int(counts.sum()))
     Bk = pairs.b[idx]
     geometry = block_geometry(tables.resolution)
     if mode == "adaptive":
@@ -1661,8 +1668,9 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats, th
     _in_threads(tasks, run_pixels, threads)
     t0 = _time.perf_counter()
     out = np.zeros((verts.size, 3))
+    sampled = np.flatnonzero(levels)                   # level 0 pairs add nothing
     for c in range(3):
-        out[:, c] = np.bincount(P, weights=per_pair[:, c], minlength=verts.size)
+        out[:, c] = np.bincount(P[sampled], weights=per_pair[sampled, c], minlength=verts.size)
     _tick(st, "sum", t0)
     mixed = ~one
     st.cases[1] += int(one.sum())
