@@ -15,7 +15,30 @@ import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 SHADER_DIR = Path(__file__).resolve().parent.parent / "shaders"
-_SHADERS = {}
+#: dicts holding GPU objects (shaders, batches, textures) of this module and of the
+#: per-pixel methods: emptied by :func:`free_gpu_resources`
+_GPU_CACHES: list = []
+
+
+def gpu_cache(cache: dict) -> dict:
+    """Register ``cache`` as holding GPU objects (returns it)."""
+    _GPU_CACHES.append(cache)
+    return cache
+
+
+def free_gpu_resources():
+    """Drop every cached GPU object while Blender's GPU context still exists: on
+    unregister, and at interpreter exit before Blender's own exit handler frees the
+    context (Python collecting a texture or shader after that crashes)."""
+    global _QUAD
+    _QUAD = None
+    for cache in _GPU_CACHES:
+        cache.clear()
+    import gc
+    gc.collect()
+
+
+_SHADERS = gpu_cache({})
 
 
 def _source(name):

@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 
 from ...core import brdf, directions, envmap, reference, rsl
-from .. import runtime, storage
+from .. import drawing, runtime, storage
 from . import Method, glossy_or_layered, register
 
 #: disk-map resolution of the BRDF SATs and visibility tables (§5.1: 32 x 32)
@@ -413,8 +413,10 @@ register(RSLMethod())
 
 MAX_TERMS = 8
 TEXTURE_WIDTH = 8192
-_GPU: dict = {}             # shader, cached textures (per object tables, per material SATs)
-_GPU_DIFFUSE: dict = {}     # view-independent GPU results per (object, material, lighting)
+# shader, cached textures (per object tables, per material SATs)
+_GPU: dict = drawing.gpu_cache({})
+# view-independent GPU results per (object, material, lighting)
+_GPU_DIFFUSE: dict = drawing.gpu_cache({})
 
 
 def gpu_available() -> bool:

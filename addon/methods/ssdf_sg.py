@@ -26,14 +26,15 @@ import numpy as np
 
 from ...core import directions, envmap, sg_brdf, sg_lighting, ssdf, ssdf_sg
 from ...core import brdf as core_brdf
-from .. import runtime, storage
+from .. import drawing, runtime, storage
 from . import Method, register
 
 IMAGE_PREFIX = "PRT SSDF "
 # (ident, resolution) -> (diffuse SGs, PrefilteredEnvironment) of the unrotated image
 _LIGHTING_CACHE: dict = {}
-# SSDF PCA derived at draw time per (object, visibility, settings)
-_FIELD_CACHE: dict = {}
+# SSDF PCA derived at draw time per (object, visibility, settings); a field carries its
+# GPU textures once drawn (``field.gpu``), so the cache is freed with the GPU objects
+_FIELD_CACHE: dict = drawing.gpu_cache({})
 
 
 def cosine_of(settings) -> ssdf_sg.CosineLobes:
@@ -370,7 +371,7 @@ def write_image(name, basis, coeffs, precompute_id, cube_resolution):
     return img
 
 
-_READ_CACHE: dict = {}
+_READ_CACHE: dict = drawing.gpu_cache({})    # fields read from the .blend (GPU textures too)
 
 
 def read_image(name, points, cube_resolution, resolution, budget, max_terms):
@@ -413,7 +414,7 @@ def read_image(name, points, cube_resolution, resolution, budget, max_terms):
 
 # ----------------------------------------------------------------- GPU (per pixel)
 
-_GPU = {}
+_GPU = drawing.gpu_cache({})
 
 
 def _gpu_shader():
