@@ -1481,6 +1481,17 @@ def glossy_levels(lobe: GlossyLobe, p: np.ndarray, b: np.ndarray, geometry: Bloc
     return levels
 
 
+def near_horizon(lobe: GlossyLobe, p: np.ndarray, b: np.ndarray,
+                 geometry: BlockGeometry) -> np.ndarray:
+    """Per pair (vertex ``p``, block ``b``): whether some direction of the block may have
+    ``cos_i <= lobe.horizon_cos()`` -- the angle between the normal and the block centre
+    plus the block's radius reaches the cut (False: every direction is above it)."""
+    top = np.arccos(np.float32(min(lobe.horizon_cos(), 1.0)))
+    ang = np.arccos(np.clip(np.einsum("ij,ij->i", lobe.n32[p],
+                                      geometry.centre[b].astype(np.float32)), -1.0, 1.0))
+    return (ang + geometry.radius32[b]) >= top
+
+
 @dataclass
 class BlocksStats:
     """Tables 1-2 style counts and stage times of one evaluation."""
@@ -1635,12 +1646,9 @@ def _glossy_blocks(pairs, sums, tables, lobe, verts, mode, thresholds, stats, th
     # lighting is ``(rho * V) @ L~_b`` (occluded pixels contribute 0); the groups
     # (cut at _PIXEL_ROWS pairs) are shared out to the threads
     rest = np.nonzero(levels == PIXEL)[0]
-    # a pair whose block lies wholly above the lobe's horizon_cos (angle to the normal
-    # plus the block's radius) skips the per-sample horizon checks: grouped apart
-    top = np.arccos(np.float32(min(lobe.horizon_cos(), 1.0)))
-    ang = np.arccos(np.clip(np.einsum("ij,ij->i", lobe.n32[P[rest]],
-                                      geometry.centre[Bk[rest]].astype(np.float32)), -1.0, 1.0))
-    edge = (ang + geometry.radius32[Bk[rest]]) >= top
+    # a pair whose block lies wholly above the lobe's horizon_cos skips the per-sample
+    # horizon checks: grouped apart
+    edge = near_horizon(lobe, P[rest], Bk[rest], geometry)
     order = np.lexsort((edge, Bk[rest]))
     rest, edge = rest[order], edge[order]
     st.samples += rest.size * BLOCK_PIXELS

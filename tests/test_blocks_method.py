@@ -146,6 +146,32 @@ def test_fused_beckmann_lobe_equals_the_general_formula(roughness):
     assert (got[(nrm @ d.T) < -1e-5] == 0.0).all()
 
 
+@pytest.mark.parametrize("n", [32, 64])
+def test_pairs_off_the_horizon_have_every_direction_above_the_cut(n):
+    """near_horizon is conservative: a (vertex, block) pair it lets skip the horizon and
+    grazing-light checks has every sample direction (the lighting's unit directions) above
+    the lobe's horizon_cos; and most pairs well above the horizon are let through."""
+    rng = np.random.default_rng(11)
+    P = 300
+    nrm = rng.normal(size=(P, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    mat = brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 1.0, 1.0),
+                        roughness=0.25, distribution="BECKMANN")
+    lobe = B.GlossyLobe(mat).prepare(nrm, nrm)
+    cube = cubemap(n)
+    light = CubeLighting(np.ones((cube.size, 3), np.float32),
+                         cube.directions * rng.uniform(0.9, 1.0, (cube.size, 1)))
+    tables = B.light_tables(light, n)
+    geometry = B.block_geometry(n)
+    nb = geometry.centre.shape[0]
+    p = np.repeat(np.arange(P), nb)
+    b = np.tile(np.arange(nb), P)
+    edge = B.near_horizon(lobe, p, b, geometry)
+    cos_min = np.einsum("kc,kjc->kj", lobe.n32[p], tables.unit_dirs32[b]).min(axis=1)
+    assert (cos_min[~edge] > lobe.horizon_cos()).all()
+    assert (~edge[cos_min > 0.5]).mean() > 0.9
+
+
 def test_cached_decoded_blocks_equal_the_differential_decode():
     """The per-frame unpack of cached decoded blocks == decoding V_d again == the bits."""
     rng = np.random.default_rng(11)
