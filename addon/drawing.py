@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import bpy  # noqa: F401  (Blender's ``gpu`` module is importable once bpy is)
 import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
