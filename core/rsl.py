@@ -13,7 +13,8 @@ integrals (eq. 5)::
 square has area ``|S_i| / 2``); the BRDF average comes from a summed-area table (§4.2,
 eq. 6/8, four look-ups per view node) and the visibility average from the visibility
 distance table (§4.3, eq. 9) or, as the exact option, from a per-vertex SAT of the
-visibility map.
+visibility map.  ``V`` is the visibility of the hemisphere only: the horizon is cut
+once, by the cosine in ``rho cos`` (see :func:`visibility_maps`).
 
 Everything here is numpy only; :mod:`..addon.methods.rsl` and the GLSL pass use the
 same tables.
@@ -127,10 +128,11 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
     """Bottom-up merging of cubemap texels into ``count`` subregions (§4.1.2, Fig. 5).
 
     Each step merges the pair of adjacent subregions (across cube faces too) whose
-    merge increases the total penalised fitting error ``sum_i |S_i|^p E(eta_i²)``
-    (eq. 7, ``p = area_power``) the least; costs are incremental (moments add) and
-    kept in a priority queue with lazy invalidation, so 6x32² texels -> 30 lights
-    takes about a second instead of the paper's two minutes.  With ``error_budget``
+    merged subregion has the least penalised fitting error ``|S|^p E(eta²)`` (eq. 7,
+    ``p = area_power``; Fig. 5 picks the least merged error, not the least increase of
+    the sum); costs come from moments (they add on a merge) and are kept in a priority
+    queue with lazy invalidation, so 6x32² texels -> 30 lights takes well under a
+    second instead of the paper's two minutes.  With ``error_budget``
     the count is the smallest one (not below ``count``; ``None``: 1) whose intensity
     fitting error ``sum_i integral_{S_i} (L - I_i)²`` is at most ``error_budget`` times
     ``(integral Y dw)² / 4 pi`` (the squared luminance integral of a uniform
@@ -164,8 +166,6 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
     alive = [True] * D
     parent = list(range(D))
     stamp = [0] * D
-    eta = [_fit_error(A[i], E[i], Q[i], M[i]) for i in range(D)]
-    cost = [eta[i] * A[i] ** p for i in range(D)]
     neigh = [set() for _ in range(D)]
     for a, b in _texel_neighbours(cube).tolist():
         neigh[a].add(b)
@@ -178,22 +178,20 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
         Am = A[a] + A[b]
         Ma, Mb = M[a], M[b]
         Mm = (Ma[0] + Mb[0], Ma[1] + Mb[1], Ma[2] + Mb[2])
-        e = _fit_error(Am, E[a] + E[b], Q[a] + Q[b], Mm)
-        return e, e * Am ** p, Mm
+        return _fit_error(Am, E[a] + E[b], Q[a] + Q[b], Mm) * Am ** p, Mm
 
     heap = []
     for a in range(D):
         for b in neigh[a]:
             if a < b:
-                e, c, _ = merged(a, b)
-                heap.append((c - cost[a] - cost[b], a, b, 0, 0))
+                heap.append((merged(a, b)[0], a, b, 0, 0))
     heapq.heapify(heap)
     regions = D
     while regions > target and heap:
-        delta, a, b, sa, sb = heapq.heappop(heap)
+        _, a, b, sa, sb = heapq.heappop(heap)
         if not (alive[a] and alive[b]) or stamp[a] != sa or stamp[b] != sb:
             continue
-        e, c, Mm = merged(a, b)
+        Mm = merged(a, b)[1]
         if len(neigh[a]) < len(neigh[b]):
             a, b = b, a
         total_var += (Q[a] + Q[b] - (E[a] + E[b]) ** 2 / (A[a] + A[b])
@@ -202,7 +200,6 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
         E[a] += E[b]
         Q[a] += Q[b]
         M[a] = Mm
-        eta[a], cost[a] = e, c
         alive[b] = False
         stamp[a] += 1
         nb = neigh[b]
@@ -221,9 +218,7 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
             _history.append((regions, max(total_var, 0.0) / q_total))
         sa = stamp[a]
         for x in na:
-            e2, c2, _ = merged(a, x)
-            d2 = c2 - cost[a] - cost[x]
-            heapq.heappush(heap, (d2, a, x, sa, stamp[x]))
+            heapq.heappush(heap, (merged(a, x)[0], a, x, sa, stamp[x]))
     labels = np.array(parent)
     while True:                       # follow merge parents to the surviving roots
         nxt = labels[labels]
@@ -409,19 +404,30 @@ def visibility_maps(bits: np.ndarray, normals: np.ndarray, cube: Cubemap, resolu
     The stored cubemap visibility bits (world texel order) are read along ``sub x
     sub`` sample directions per disk texel in the frame ``(t, b, n)`` of
     :func:`..directions.orthonormal_frame`; a texel's value is the visible fraction
-    of its samples inside the unit disk (0 outside: below the horizon)."""
+    of its samples (``sub = 1``: a binary map, one ray per texel as in §4.3.1).
+
+    The map is the visibility of the *hemisphere* (§4.3: the VDT holds distances to the
+    map's occlusion boundaries); the horizon is not one of them -- the cosine in the
+    BRDF tables already cuts the integrand there (zero outside the unit disk), and a
+    square average of a visibility that also drops to 0 at the horizon would count
+    the cut twice in eq. 5 (``avg rho * avg V`` for a light across the horizon).  So
+    samples lower than ``z0 = 2/M`` (M the cubemap resolution: the cube texel holding
+    the direction then lies above the horizon, so its bit was traced), the disk rim
+    and the square's corners outside the disk, read the visibility at height ``z0``
+    along their azimuth: a boundary meeting the horizon continues straight below it.
+    """
     n = int(resolution)
     P = len(normals)
-    px, py, _, inside = disk_texel_samples(n, sub)
-    local = rsl_disk_to_hemisphere(px, py).reshape(-1, 3)
-    inside = inside.reshape(-1)
-    local = local[inside]
+    px, py, _, _ = disk_texel_samples(n, sub)
+    # below the height z0 (|p|^2 = 1 - z): read at z0 along the same azimuth
+    r_low = math.sqrt(1.0 - 2.0 / cube.resolution)
+    scale = np.minimum(1.0, r_low / np.maximum(np.hypot(px, py), 1e-12))
+    local = rsl_disk_to_hemisphere(px * scale, py * scale).reshape(-1, 3)
     t, b = orthonormal_frame(np.asarray(normals, dtype=np.float64))
     nrm = np.asarray(normals, dtype=np.float64)
     frames = np.stack([t, b, nrm], axis=2).astype(np.float32)       # (P, 3 world, 3 local)
     local_t = np.ascontiguousarray(local.T, dtype=np.float32)        # (3, S)
     out = np.zeros((P, n, n), dtype=np.float32)
-    m = n * sub
     packed = np.asarray(bits, dtype=np.uint8)
     nbytes = packed.shape[1]
     for a in range(0, P, chunk):
@@ -431,9 +437,7 @@ def visibility_maps(bits: np.ndarray, normals: np.ndarray, cube: Cubemap, resolu
         # read the packed bits directly (np.packbits order: most significant bit first)
         byte = np.take_along_axis(packed[a:e], tex >> 3, axis=1) if nbytes else tex * 0
         got = ((byte >> (7 - (tex & 7)).astype(np.uint8)) & 1).astype(np.float32)
-        full = np.zeros((e - a, m * m), dtype=np.float32)
-        full[:, inside] = got
-        out[a:e] = full.reshape(e - a, n, sub, n, sub).mean(axis=(2, 4))
+        out[a:e] = got.reshape(e - a, n, sub, n, sub).mean(axis=(2, 4))
     return out
 
 
@@ -507,9 +511,19 @@ def _bilinear_centres(T, x, y, lead):
 
 def visibility_sat(maps: np.ndarray) -> np.ndarray:
     """Per-vertex SAT of the visibility maps' texel integrals, (P, N+1, N+1): the exact
-    box-integral option of §4.3."""
+    box-integral option of §4.3.
+
+    Anchored at the disk centre (§2's GPU precision problem, the centred table of
+    Hensley et al.): ``S(i, j)`` is the signed integral from the centre corner
+    ``(N/2, N/2)`` to ``(i, j)``, i.e. the corner SAT minus its centre row and column
+    (a function of ``i`` alone plus one of ``j`` alone, which cancels in the four
+    look-ups of a box), so the values stay within a quadrant's area (1 instead of 4)
+    and a float32 box near the normal, where most lights are, keeps its digits."""
     n = maps.shape[-1]
-    return summed_area(np.asarray(maps, dtype=np.float64) * (2.0 / n) ** 2).astype(np.float32)
+    S = summed_area(np.asarray(maps, dtype=np.float64) * (2.0 / n) ** 2)
+    m = n // 2
+    S = S - S[..., :, m:m + 1] - S[..., m:m + 1, :] + S[..., m:m + 1, m:m + 1]
+    return S.astype(np.float32)
 
 
 # --------------------------------------------------------------------------- #
@@ -697,13 +711,30 @@ def truncated(model: ClusteredPCA, eigen: int) -> ClusteredPCA:
                         model.coeffs[:, :eigen].copy())
 
 
+def _spread(X: np.ndarray, chunk: int = 4096) -> float:
+    """``sum |x - mean|²`` over the rows (float64), or ``sum |x|²`` when the rows are
+    all equal: the scale of :func:`relative_error` and :func:`compress_by_budget`.
+
+    Measured about the mean, a constant part of the vectors does not loosen the
+    budget: the VDT of an unoccluded point is the constant "no boundary" value, and
+    against the plain norm those would let the budget spend its whole error on the
+    points with shadow boundaries."""
+    mu = np.asarray(X, np.float64).mean(0)
+    spread = total = 0.0
+    for a in range(0, len(X), chunk):
+        x = np.asarray(X[a:a + chunk], np.float64)
+        spread += float(((x - mu) ** 2).sum())
+        total += float((x * x).sum())
+    return spread if spread > 1e-12 * total else total
+
+
 def relative_error(vectors: np.ndarray, model: ClusteredPCA, chunk: int = 4096) -> float:
-    num = den = 0.0
+    """RMS reconstruction error relative to the vectors' RMS spread about their mean."""
+    num = 0.0
     for a in range(0, len(vectors), chunk):
         x = np.asarray(vectors[a:a + chunk], np.float64)
         num += float(((x - model.reconstruct(a, a + chunk)) ** 2).sum())
-        den += float((x * x).sum())
-    return float(np.sqrt(num / max(den, 1e-300)))
+    return float(np.sqrt(num / max(_spread(vectors, chunk), 1e-300)))
 
 
 #: cluster counts and eigenvector counts tried by :func:`compress_by_budget`
@@ -713,7 +744,8 @@ CPCA_EIGEN = (4, 8, 16, 32)
 
 def compress_by_budget(vectors: np.ndarray, budget: float, seed: int = 0):
     """The cheapest (clusters, eigenvectors) pair -- fewest stored floats -- whose
-    relative RMS error is within ``budget``; pairs that would not compress at least
+    relative RMS error (:func:`relative_error`: against the spread about the mean
+    vector) is within ``budget``; pairs that would not compress at least
     2:1 or leave fewer than 16 vectors per cluster are skipped, and when none meets
     the budget the most accurate one tried is kept.  One clustering per cluster
     count, truncated for smaller eigenvector counts.  Returns ``(model, error,
@@ -725,7 +757,7 @@ def compress_by_budget(vectors: np.ndarray, budget: float, seed: int = 0):
                    key=lambda t: t[0])
     pairs = [p for p in pairs if 2 * p[0] <= X.size] or pairs[:1]
     fulls, best = {}, None
-    total = float(np.einsum("pd,pd->", X, X, dtype=np.float64))
+    total = _spread(X)
     for _, C, E in pairs:
         if C not in fulls:
             full = clustered_pca(X, C, max(e for _, c, e in pairs if c == C), seed=seed)

@@ -227,8 +227,9 @@ class RSLMethod(Method):
                 default="VDT"),
             "rsl_cpca_error": FloatProperty(
                 name="VDT Compression Error", default=0.02, min=1e-4, max=0.5,
-                description="Precompute: relative RMS error allowed when compressing the "
-                            "per-vertex distance tables with clustered PCA"),
+                description="Precompute: RMS error allowed when compressing the per-vertex "
+                            "distance tables with clustered PCA, relative to their spread "
+                            "about the mean table"),
             "rsl_gpu": BoolProperty(
                 name="GPU Pass", default=True, update=upd,
                 description="Shade the vertices in a GLSL pass (one texel per vertex) when a GPU "
