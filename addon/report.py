@@ -255,34 +255,22 @@ class ReportRun:
     def _time_frames(self, state, view, projection, w, h, persp):
         """Relit frames: each one turns the environment to an angle not drawn before,
         so nothing cached per lighting is reused (what PRT is for); the camera stays."""
-        from .engine import render_pixels
-        world, background = state.world, state.background
-        times = []
-        for k in range(self.repeats + 1):                 # the first one warms up
-            self._frames += 1
-            state.world = rotated_world(world, 0.05 + 0.37 * self._frames)
-            if background is not None:                    # same pixels: no texture upload
-                state.background = (state.world, background[1])
-            t0 = time.perf_counter()
-            render_pixels(state, view, projection, w, h, True, persp, 1)
-            if k:
-                times.append(time.perf_counter() - t0)
-        state.world, state.background = world, background
-        return times
+        return self._relit_times([state], self.repeats, view, projection, w, h, persp)[0]
 
-    def _head_to_head(self, states, view, projection, w, h, persp):
-        """Relit frames of several states *interleaved* (one frame each per round, every
-        frame at an angle not drawn before), ``3 * repeats`` rounds after a warm-up one:
-        the machine's load then weighs on each alike (for the AUTO check)."""
+    def _relit_times(self, states, rounds, view, projection, w, h, persp):
+        """Seconds of ``rounds`` relit frames per state, after a warm-up round; with
+        several states the frames are *interleaved* (one each per round), so the
+        machine's load weighs on each alike (the AUTO check).  Every frame turns the
+        environment to an angle not drawn before."""
         from .engine import render_pixels
         times = [[] for _ in states]
         saved = [(st.world, st.background) for st in states]
-        for k in range(3 * self.repeats + 1):
+        for k in range(rounds + 1):                       # the first round warms up
             for i, st in enumerate(states):
                 world, background = saved[i]
                 self._frames += 1
                 st.world = rotated_world(world, 0.05 + 0.37 * self._frames)
-                if background is not None:
+                if background is not None:                # same pixels: no texture upload
                     st.background = (st.world, background[1])
                 t0 = time.perf_counter()
                 render_pixels(st, view, projection, w, h, True, persp, 1)
@@ -294,7 +282,7 @@ class ReportRun:
 
     def _auto_check(self, auto_state, target, view, projection, w, h, persp):
         """AUTO against the fastest fixed method/budget of the sweep that meets AUTO's
-        target, timed interleaved (:meth:`_head_to_head`) with the stored data AUTO set up
+        target, timed interleaved (:meth:`_relit_times`) with the stored data AUTO set up
         (a fixed method reads the same stored data, with its budget as the setting)."""
         fixed = core_report.fastest_meeting([r for r in self.rows if r["method"] != "AUTO"],
                                             target)
@@ -308,8 +296,8 @@ class ReportRun:
         if method.budget and fixed["label"]:
             prop = method.budget[0]
             other.settings[prop] = type(getattr(self.scene.prt, prop))(fixed["label"])
-        t_auto, t_fixed = self._head_to_head([auto_state, other], view, projection, w, h,
-                                             persp)
+        t_auto, t_fixed = self._relit_times([auto_state, other], 3 * self.repeats, view,
+                                            projection, w, h, persp)
         a, f = statistics.median(t_auto), statistics.median(t_fixed)
         return dict(target=target, fixed=f"{fixed['method']} {fixed['budget']}".strip(),
                     fixed_error=fixed.get("error_ref"), auto_error=auto_row.get("error_ref"),

@@ -719,7 +719,8 @@ def _spread(X: np.ndarray, chunk: int = 4096) -> float:
     budget: the VDT of an unoccluded point is the constant "no boundary" value, and
     against the plain norm those would let the budget spend its whole error on the
     points with shadow boundaries."""
-    mu = np.asarray(X, np.float64).mean(0)
+    mu = sum(np.asarray(X[a:a + chunk], np.float64).sum(0)
+             for a in range(0, len(X), chunk)) / max(len(X), 1)
     spread = total = 0.0
     for a in range(0, len(X), chunk):
         x = np.asarray(X[a:a + chunk], np.float64)
