@@ -1694,12 +1694,15 @@ glossy_blocks.__doc__ = _glossy_blocks.__doc__
 
 def for_chunks(count: int, chunk: int, fn, threads: int | None = None):
     """``fn(a, b)`` over chunks of ``range(count)`` on all cores; returns the results in order."""
-    spans = [(a, min(count, a + chunk)) for a in range(0, count, chunk)]
-    threads = min(len(spans), threads or _os.cpu_count() or 1)
-    if threads <= 1:
-        return [fn(a, b) for a, b in spans]
-    with _Pool(max_workers=threads) as pool:
-        return [f.result() for f in [pool.submit(fn, a, b) for a, b in spans]]
+    spans = list(enumerate((a, min(count, a + chunk)) for a in range(0, count, chunk)))
+    out = [None] * len(spans)
+
+    def run(share):
+        for i, (a, b) in share:
+            out[i] = fn(a, b)
+
+    _in_threads(spans, run, threads)
+    return out
 
 
 def shade_points(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, positions, normals,
