@@ -48,6 +48,15 @@ def _eye(view_matrix: Matrix, is_perspective: bool):
     return None, np.asarray(forward, dtype=np.float64) / max(np.linalg.norm(forward), 1e-30)
 
 
+def frame_camera(view: Matrix, projection: Matrix, width: int, height: int, eye,
+                 view_dir) -> dict:
+    """The camera a frame is drawn with, for methods that weigh errors by what the image
+    shows (AUTO): world-to-clip matrix, size in pixels, eye (perspective) or direction
+    toward an orthographic camera (as :func:`_eye` returns them)."""
+    return dict(clip=np.array(projection @ view, dtype=np.float64), width=int(width),
+                height=int(height), eye=eye, view_dir=view_dir)
+
+
 def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, width: int,
                 height: int, transparent: bool, supersampling: int = 1,
                 object_draws=None) -> np.ndarray:
@@ -67,6 +76,7 @@ def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: in
                   transparent: bool, is_perspective: bool, supersampling: int = 1) -> np.ndarray:
     """Shade for this view and draw: the engine's one drawing path (viewport and F12)."""
     eye, view_dir = _eye(view, is_perspective)
+    state.camera = frame_camera(view, projection, width, height, eye, view_dir)
     object_draws = state.draw_objects(eye, view_dir)
     radiance = None if object_draws is not None else state.shade(eye, view_dirs_for=view_dir)
     return draw_pixels(state, radiance, view, projection, width, height, transparent,
@@ -190,6 +200,8 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         scene = depsgraph.scene
         width, height = region.width, region.height
         eye, view_dir = _eye(rv3d.view_matrix, rv3d.is_perspective)
+        state.camera = frame_camera(rv3d.view_matrix, rv3d.window_matrix, width, height,
+                                    eye, view_dir)
         object_draws = state.draw_objects(eye, view_dir)
         radiance = None
         if object_draws is None:

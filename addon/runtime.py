@@ -118,6 +118,9 @@ class FrameState:
         self.settings: dict = {}     # scene.prt values of every method's settings
         self.lamps: list = []        # core.sg_lighting.Lamp of the visible lights
         self.background = None       # (world, GPU texture) cached by the engine
+        #: the camera of the frame being drawn (set by the engine before shading):
+        #: dict(clip=4×4 world-to-clip, width, height, eye, view_dir), or None
+        self.camera: dict | None = None
 
     # ------------------------------------------------------------------ sync
     def sync(self, depsgraph):

@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Speed-against-error reports (``prt.report``) on held-out scenes.
 
-    .venv/bin/python bench/report.py [--scenes demo spot_courtyard teapot_forest]
+    .venv/bin/python bench/report.py [--scenes demo spot_courtyard teapot_forest
+                                               suzanne_sunrise_glossy]
                                      [--resolution 200x150] [--cuts 32] [--repeats 3] [--cycles]
                                      [--stability] [--out out/report] [--docs]
 
@@ -40,6 +41,23 @@ def _diffuse(ob, name, colour):
     ob.data.materials.append(mat)
 
 
+def _glossy(ob, name, colour, roughness):
+    """Cycles Glossy BSDF, Beckmann (the issue 3/5 glossy material)."""
+    import bpy
+    mat = bpy.data.materials.new(name)
+    nt = mat.node_tree
+    for node in list(nt.nodes):
+        if node.type == "BSDF_PRINCIPLED":
+            nt.nodes.remove(node)
+    node = nt.nodes.new("ShaderNodeBsdfGlossy")
+    node.distribution = "BECKMANN"
+    node.inputs["Color"].default_value = colour
+    node.inputs["Roughness"].default_value = roughness
+    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    ob.data.materials.clear()
+    ob.data.materials.append(mat)
+
+
 def build(name: str, cuts: int):
     """The held-out scenes: a mesh from /work/shared/data/meshes on a diffuse grid."""
     scenes.reset()
@@ -55,17 +73,25 @@ def build(name: str, cuts: int):
         scenes.add_world("forest", rotation_z=-0.4)
         ground = scenes.add_ground(cuts=cuts)
         ob = scenes.add_obj(MESHES / "teapot.obj", height=1.2)
+    elif name == "suzanne_sunrise_glossy":
+        scenes.add_world("sunrise", rotation_z=2.0)
+        ground = scenes.add_ground(cuts=cuts)
+        ob = scenes.add_obj(MESHES / "suzanne.obj", height=1.2)
     else:
         raise SystemExit(f"unknown scene {name}")
     _diffuse(ground, "Ground", (0.8, 0.8, 0.8, 1.0))
-    _diffuse(ob, "Object", (0.75, 0.55, 0.4, 1.0))
+    if name.endswith("_glossy"):
+        _glossy(ob, "Object", (0.9, 0.7, 0.5, 1.0), 0.3)
+    else:
+        _diffuse(ob, "Object", (0.75, 0.55, 0.4, 1.0))
     scenes.add_camera()
     return ob
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--scenes", nargs="+", default=["demo", "spot_courtyard", "teapot_forest"])
+    p.add_argument("--scenes", nargs="+",
+                   default=["demo", "spot_courtyard", "teapot_forest", "suzanne_sunrise_glossy"])
     p.add_argument("--resolution", default="200x150")
     p.add_argument("--cuts", type=int, default=32, help="ground grid subdivisions")
     p.add_argument("--repeats", type=int, default=3)

@@ -191,3 +191,61 @@ def test_auto_sizes_the_light_count_between_the_listed_values(monkeypatch):
                if _rel(ground(_state("RSL", rsl_lights=k)).shade(eye), truth, area)
                <= 0.9 * target]
     assert meeting and choice["value"] < min(meeting), (choice, meeting)
+
+
+def _camera_frame(state, width=96, height=72):
+    """Draw ``state`` through the scene camera (the engine's path; it gives AUTO the
+    frame's camera): linear RGBA pixels."""
+    from prt_relight.addon.engine import render_pixels
+    from prt_relight.addon.report import _camera_matrices, ensure_gpu
+    scene = bpy.context.scene
+    ensure_gpu(scene)
+    view, projection, persp = _camera_matrices(scene, bpy.context.evaluated_depsgraph_get(),
+                                               width, height)
+    return render_pixels(state, view, projection, width, height, True, persp, 1)
+
+
+def test_auto_meets_the_target_in_the_camera_image(monkeypatch):
+    """Drawn through a camera, AUTO weighs each point's error by the pixels it covers
+    there: the image (not the surface) meets the target, and the reason says so."""
+    from prt_relight.core import report as core_report
+    _fewer_candidates(monkeypatch)
+    _scene()
+    target = 0.02
+    truth = _camera_frame(_state("REFERENCE"))
+    auto._CHOICE_CACHE.clear()
+    state = _state("AUTO", auto_error_target=target)
+    image = _camera_frame(state)
+    assert np.isfinite(image).all()
+    assert all("in the camera's image" in c["reason"] for c in auto.LAST_CHOICES), \
+        [(c["choice"], c["reason"]) for c in auto.LAST_CHOICES]
+    assert core_report.rel_l2(image, truth) <= target
+
+
+def test_auto_spends_nothing_on_objects_the_camera_does_not_see(monkeypatch):
+    """An object outside the frame weighs nothing in the image: it takes its fastest
+    measured option, however far off, while the visible one still meets the target."""
+    from prt_relight.addon.engine import frame_camera
+    from mathutils import Matrix
+    _fewer_candidates(monkeypatch)
+    monkeypatch.setattr(auto, "UNIFORM_TRIED", 0)      # the mix only: no timing decides
+    _scene()
+    auto._CHOICE_CACHE.clear()
+    state = _state("AUTO", auto_error_target=0.02)
+    # a camera above the grid's corner, looking straight down, Suzanne out of frame
+    view = Matrix.Translation((-2.2, -2.2, -2.0))
+    s = 1.0 / 0.6                                      # orthographic half width 0.6
+    projection = Matrix(((s, 0, 0, 0), (0, s, 0, 0), (0, 0, -0.1, 0), (0, 0, 0, 1)))
+    state.camera = frame_camera(view, projection, 64, 64, None, np.array([0.0, 0.0, 1.0]))
+    eye = np.array([2.2, 2.2, 2.0])
+    state.shade(eye)
+    chosen = {c["object"]: c for c in auto.LAST_CHOICES}
+    measured = {m["object"]: m for m in (v[-1] if isinstance(v, tuple) else v
+                                         for v in auto._CHOICE_CACHE.values())}
+    hidden = next(n for n in chosen if n != "Grid")
+    fastest = min((o for o in measured[hidden]["options"]
+                   if np.isfinite(o[1]) and np.isfinite(o[2])), key=lambda o: o[1])
+    assert (chosen[hidden]["method"], chosen[hidden]["setting"], chosen[hidden]["value"]) \
+        == fastest[0], (chosen[hidden], fastest)
+    assert chosen[hidden]["error"] == 0.0           # it shows no pixel
+    assert chosen["Grid"]["error"] <= 0.95 * 0.02

@@ -9,6 +9,16 @@ against REFERENCE's (worst probe; corners weighted by the surface area they stan
 as pixels are) and its *relit* shading time on the object (the
 lighting turned to an angle not used before, as in the report's per-frame timing).
 
+A diffuse-only object's error is view independent and kept per shading point; a glossy
+object is judged per probe on what that probe's image shows (corners weighted by the
+pixels they cover from it, :func:`_probe_pixel_weights`), as the worst probe's rel-L2.
+
+Camera: when the engine draws a frame it sets ``state.camera``; the per-point errors and
+reference norms are then weighed by the pixels each point covers in that image
+(:func:`core.screen.corner_pixel_weights`), so the frame's estimate is the image's rel-L2
+(measured a little above it, never below) and an object out of view costs nothing
+(:meth:`AutoMethod._on_camera`; margin :data:`SAFETY_CAMERA`).
+
 Sizing: integer budgets are sized to the target between the listed values.  When a
 method's first value meeting the object's limit is not its first one, AUTO bisects
 between the previous (missing) value and it with :meth:`Method.budget_between` (RSL
@@ -62,6 +72,11 @@ from . import REGISTRY, Method, register
 #: error is the drawn per-corner error; pixels weight corners by screen area).
 SAFETY = 0.75
 SAFETY_DIFFUSE = 0.9
+#: The same for diffuse-only objects when the frame's camera is known: their per-vertex
+#: errors are then weighed by the pixels each corner covers in that image
+#: (:func:`core.screen.corner_pixel_weights`), which leaves only interpolation inside
+#: triangles and antialiased edges between the estimate and the image's rel-L2.
+SAFETY_CAMERA = 0.95
 #: A candidate this many times the target off at a probe is not measured further.
 REJECT = 4.0
 #: Single methods timed against the mix on the whole scene (the fastest by estimate).
@@ -77,8 +92,15 @@ _ANGLE = [0.0]
 # Per-object selections: (name, id(bits), lighting content, target, materials, candidates);
 # the same environment turned (Mapping rotation) keeps the choice.
 _CHOICE_CACHE: dict = {}
-# The scene-level assignment for the newest tuple of per-object keys.
+# The scene-level assignment for the newest tuple of per-object keys (and camera).
 _SCENE_CACHE: dict = {}
+# Whole-scene relit times of assignments, per tuple of per-object keys: (visibility
+# arrays, {assignment: seconds}); a new camera picks among the same options, so it
+# times only assignments not timed before.
+_TIMED: dict = {}
+# Embree scene of the frame's triangles for the camera weights, per geometry (the
+# objects' mesh arrays, held with it).
+_OCCLUDERS: dict = {}
 #: The newest per-object choices (what the panel and the report show).
 LAST_CHOICES: list = []
 #: Number of selections run (tests check that unchanged objects are not re-selected).
@@ -143,6 +165,28 @@ def corner_area_weights(arrays) -> np.ndarray:
     for k in range(3):
         np.add.at(w, tri[:, k], area / 3.0)
     return w
+
+
+def _point_norm2(st, x) -> np.ndarray:
+    """Per shading point ``‖x‖²`` of per-corner values (corners of a point agree)."""
+    pts = st.points
+    c2 = np.sum(np.square(np.asarray(x, np.float64)), axis=-1)
+    total = np.bincount(pts.point_of_corner, weights=c2, minlength=pts.count)
+    count = np.bincount(pts.point_of_corner, minlength=pts.count)
+    return (total / np.maximum(count, 1)).astype(np.float32)
+
+
+def _probe_pixel_weights(st, eye, size: int = 128) -> np.ndarray:
+    """Per corner, the pixels it covers in a ``size``² image from probe ``eye`` looking
+    at the object's centre (the object alone; see :func:`core.screen.corner_pixel_weights`)."""
+    from ...core import screen
+    p = st.points.positions
+    centre = (p.min(axis=0) + p.max(axis=0)) / 2
+    dist = max(float(np.linalg.norm(np.asarray(eye) - centre)), 1e-9)
+    radius = max(float(np.linalg.norm(p.max(axis=0) - p.min(axis=0))) / 2, 1e-9)
+    fov = 2.0 * np.arctan(min(1.2 * radius / dist, 10.0))
+    clip = screen.look_at_clip(eye, centre, fov, near=dist * 1e-3, far=dist * 10.0)
+    return screen.corner_pixel_weights([st.arrays], clip, size, size, eye=eye)[0]
 
 
 def _weighted_norm2(x, w) -> float:
@@ -229,6 +273,12 @@ class AutoMethod(Method):
         truth = [ref.shade(_substate(state, one, "REFERENCE"), eye, None)[0] for eye in eyes]
         w = corner_area_weights(st.arrays)
         ref_norm2 = min(_weighted_norm2(t, w) for t in truth)
+        # a view-dependent object is judged per probe on what that probe's image shows
+        # (its back faces and self-hidden parts count nothing), by relative error
+        probe_w = [w] if view_free else [_probe_pixel_weights(st, eye) for eye in eyes]
+        probe_ref2 = [_weighted_norm2(t, pw) for t, pw in zip(truth, probe_w)]
+        point_ref2 = _point_norm2(st, truth[0])
+        point_err2 = {}     # per option: per-point squared error (view-independent objects)
         cube = directions.cubemap(state.resolution)
         open_sky = bool(np.array_equal(st.bits, runtime.open_visibility(st.points.normals,
                                                                         cube)))
@@ -249,16 +299,19 @@ class AutoMethod(Method):
             """Adds the option ``(m.id, prop, value)`` (error at the probes, relit time
             unless ``timed`` is false or it is far off); whether it meets ``limit``."""
             sub = _substate(state, one, m.id, prop, value)
-            err2 = 0.0
+            rel2 = 0.0      # worst probe's squared rel-L2 (absolute against black)
             if m is not ref:
-                for eye, expected in zip(eyes, truth):
+                for eye, expected, pw, r2 in zip(eyes, truth, probe_w, probe_ref2):
                     rad = m.shade(sub, eye, None)
                     e2 = (float("inf") if rad is None or not np.isfinite(rad[0]).all()
-                          else _weighted_norm2(rad[0] - expected, w))
-                    err2 = max(err2, e2)
-                    if err2 > (REJECT * target) ** 2 * ref_norm2:
-                        err2 = float("inf")     # far off at this probe: skip the others
+                          else _weighted_norm2(rad[0] - expected, pw))
+                    rel2 = max(rel2, e2 / r2 if r2 > 0 else e2)
+                    if rel2 > (REJECT * target) ** 2:
+                        rel2 = float("inf")     # far off at this probe: skip the others
                         break
+                    if view_free:
+                        point_err2[(m.id, prop, value)] = _point_norm2(st, rad[0] - expected)
+            err2 = rel2 * ref_norm2 if ref_norm2 > 0 else rel2
             finite = bool(np.isfinite(err2))
             seconds = relit_seconds(m, sub) if timed and finite else float("inf")
             options.append(((m.id, prop, value), seconds, err2))
@@ -291,7 +344,8 @@ class AutoMethod(Method):
                 print(f"PRT AUTO: {m.id} failed on '{st.name}': {exc}")
         notes = (["no occluders"] if open_sky else []) + (["diffuse only"] if view_free else [])
         return dict(object=st.name, options=options, ref_norm2=ref_norm2, limit=limit,
-                    notes=notes)
+                    notes=notes, view_free=view_free, point_ref2=point_ref2,
+                    point_err2=point_err2)
 
     def choices(self, state):
         """Per-object measurements (cached per object: only what changed is measured
@@ -312,10 +366,14 @@ class AutoMethod(Method):
             measured.append(runtime.per_visibility(
                 _CHOICE_CACHE, key, st.bits, lambda st=st: self._measure(state, st, target),
                 limit=256))
-        scene_key = tuple(keys)
+        camera = getattr(state, "camera", None)
+        cam_key = None if camera is None else (
+            np.round(np.asarray(camera["clip"], np.float64), 6).tobytes(),
+            camera["width"], camera["height"])
+        scene_key = (tuple(keys), cam_key)
         got = _SCENE_CACHE.get(scene_key)
         if got is None:
-            out = self._assign(state, measured, target)
+            out = self._assign(state, measured, target, tuple(keys))
             note = ("AUTO: " + ", ".join(f"{c['object']} → {c['choice']}" for c in out)
                     if out else None)
             got = (out, [(c["method"], c["setting"], c["value"]) for c in out], note)
@@ -363,10 +421,58 @@ class AutoMethod(Method):
         best = pick(hi)
         return spend_slack(best) if sum(o[2] for o in best) <= budget2 else best
 
-    def _assign(self, state, measured, target):
+    @staticmethod
+    def _on_camera(state, measured, target, objects_key):
+        """``measured`` weighed for the frame's camera (``state.camera``, set by the
+        engine): each point's squared error and reference norm count by the pixels its
+        corners cover in this image (:func:`core.screen.corner_pixel_weights`; hidden,
+        off-screen and back-facing surface counts nothing), so the frame's estimate is
+        the image's rel-L2 rather than the surface's.  Diffuse-only objects have their
+        per-point errors (view independent); a glossy object's probe rel-L2 is scaled
+        to its norm in the image.  Unchanged without a camera or when nothing shows."""
+        camera = getattr(state, "camera", None)
+        if camera is None or not measured:
+            return measured, False
+        from ...core import screen, visibility
+        arrays = [st.arrays for st in state.objects]
+        geometry = tuple(id(a) for a in arrays)         # the cache holds them: ids stay
+        got = _OCCLUDERS.get(geometry)
+        occluders = got[1] if got is not None else None
+        if occluders is None and visibility.have_embree():
+            occluders = visibility.build_occluder_scene(
+                np.concatenate([a.triangle_positions for a in arrays]))
+            _OCCLUDERS.clear()
+            _OCCLUDERS[geometry] = (arrays, occluders)
+        weights = screen.corner_pixel_weights(
+            arrays, camera["clip"], camera["width"],
+            camera["height"], eye=camera["eye"], view_dir=camera["view_dir"],
+            occluders=occluders)
+        out = []
+        for st, m, wc in zip(state.objects, measured, weights):
+            wp = np.bincount(st.points.point_of_corner, weights=wc, minlength=st.points.count)
+            ref2 = float(wp @ m["point_ref2"])
+            scale = ref2 / m["ref_norm2"] if m["ref_norm2"] > 0 else 1.0
+            options = []
+            for key, seconds, err2 in m["options"]:
+                per_point = m["point_err2"].get(key)
+                if per_point is not None and np.isfinite(err2):
+                    err2 = float(wp @ per_point)
+                elif np.isfinite(err2):
+                    err2 = err2 * scale
+                options.append((key, seconds, err2))
+            out.append(dict(m, options=options, ref_norm2=ref2,
+                            limit=(SAFETY_CAMERA if m["view_free"] else SAFETY) * target))
+        if sum(m["ref_norm2"] for m in out) <= 0:
+            return measured, False
+        return out, True
+
+    def _assign(self, state, measured, target, objects_key=None):
         """The frame's assignment: the Lagrangian per-object mix against the whole scene's
-        rel-L2 budget, timed (relit frames of the whole scene) against each single
-        candidate that also fits the budget; the fastest wins."""
+        rel-L2 budget (in the frame camera's image when known, else at the probes),
+        timed (relit frames of the whole scene) against each single candidate that also
+        fits the budget; the fastest wins.  Timings are kept per assignment, so a new
+        camera times only assignments not seen before."""
+        measured, on_camera = self._on_camera(state, measured, target, objects_key)
         limit = min(m["limit"] for m in measured) if measured else target
         total_ref2 = sum(m["ref_norm2"] for m in measured)
         budget2 = (limit ** 2) * total_ref2
@@ -400,21 +506,35 @@ class AutoMethod(Method):
         if len(options) > 1:
             eye = _probe_eyes(np.concatenate([st.points.positions for st in state.objects]),
                               1)[0]
+            # the timings of this scene's objects (their visibility arrays held with
+            # them, so an id in the key is never another object's)
+            bits = [st.bits for st in state.objects]
+            got = _TIMED.get(objects_key)
+            if got is None or objects_key is None or \
+                    not all(a is b for a, b in zip(got[0], bits)):
+                if len(_TIMED) > 16:
+                    _TIMED.clear()
+                got = _TIMED[objects_key] = (bits, {})
+            seen = got[1]
             for name, assignment in options.items():
-                times = []
-                for _ in range(TIMED_FRAMES + 1):
-                    _ANGLE[0] += 0.61
-                    sub = copy.copy(state)
-                    sub.world = _rotated(state.world, _ANGLE[0])
-                    t0 = time.perf_counter()
-                    self._shade_assigned(sub, assignment, eye, None)
-                    times.append(time.perf_counter() - t0)
-                timed[name] = min(times)
+                tkey = tuple(assignment)
+                if tkey not in seen:
+                    times = []
+                    for _ in range(TIMED_FRAMES + 1):
+                        _ANGLE[0] += 0.61
+                        sub = copy.copy(state)
+                        sub.world = _rotated(state.world, _ANGLE[0])
+                        t0 = time.perf_counter()
+                        self._shade_assigned(sub, assignment, eye, None)
+                        times.append(time.perf_counter() - t0)
+                    seen[tkey] = min(times)
+                timed[name] = seen[tkey]
         best = min(timed, key=timed.get) if timed else "mix"
         assignment = options[best]
         scene_rel = _rel(sum(k[a][2] for k, a in zip(by_key, assignment)), total_ref2)
+        where = "in the camera's image" if on_camera else "at the probes"
         if best == "mix":
-            why = (f"fastest mix within {limit:.2%} of the whole scene at the probes "
+            why = (f"fastest mix within {limit:.2%} of the whole scene {where} "
                    f"({scene_rel:.2%})")
             if timed:
                 why += f"; {timed['mix'] * 1e3:.2f} ms per relit frame, faster than " + \
@@ -422,7 +542,8 @@ class AutoMethod(Method):
                               if k != "mix")
         else:
             why = (f"one method for the whole scene is fastest ({timed[best] * 1e3:.2f} ms "
-                   f"per relit frame; the per-object mix {timed['mix'] * 1e3:.2f} ms)")
+                   f"per relit frame, {scene_rel:.2%} {where}; the per-object mix "
+                   f"{timed['mix'] * 1e3:.2f} ms)")
         out = []
         for m, k, a in zip(measured, by_key, assignment):
             o = k[a]
