@@ -555,11 +555,16 @@ def view_frames(normals: np.ndarray, views: np.ndarray):
 
 def visible_fraction(kind: str, table: np.ndarray, px, py, half) -> np.ndarray:
     """``avg_R V`` (P, K) for per-vertex tables: ``"VDT"`` (eq. 9, one look-up) or
-    ``"SAT"`` (exact box integral of the visibility map, four look-ups)."""
+    ``"SAT"`` (exact box integral of the visibility map, four look-ups, averaged over
+    the part of the square inside the table: the map has no values beyond it, where a
+    square near the horizon reaches; 1 for a square wholly outside)."""
     lead = np.arange(len(table))[:, None]
     if kind == "VDT":
         return vdt_box(table, px, py, half, lead=lead)
-    return box_integral(table, px, py, half, lead=lead) / (2.0 * half) ** 2
+    area = _clipped_area(px, py, half)
+    inside = area > 1e-12
+    return np.where(inside, box_integral(table, px, py, half, lead=lead)
+                    / np.where(inside, area, 1.0), 1.0)
 
 
 class Evaluator:

@@ -83,7 +83,9 @@ float visibility(ivec2 tile, vec2 p, float h)
     float D = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
     return clamp((h + D) / (2.0 * h), 0.0, 1.0);
   }
-  return box(visTable, tile, visRes, p, h) / (4.0 * h * h);
+  /* SAT: the average over the part of the square inside the table (as core.rsl) */
+  float area = clipped_area(p, h);
+  return area > 1e-12 ? box(visTable, tile, visRes, p, h) / area : 1.0;
 }
 
 void main()

@@ -176,6 +176,27 @@ def test_vdt_equals_box_integral_for_straight_boundaries():
             np.testing.assert_allclose(got_sat, [want0, want1], atol=1e-5)
 
 
+def test_sat_visibility_averages_the_part_of_the_square_inside_the_table():
+    """A square near the horizon reaches past the map's [-1, 1]² (no values there): the
+    SAT option averages over its inside part (not over the whole square, which would
+    count the outside as occluded); a square wholly outside is fully visible."""
+    n = 32
+    maps = np.zeros((1, n, n), np.float32)
+    maps[0, :, 24:] = 1.0                                 # visible for x > -1 + 24·2/n = 0.5
+    sat = rsl.visibility_sat(maps)
+    rng = np.random.default_rng(11)
+    for _ in range(40):
+        half = rng.uniform(0.1, 0.4)
+        px = rng.uniform(1.0 - half, 1.0 + 0.9 * half)     # straddles the right edge
+        py = rng.uniform(-0.5, 0.5)
+        lo, hi = px - half, min(px + half, 1.0)
+        want = max(0.0, hi - max(lo, 0.5)) / (hi - lo)
+        got = rsl.visible_fraction("SAT", sat, np.array([[px]]), np.array([[py]]), half)
+        assert got[0, 0] == pytest.approx(want, abs=1e-5)
+    outside = rsl.visible_fraction("SAT", sat, np.array([[1.5]]), np.array([[0.0]]), 0.2)
+    assert outside[0, 0] == 1.0
+
+
 def test_vdt_is_the_signed_distance():
     n = 32
     maps = np.zeros((1, n, n), np.float32)
