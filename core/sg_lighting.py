@@ -98,9 +98,7 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
        and the axes/log-sharpnesses refined by Levenberg-Marquardt (amplitudes
        projected out) on the **irradiance** error -- what eq. 39 uses.
     3. Stop when the relative L2 error of the unshadowed irradiance over the
-       normals of a 6x8^2 cubemap is <= ``tol``, or at ``max_lobes``; the fit
-       returned is the iteration with the smallest error (the refinement is local:
-       on Blender's 'sunrise' the 8-lobe refinement diverged to 220 %).
+       normals of a 6x8^2 cubemap is <= ``tol``, or at ``max_lobes``.
 
     Cubes finer than :data:`FIT_RESOLUTION` are box-filtered to it first.
     Returns ``(axes (J, 3), lam (J,), mu (J, 3), rel_error)`` in the cube's
@@ -146,7 +144,6 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
     rel = 1.0
     mu = np.zeros((0, 3))
     residual = Y.copy()
-    best_fit = None     # the refinement is local: a later, larger fit can end up worse
     while len(axes) < max_lobes:
         # greedy candidate (radiance-space gain)
         rw = residual * w
@@ -179,13 +176,11 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
         mu, res_e = solve_mu(G)
         rel = math.sqrt(float(np.sum(res_e * res_e))) / En
         residual = Y - (G @ mu) @ LUMINANCE
-        if best_fit is None or rel < best_fit[3]:
-            best_fit = (np.array(axes), np.array(lamv), mu, rel)
         if rel <= tol:
             break
-    if best_fit is None:
+    if not axes:
         return empty
-    return best_fit
+    return np.array(axes), np.array(lamv), mu, rel
 
 
 # --------------------------------------------------------------------------- prefiltered environment

@@ -288,30 +288,3 @@ def test_lamp_sg_units_match_cycles(kind, tmp_path):
     print(f"{kind}: Cycles vs SG lamp on a Lambert plane: rel L2 {err:.4f}, "
           f"mean ratio {ours.mean() / cyc.mean():.4f}")
     assert err <= 0.04
-
-
-def test_environment_fit_keeps_its_best_iteration_on_a_sunrise():
-    """The lobes are refined locally (Levenberg-Marquardt), so a fit with more lobes can
-    end worse than one with fewer (on Blender's 'sunrise' the 8th refinement diverged to
-    220 % irradiance error): the fit returns its best iteration, never worse than a
-    smaller one."""
-    import glob
-    import pathlib
-    import prt_relight
-    root = pathlib.Path(prt_relight.__file__).parent
-    hits = glob.glob(str(root / ".venv/lib/python3*/site-packages/bpy/*/datafiles/"
-                              "studiolights/world/sunrise.exr"))
-    if not hits:
-        pytest.skip("Blender's bundled HDRIs are not in .venv")
-    world = envmap.WorldLighting(image=envmap.load_equirect(hits[0]))
-    cube = cubemap(32)
-    L = np.asarray(world.to_cubemap(32).radiance, np.float64)
-    few = sg_lighting.fit_environment_sgs(L, cube, max_lobes=4, tol=0.0)
-    more = sg_lighting.fit_environment_sgs(L, cube, max_lobes=8, tol=0.0)
-    assert few[3] < 0.05
-    assert more[3] <= few[3]
-    # the error returned is the returned lobes' own
-    normals, C = sg_lighting._irradiance_operator(cube)
-    E = C @ L
-    fit = sg_lighting.sg_mixture_radiance(cube.directions, more[0], more[1], more[2])
-    assert np.linalg.norm(C @ fit - E) / np.linalg.norm(E) == pytest.approx(more[3], rel=1e-6)

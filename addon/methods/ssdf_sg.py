@@ -60,23 +60,17 @@ def derive_object(bits, normals, cube, settings, cancel=None, progress=None):
                          cancel=cancel, progress=progress)
 
 
-#: Relative L2 error of the unshadowed irradiance at which the diffuse SG fit stops
-#: adding lobes (:func:`core.sg_lighting.fit_environment_sgs`).
-ENV_FIT_TOLERANCE = 0.03
-
-
 def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes: int = 8):
     """``(axes, lam, mu)`` diffuse SG fit and the SG-prefiltered pyramid of the
     world's image without rotation/strength (texture space), cached per image."""
     ident = runtime.env_key(world, resolution)[0]
-    key = (ident, resolution, max_lobes, ENV_FIT_TOLERANCE)
+    key = (ident, resolution, max_lobes)
     hit = _LIGHTING_CACHE.get(key)
     if hit is None:
         base = envmap.WorldLighting(image=world.image, color=world.color, strength=1.0)
         cube = directions.cubemap(resolution)
         radiance = np.asarray(base.to_cubemap(resolution).radiance, np.float64)
-        axes, lam, mu, rel = sg_lighting.fit_environment_sgs(radiance, cube, max_lobes=max_lobes,
-                                                             tol=ENV_FIT_TOLERANCE)
+        axes, lam, mu, rel = sg_lighting.fit_environment_sgs(radiance, cube, max_lobes=max_lobes)
         pre = sg_lighting.PrefilteredEnvironment(radiance, cube)
         hit = ((axes, lam, mu, rel), pre)
         _LIGHTING_CACHE.clear()
