@@ -11,7 +11,8 @@ lighting turned to an angle not used before, as in the report's per-frame timing
 
 A diffuse-only object's error is view independent and kept per shading point; a glossy
 object is judged per probe on what that probe's image shows (corners weighted by the
-pixels they cover from it, :func:`_probe_pixel_weights`), as the worst probe's rel-L2.
+pixels they cover from it, :func:`_probe_pixel_weights`): the worst probe's squared
+error over the dimmest probe's norm.
 
 Camera: when the engine draws a frame it sets ``state.camera``; the per-point errors and
 reference norms are then weighed by the pixels each point covers in that image
@@ -276,7 +277,7 @@ class AutoMethod(Method):
         # a view-dependent object is judged per probe on what that probe's image shows
         # (its back faces and self-hidden parts count nothing), by relative error
         probe_w = [w] if view_free else [_probe_pixel_weights(st, eye) for eye in eyes]
-        probe_ref2 = [_weighted_norm2(t, pw) for t, pw in zip(truth, probe_w)]
+        probe_ref2_min = min(_weighted_norm2(t, pw) for t, pw in zip(truth, probe_w))
         point_ref2 = _point_norm2(st, truth[0])
         point_err2 = {}     # per option: per-point squared error (view-independent objects)
         cube = directions.cubemap(state.resolution)
@@ -299,13 +300,17 @@ class AutoMethod(Method):
             """Adds the option ``(m.id, prop, value)`` (error at the probes, relit time
             unless ``timed`` is false or it is far off); whether it meets ``limit``."""
             sub = _substate(state, one, m.id, prop, value)
-            rel2 = 0.0      # worst probe's squared rel-L2 (absolute against black)
+            # the worst probe's squared error over the dimmest probe's norm (a glossy
+            # object's highlights move between views: the camera's may be the worst
+            # error where the least light is); absolute against black
+            worst_e2, rel2 = 0.0, 0.0
             if m is not ref:
-                for eye, expected, pw, r2 in zip(eyes, truth, probe_w, probe_ref2):
+                for eye, expected, pw in zip(eyes, truth, probe_w):
                     rad = m.shade(sub, eye, None)
                     e2 = (float("inf") if rad is None or not np.isfinite(rad[0]).all()
                           else _weighted_norm2(rad[0] - expected, pw))
-                    rel2 = max(rel2, e2 / r2 if r2 > 0 else e2)
+                    worst_e2 = max(worst_e2, e2)
+                    rel2 = worst_e2 / probe_ref2_min if probe_ref2_min > 0 else worst_e2
                     if rel2 > (REJECT * target) ** 2:
                         rel2 = float("inf")     # far off at this probe: skip the others
                         break
