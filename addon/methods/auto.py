@@ -44,7 +44,7 @@ pixels weighting corners by screen area (:data:`SAFETY_DIFFUSE` for diffuse-only
 Shortcuts that make the measurement cheap:
 
 * diffuse-only objects (no glossy lobe, no dielectric layer) are view independent: one
-  probe instead of three (and no candidate evaluates a BRDF table for them);
+  probe instead of four (and no candidate evaluates a BRDF table for them);
 * a candidate :data:`REJECT` × the target off at a probe is not run at the others;
 * a method's budget values are listed cheapest first (SH order, wavelet terms, RSL
   count, PCA error budget, BLOCKS tolerance), so values after the first one that meets
@@ -127,7 +127,10 @@ def _probe_eyes(p, count: int):
     lo, hi = p.min(axis=0), p.max(axis=0)
     centre = (lo + hi) / 2
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
-    dirs = np.array([[0.0, -1.0, 0.5], [0.87, 0.5, 0.5], [-0.87, 0.5, 0.5]])[:count]
+    # three views from 27° above around the object, then one from 3° above (a glossy
+    # object's highlights and grazing reflections differ most there)
+    dirs = np.array([[0.0, -1.0, 0.5], [0.87, 0.5, 0.5], [-0.87, 0.5, 0.5],
+                     [0.0, 1.0, 0.05]])[:count]
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     return [centre + 3.0 * radius * d for d in dirs]
 
@@ -269,7 +272,7 @@ class AutoMethod(Method):
         SELECTIONS[0] += 1
         ref = REGISTRY["REFERENCE"]
         view_free = _is_view_independent(st)
-        eyes = _probe_eyes(st.points.positions, 1 if view_free else 3)
+        eyes = _probe_eyes(st.points.positions, 1 if view_free else 4)
         one = [st]
         truth = [ref.shade(_substate(state, one, "REFERENCE"), eye, None)[0] for eye in eyes]
         w = corner_area_weights(st.arrays)
