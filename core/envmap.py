@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .directions import Cubemap, cubemap, direction_to_texel
+from .directions import Cubemap, cubemap, direction_to_texel, texel_of_components
 
 try:  # OpenImageIO ships inside Blender 4.5/5.0, not 4.2.
     import OpenImageIO as _oiio
@@ -195,32 +195,67 @@ def _supersample_for(height: int, resolution: int) -> int:
     return int(max(1, np.ceil(8.0 * pixel_angle / texel_angle)))
 
 
-def resample_equirect_to_cubemap(image: np.ndarray, cube: Cubemap, rotation=None,
-                                 supersample: int | None = None) -> CubeLighting:
-    """Energy-preserving resampling of an equirect image to ``cube`` texels."""
-    img = np.asarray(image, dtype=np.float32)
+# Rotation-independent parts of the resampling, for the newest image and cube size:
+# the supersampled pixels' unit directions and energies (float32, 28 bytes a sample).
+# A turned world (Mapping rotation: relit frames) only re-bins them.  Images with more
+# samples than this are prepared again per call, band by band (bounded memory).
+_RESAMPLE_CACHE: dict = {}
+RESAMPLE_CACHE_SAMPLES = 2_200_000
+
+
+def _resample_bands(img: np.ndarray, s: int):
+    """Per band of rows: (directions (n, 3), RGB energy (n, 3), luminance energy (n,)),
+    float32, of ``img``'s samples at supersampling ``s``."""
     h, w, _ = img.shape
-    s = _supersample_for(h, cube.resolution) if supersample is None else int(supersample)
-    R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
-    energy = np.zeros((cube.size, 3))
-    moment = np.zeros((cube.size, 3))       # sum of Y * w * dw
-    lum_energy = np.zeros(cube.size)        # sum of Y * dw
-    # Process in bands of rows so memory stays bounded for large images.
     rows_per_band = max(1, 2_000_000 // (w * s * s))
     for r0 in range(0, h, rows_per_band):
         r1 = min(h, r0 + rows_per_band)
         dirs, sa = _band_directions(h, w, s, r0, r1)
-        world = dirs @ R            # tex = R @ world  <=>  world = R.T @ tex
-        texel = direction_to_texel(world, cube.resolution).reshape(-1)
         px = np.repeat(np.repeat(img[r0:r1], s, axis=0), s, axis=1).reshape(-1, 3)
-        wts = sa.reshape(-1)
+        energy = px.astype(np.float64) * sa.reshape(-1)[:, None]
+        yield (dirs.reshape(-1, 3).astype(np.float32), energy.astype(np.float32),
+               (energy @ LUMINANCE).astype(np.float32))
+
+
+def _resample_parts(img: np.ndarray, s: int):
+    """:func:`_resample_bands` of ``img``, kept for the newest small enough image."""
+    if img.shape[0] * img.shape[1] * s * s > RESAMPLE_CACHE_SAMPLES:
+        return _resample_bands(img, s)
+    key = (id(img), img.shape, s)
+    got = _RESAMPLE_CACHE.get(key)
+    if got is not None and got[0] is img:
+        return got[1]
+    bands = list(_resample_bands(img, s))
+    _RESAMPLE_CACHE.clear()
+    _RESAMPLE_CACHE[key] = (img, bands)
+    return bands
+
+
+def resample_equirect_to_cubemap(image: np.ndarray, cube: Cubemap, rotation=None,
+                                 supersample: int | None = None) -> CubeLighting:
+    """Energy-preserving resampling of an equirect image to ``cube`` texels.
+
+    Each (super)sampled pixel's energy goes to the texel its centre direction falls in
+    (directions in float32; the image's directions and energies are kept between calls
+    for the same image array, so turning the world only re-bins them).  The image must
+    not be modified in place between calls (a new array is a new image)."""
+    img = image if isinstance(image, np.ndarray) and image.dtype == np.float32 \
+        else np.asarray(image, dtype=np.float32)
+    h, w, _ = img.shape
+    s = _supersample_for(h, cube.resolution) if supersample is None else int(supersample)
+    R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
+    R32 = R.astype(np.float32)
+    energy = np.zeros((cube.size, 3))
+    moment = np.zeros((cube.size, 3))       # sum of Y * w * dw
+    lum_energy = np.zeros(cube.size)        # sum of Y * dw
+    for dirs, e, yw in _resample_parts(img, s):
+        world = dirs @ R32          # tex = R @ world  <=>  world = R.T @ tex
+        texel = texel_of_components(world[:, 0], world[:, 1], world[:, 2], cube.resolution)
         for c in range(3):
-            energy[:, c] += np.bincount(texel, weights=px[:, c] * wts, minlength=cube.size)
-        yw = (px.astype(np.float64) @ LUMINANCE) * wts
+            energy[:, c] += np.bincount(texel, weights=e[:, c], minlength=cube.size)
         lum_energy += np.bincount(texel, weights=yw, minlength=cube.size)
-        w3 = world.reshape(-1, 3)
         for c in range(3):
-            moment[:, c] += np.bincount(texel, weights=yw * w3[:, c], minlength=cube.size)
+            moment[:, c] += np.bincount(texel, weights=yw * world[:, c], minlength=cube.size)
     lit = lum_energy > 0
     dirs = np.array(cube.mean_directions)
     dirs[lit] = moment[lit] / lum_energy[lit, None]
