@@ -34,7 +34,7 @@ from ..core import report as core_report
 from ..core import visibility
 from . import methods, precompute, scene_build, scene_export
 from .operators import RUNNING, end_modal
-from .runtime import FrameState
+from .runtime import FrameState, rotated_world
 
 _GPU_READY = False
 
@@ -55,16 +55,6 @@ def ensure_gpu(scene):
         _GPU_READY = True
     finally:
         r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
-
-
-def rotated_world(world, angle: float):
-    """``world`` turned by ``angle`` about +Z (same pixels, a new lighting key)."""
-    import copy
-    c, s = math.cos(angle), math.sin(angle)
-    out = copy.copy(world)
-    out.rotation = np.asarray(world.rotation) @ np.array([[c, -s, 0.0], [s, c, 0.0],
-                                                           [0.0, 0.0, 1.0]])
-    return out
 
 
 def sweep(method_ids=None, budgets_per_method=None):

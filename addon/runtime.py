@@ -8,6 +8,7 @@ returns per-corner radiance for each object with the active method.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 
 import numpy as np
@@ -24,17 +25,40 @@ _VIS_CACHE_MAX = 16
 _ENV_CACHE: dict = {}
 
 
+# Content hashes of the newest environment images, per array: (image, key).  Every sync
+# and every turned copy of a world shares the exported pixel array, so it is hashed
+# once (an array is not modified in place; new pixels are a new array).
+_CONTENT_KEYS: dict = {}
+
+
+def _image_key(img: np.ndarray):
+    got = _CONTENT_KEYS.get(id(img))
+    if got is not None and got[0] is img:
+        return got[1]
+    key = (img.shape, hashlib.sha1(np.ascontiguousarray(img).view(np.uint8)).hexdigest())
+    if len(_CONTENT_KEYS) >= 4:
+        _CONTENT_KEYS.pop(next(iter(_CONTENT_KEYS)))
+    _CONTENT_KEYS[id(img)] = (img, key)
+    return key
+
+
 def env_key(world: envmap.WorldLighting, resolution: int):
-    """Content key of the lighting (pixels hashed once per WorldLighting object)."""
-    ident = getattr(world, "_content_key", None)
-    if ident is None:
-        img = world.image
-        if img is None:
-            ident = ("color",) + tuple(float(c) for c in world.color)
-        else:
-            ident = (img.shape, hashlib.sha1(np.ascontiguousarray(img).view(np.uint8)).hexdigest())
-        world._content_key = ident
+    """Key of the lighting: its content (the image's pixels hashed once per array),
+    strength, rotation and the cubemap resolution."""
+    img = world.image
+    ident = (("color",) + tuple(float(c) for c in world.color) if img is None
+             else _image_key(img))
     return (ident, float(world.strength), world.rotation.round(9).tobytes(), resolution)
+
+
+def rotated_world(world: envmap.WorldLighting, angle: float) -> envmap.WorldLighting:
+    """``world`` turned by ``angle`` about +Z (same pixels, a new lighting key): the
+    relit frames of the report and of AUTO's timings."""
+    c, s = np.cos(angle), np.sin(angle)
+    out = copy.copy(world)
+    out.rotation = np.asarray(world.rotation) @ np.array([[c, -s, 0.0], [s, c, 0.0],
+                                                           [0.0, 0.0, 1.0]])
+    return out
 
 
 def redraw_viewports(self=None, context=None):

@@ -1150,6 +1150,12 @@ def lambert_irradiance(light_vis: LightVis, normals: np.ndarray) -> np.ndarray:
     return np.einsum("pcd,pd->pc", light_vis.moment, n)
 
 
+def _beckmann_grazing_cos(a2) -> float:
+    """``cos_i`` above which Beckmann's ``Lambda_i`` is 0 (``a2 tan^2(theta_i) < 0.39``),
+    with a margin of 0.1 % for float32 rounding."""
+    return float(np.sqrt(float(a2) / (float(a2) + 0.39) * 1.001))
+
+
 def _beckmann_grazing(val, cos_i, a2, lam_o, lowest):
     """Beckmann's ``G2``: ``val`` computed with ``Lambda_i = 0`` gets
     ``(1 + Lambda_o) / (1 + Lambda_o + Lambda_i)`` where the light is grazing enough for
@@ -1158,7 +1164,7 @@ def _beckmann_grazing(val, cos_i, a2, lam_o, lowest):
     ``cos_i`` (only the rows that reach below the cut are looked at)."""
     f32 = np.float32
     one = f32(1.0)
-    top = f32(np.sqrt(float(a2) / (float(a2) + 0.39) * 1.001))
+    top = f32(_beckmann_grazing_cos(a2))
     shape = np.shape(cos_i)
     if np.ndim(lowest):
         rows = np.flatnonzero(lowest <= top)
@@ -1389,9 +1395,7 @@ class GlossyLobe:
     def horizon_cos(self) -> float:
         """``cos_i`` below which a direction needs more than the lobe's main formula
         (Beckmann: the grazing-light ``Lambda_i``; every lobe: zero below the horizon)."""
-        if self.distribution == "BECKMANN":
-            return float(np.sqrt(float(self.a2) / (float(self.a2) + 0.39) * 1.001))
-        return 1.0
+        return _beckmann_grazing_cos(self.a2) if self.distribution == "BECKMANN" else 1.0
 
     def _beckmann_shared(self, p, d, edge=True):
         """:meth:`dense` for Beckmann in float32 against shared directions ``d`` (D, 3),

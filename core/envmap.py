@@ -239,8 +239,7 @@ def resample_equirect_to_cubemap(image: np.ndarray, cube: Cubemap, rotation=None
     (directions in float32; the image's directions and energies are kept between calls
     for the same image array, so turning the world only re-bins them).  The image must
     not be modified in place between calls (a new array is a new image)."""
-    img = image if isinstance(image, np.ndarray) and image.dtype == np.float32 \
-        else np.asarray(image, dtype=np.float32)
+    img = np.asarray(image, dtype=np.float32)      # the same array when already float32
     h, w, _ = img.shape
     s = _supersample_for(h, cube.resolution) if supersample is None else int(supersample)
     R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)

@@ -64,7 +64,7 @@ import time
 
 import numpy as np
 
-from ...core import directions
+from ...core import directions, screen, visibility
 from .. import runtime
 from . import REGISTRY, Method, register
 
@@ -148,15 +148,6 @@ def _label(method_id, setting, value) -> str:
     return method_id + ("" if setting is None else f" {setting}={value}")
 
 
-def _rotated(world, angle: float):
-    """``world`` turned about +Z: the same pixels under a new lighting key."""
-    out = copy.copy(world)
-    c, s = np.cos(angle), np.sin(angle)
-    out.rotation = np.asarray(world.rotation) @ np.array([[c, -s, 0.0], [s, c, 0.0],
-                                                           [0.0, 0.0, 1.0]])
-    return out
-
-
 def corner_area_weights(arrays) -> np.ndarray:
     """Surface area each corner stands for (a third of each triangle it is in), so that
     ``Σ_c w_c ‖x_c‖²`` is the surface L2 norm the image error approximates (pixels cover
@@ -180,17 +171,18 @@ def _point_norm2(st, x) -> np.ndarray:
     return (total / np.maximum(count, 1)).astype(np.float32)
 
 
-def _probe_pixel_weights(st, eye, size: int = 128) -> np.ndarray:
+def _probe_pixel_weights(st, eye, occluders, size: int = 128) -> np.ndarray:
     """Per corner, the pixels it covers in a ``size``² image from probe ``eye`` looking
-    at the object's centre (the object alone; see :func:`core.screen.corner_pixel_weights`)."""
-    from ...core import screen
+    at the object's centre (the object alone: ``occluders`` is the Embree scene of its
+    triangles; see :func:`core.screen.corner_pixel_weights`)."""
     p = st.points.positions
     centre = (p.min(axis=0) + p.max(axis=0)) / 2
     dist = max(float(np.linalg.norm(np.asarray(eye) - centre)), 1e-9)
     radius = max(float(np.linalg.norm(p.max(axis=0) - p.min(axis=0))) / 2, 1e-9)
     fov = 2.0 * np.arctan(min(1.2 * radius / dist, 10.0))
     clip = screen.look_at_clip(eye, centre, fov, near=dist * 1e-3, far=dist * 10.0)
-    return screen.corner_pixel_weights([st.arrays], clip, size, size, eye=eye)[0]
+    return screen.corner_pixel_weights([st.arrays], clip, size, size, eye=eye,
+                                       occluders=occluders)[0]
 
 
 def _weighted_norm2(x, w) -> float:
@@ -279,7 +271,12 @@ class AutoMethod(Method):
         ref_norm2 = min(_weighted_norm2(t, w) for t in truth)
         # a view-dependent object is judged per probe on what that probe's image shows
         # (its back faces and self-hidden parts count nothing), by relative error
-        probe_w = [w] if view_free else [_probe_pixel_weights(st, eye) for eye in eyes]
+        if view_free:
+            probe_w = [w]
+        else:
+            occluders = (visibility.build_occluder_scene(st.arrays.triangle_positions)
+                         if visibility.have_embree() else None)
+            probe_w = [_probe_pixel_weights(st, eye, occluders) for eye in eyes]
         probe_ref2_min = min(_weighted_norm2(t, pw) for t, pw in zip(truth, probe_w))
         point_ref2 = _point_norm2(st, truth[0])
         point_err2 = {}     # per option: per-point squared error (view-independent objects)
@@ -293,7 +290,7 @@ class AutoMethod(Method):
             times = []
             for _ in range(TIMED_FRAMES):
                 _ANGLE[0] += 0.61
-                sub.world = _rotated(state.world, _ANGLE[0])
+                sub.world = runtime.rotated_world(state.world, _ANGLE[0])
                 t0 = time.perf_counter()
                 m.shade(sub, eyes[0], None)
                 times.append(time.perf_counter() - t0)
@@ -441,7 +438,6 @@ class AutoMethod(Method):
         camera = getattr(state, "camera", None)
         if camera is None or not measured:
             return measured, False
-        from ...core import screen, visibility
         arrays = [st.arrays for st in state.objects]
         geometry = tuple(id(a) for a in arrays)         # the cache holds them: ids stay
         got = _OCCLUDERS.get(geometry)
@@ -531,7 +527,7 @@ class AutoMethod(Method):
                     for _ in range(TIMED_FRAMES + 1):
                         _ANGLE[0] += 0.61
                         sub = copy.copy(state)
-                        sub.world = _rotated(state.world, _ANGLE[0])
+                        sub.world = runtime.rotated_world(state.world, _ANGLE[0])
                         t0 = time.perf_counter()
                         self._shade_assigned(sub, assignment, eye, None)
                         times.append(time.perf_counter() - t0)
