@@ -98,6 +98,8 @@ def main(argv=None):
     p.add_argument("--cycles-samples", type=int, default=64)
     p.add_argument("--stability", action="store_true",
                    help="add the stability table (to the first scene's report)")
+    p.add_argument("--methods", nargs="+", default=None,
+                   help="method ids to report (default: every registered method)")
     p.add_argument("--budgets", type=int, default=None,
                    help="budget values per method (evenly spread; default: every value)")
     p.add_argument("--out", type=pathlib.Path, default=scenes.ROOT / "out/report")
@@ -123,6 +125,7 @@ def main(argv=None):
                                      cycles_samples=args.cycles_samples,
                                      stability=args.stability and name == args.scenes[0],
                                      budgets_per_method=args.budgets,
+                                     method_ids=args.methods,
                                      title=f"PRT report: {name}")
         for step in run.steps():
             print(f"  [{time.perf_counter() - t0:6.1f} s] {name}: {step}", flush=True)

@@ -1,4 +1,4 @@
-"""Small non-linear least-squares helper shared by the SG fits."""
+"""Least-squares helpers shared by the SG fits (non-linear; non-negative linear)."""
 
 from __future__ import annotations
 
@@ -42,3 +42,41 @@ def levenberg_marquardt(resid, x, iterations: int, fd_step, tries: int = 8,
         if not improved or gain < min_gain:
             break
     return x, r
+
+
+def nonnegative_least_squares(A, b, tol: float | None = None):
+    """``argmin_{x >= 0} |A x - b|`` by Lawson & Hanson's active-set method (1974,
+    ch. 23): move the variable with the largest gradient component into the passive
+    set, solve the unconstrained problem on that set, and step back toward the
+    previous point while any passive variable would turn negative.  Exact for the
+    small problems of the SG fits (tens of columns).  Returns ``x`` (n,)."""
+    A = np.asarray(A, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    m, n = A.shape
+    x = np.zeros(n)
+    if n == 0 or not np.any(b):
+        return x
+    if tol is None:
+        tol = 10.0 * np.finfo(np.float64).eps * max(m, n) * max(np.abs(A).max(initial=0.0), 1e-300)
+    passive = np.zeros(n, dtype=bool)
+    w = A.T @ (b - A @ x)
+    for _ in range(3 * n + 10):
+        free = ~passive
+        if not np.any(free) or np.max(np.where(free, w, -np.inf)) <= tol * max(np.abs(b).max(), 1.0):
+            break
+        passive[int(np.argmax(np.where(free, w, -np.inf)))] = True
+        while True:
+            z = np.zeros(n)
+            z[passive] = np.linalg.lstsq(A[:, passive], b, rcond=None)[0]
+            if np.all(z[passive] > 0.0):
+                x = z
+                break
+            hit = passive & (z <= 0.0)
+            alpha = np.min(x[hit] / np.maximum(x[hit] - z[hit], 1e-300))
+            x = x + alpha * (z - x)
+            passive &= x > tol
+            x[~passive] = 0.0
+            if not np.any(passive):
+                break
+        w = A.T @ (b - A @ x)
+    return x

@@ -62,6 +62,25 @@ def degenerate_triangles(mesh: MeshArrays, scale: float | None = None) -> np.nda
     return ~np.isfinite(area) | (area <= (1e-12 * max(scale, 1e-30) ** 2))
 
 
+def corner_areas(mesh: MeshArrays) -> np.ndarray:
+    """Surface area each corner stands for (a third of each triangle it is in), (C,):
+    ``sum_c w_c |x_c|^2`` is the surface L2 norm that an image's error approximates
+    (pixels cover surface area, not corners)."""
+    p = mesh.positions[mesh.corner_verts]
+    tri = mesh.triangles
+    area = triangle_areas(p[tri])
+    w = np.zeros(len(p), dtype=np.float64)
+    for k in range(3):
+        np.add.at(w, tri[:, k], area / 3.0)
+    return w
+
+
+def point_areas(mesh: MeshArrays, points: "ShadingPoints") -> np.ndarray:
+    """Surface area each shading point stands for (P,): its corners' :func:`corner_areas`."""
+    return np.bincount(points.point_of_corner, weights=corner_areas(mesh),
+                       minlength=points.count)
+
+
 def bounding_diagonal(positions: np.ndarray) -> float:
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     p = p[np.isfinite(p).all(axis=1)]

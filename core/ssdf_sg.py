@@ -136,6 +136,31 @@ def visibility_ratio(theta_d, lam, exact=False):
     return sg.fh_hat(theta_d, lam) if exact else sg.fh_hat_approx(theta_d, lam)
 
 
+def diffuse_lobe_transfer(field, rows, normals, light_axes, light_lam, tangents=None,
+                          bitangents=None, exact_fh=False, cosine=COSINE_EQ40):
+    """Eq. 39 per light lobe: ``T[r, j] = (C*(i; n_r) (x) G(i; p_j, lam_j, 1)) . V^d_r``
+    (R, J), the diffuse transfer of each *unit-amplitude* light lobe, so that
+    ``R_d = T mu`` for RGB amplitudes ``mu`` (J, 3).  ``light_axes`` (J, 3) or
+    (R, J, 3) world, ``light_lam`` (J,)/(R, J); the rest as :func:`diffuse_transfer`."""
+    n = np.asarray(normals, np.float64)
+    R = len(n)
+    if tangents is None:
+        tangents, bitangents = ssdf_frames(n)
+    ax = np.broadcast_to(np.asarray(light_axes, np.float64), (R,) + np.shape(light_axes)[-2:])
+    lam = np.broadcast_to(np.asarray(light_lam, np.float64), ax.shape[:2])
+    out = np.zeros(ax.shape[:2])
+    if ax.shape[1] == 0:
+        return out
+    for d, c in zip(cosine.directions, cosine.amplitudes):
+        cw = d[0] * tangents + d[1] * bitangents + d[2] * n
+        cn = np.broadcast_to(cw[:, None, :], ax.shape)
+        p, lam_m, amp = sg.product(cn, np.full(ax.shape[:2], cosine.sharpness),
+                                   np.full(ax.shape[:2], c), ax, lam, 1.0)
+        theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
+        out += visibility_integral(theta, lam_m, exact_fh) * amp                  # (R, J)
+    return out
+
+
 def diffuse_transfer(field, rows, normals, light_axes, light_lam, light_mu,
                      tangents=None, bitangents=None, exact_fh=False, cosine=COSINE_EQ40):
     """Eq. 39 (and eq. 42 with per-point light lobes): ``R_d`` (R, 3).
@@ -145,25 +170,10 @@ def diffuse_transfer(field, rows, normals, light_axes, light_lam, light_mu,
     points ``rows`` of ``field``; ``cosine`` the SG mixture ``C*`` (eq. 40 by
     default): every (cosine lobe, light lobe) product gets its own SSDF value.
     """
-    n = np.asarray(normals, np.float64)
-    R = len(n)
-    if tangents is None:
-        tangents, bitangents = ssdf_frames(n)
-    ax = np.broadcast_to(np.asarray(light_axes, np.float64), (R,) + np.shape(light_axes)[-2:])
-    lam = np.broadcast_to(np.asarray(light_lam, np.float64), ax.shape[:2])
-    mu = np.broadcast_to(np.asarray(light_mu, np.float64), ax.shape[:2] + (3,))
-    out = np.zeros((R, 3))
-    if ax.shape[1] == 0:
-        return out
-    for d, c in zip(cosine.directions, cosine.amplitudes):
-        cw = d[0] * tangents + d[1] * bitangents + d[2] * n
-        cn = np.broadcast_to(cw[:, None, :], ax.shape)
-        p, lam_m, amp = sg.product(cn, np.full(ax.shape[:2], cosine.sharpness),
-                                   np.full(ax.shape[:2], c), ax, lam, 1.0)
-        theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
-        f = visibility_integral(theta, lam_m, exact_fh) * amp                     # (R, J)
-        out += np.einsum("rj,rjc->rc", f, mu)
-    return out
+    T = diffuse_lobe_transfer(field, rows, normals, light_axes, light_lam, tangents,
+                              bitangents, exact_fh, cosine)
+    mu = np.broadcast_to(np.asarray(light_mu, np.float64), T.shape + (3,))
+    return np.einsum("rj,rjc->rc", T, mu)
 
 
 def specular_radiance(field, rows, normals, lobe_axes, lobe_lam, lobe_mu, env_lookup,
@@ -255,6 +265,6 @@ def equirect_from_sgs(height, axes, lam, mu):
         height, 2 * height, 3).astype(np.float32)
 
 
-__all__ = ["CosineLobes", "COSINE_EQ40", "COSINE_SG7", "COSINE_SG19", "COSINE_MODELS", "PCAField", "ImageField", "diffuse_transfer", "specular_radiance", "lamp_radiance",
+__all__ = ["CosineLobes", "COSINE_EQ40", "COSINE_SG7", "COSINE_SG19", "COSINE_MODELS", "PCAField", "ImageField", "diffuse_transfer", "diffuse_lobe_transfer", "specular_radiance", "lamp_radiance",
            "visibility_integral", "visibility_ratio", "analytic_sg_environment",
            "sg_mixture_radiance", "equirect_from_sgs", "LAMBDA_C", "MU_C"]

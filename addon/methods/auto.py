@@ -65,6 +65,7 @@ import time
 import numpy as np
 
 from ...core import directions, screen, visibility
+from ...core import mesh as core_mesh
 from .. import runtime
 from . import REGISTRY, Method, register
 
@@ -146,20 +147,6 @@ def _substate(state, objects, method_id, setting=None, value=None):
 
 def _label(method_id, setting, value) -> str:
     return method_id + ("" if setting is None else f" {setting}={value}")
-
-
-def corner_area_weights(arrays) -> np.ndarray:
-    """Surface area each corner stands for (a third of each triangle it is in), so that
-    ``Σ_c w_c ‖x_c‖²`` is the surface L2 norm the image error approximates (pixels cover
-    surface area, not corners)."""
-    p = arrays.positions[arrays.corner_verts]
-    tri = arrays.triangles
-    area = 0.5 * np.linalg.norm(np.cross(p[tri[:, 1]] - p[tri[:, 0]],
-                                         p[tri[:, 2]] - p[tri[:, 0]]), axis=1)
-    w = np.zeros(len(p), dtype=np.float64)
-    for k in range(3):
-        np.add.at(w, tri[:, k], area / 3.0)
-    return w
 
 
 def _point_norm2(st, x) -> np.ndarray:
@@ -267,7 +254,7 @@ class AutoMethod(Method):
         eyes = _probe_eyes(st.points.positions, 1 if view_free else 4)
         one = [st]
         truth = [ref.shade(_substate(state, one, "REFERENCE"), eye, None)[0] for eye in eyes]
-        w = corner_area_weights(st.arrays)
+        w = core_mesh.corner_areas(st.arrays)
         ref_norm2 = min(_weighted_norm2(t, w) for t in truth)
         # a view-dependent object is judged per probe on what that probe's image shows
         # (its back faces and self-hidden parts count nothing), by relative error

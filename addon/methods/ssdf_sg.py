@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core import directions, envmap, sg_brdf, sg_lighting, ssdf, ssdf_sg
+from ...core import directions, envmap, reference, sg_brdf, sg_lighting, ssdf, ssdf_sg
+from ...core import mesh as core_mesh
 from ...core import brdf as core_brdf
 from .. import drawing, runtime, storage
 from . import Method, register
@@ -78,9 +79,96 @@ def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes
     return hit
 
 
+#: scene points (drawn by surface area among the points with a diffuse part) at which
+#: the diffuse lighting amplitudes are fitted (``sg_lighting_fit = 'SCENE'``)
+SCENE_FIT_POINTS = 2048
+# (lighting, rotation, objects, cosine) -> the scene-fitted diffuse SGs
+_SCENE_FIT_CACHE: dict = {}
+
+
+def scene_fit_points(state, fields, count: int = SCENE_FIT_POINTS, seed: int = 0):
+    """``[(object state, field, rows (sorted), weights)]``: up to ``count`` shading points
+    drawn with probability proportional to surface area among the points whose material
+    has a diffuse part (all points when there are fewer); weights = times drawn (or
+    the area when every point is taken)."""
+    per = []
+    for st, field in zip(state.objects, fields):
+        pts = st.points
+        area = core_mesh.point_areas(st.arrays, pts)
+        table = object_sg_materials(st)
+        diffuse = np.array([
+            bool(np.any(sg_brdf.diffuse_albedo(
+                table[int(m)] if 0 <= m < len(table) else sg_brdf.sg_material_from_brdf(
+                    core_brdf.Material())) > 0)) for m in range(max(len(table), 1))])
+        mats = np.clip(pts.materials, 0, len(diffuse) - 1)
+        per.append(area * diffuse[mats])
+    total = sum(float(w.sum()) for w in per)
+    if total <= 0.0:
+        return []
+    sizes = [len(w) for w in per]
+    if sum(int(np.count_nonzero(w)) for w in per) <= count:
+        picks = [(np.flatnonzero(w), w[w > 0]) for w in per]
+    else:
+        flat = np.concatenate(per)
+        draw = np.random.default_rng(seed).choice(flat.size, count, p=flat / flat.sum())
+        idx, times = np.unique(draw, return_counts=True)
+        start = np.concatenate([[0], np.cumsum(sizes)])
+        picks = []
+        for o in range(len(per)):
+            sel = (idx >= start[o]) & (idx < start[o + 1])
+            picks.append((idx[sel] - start[o], times[sel].astype(np.float64)))
+    return [(st, field, rows, w) for st, field, (rows, w) in zip(state.objects, fields, picks)
+            if rows.size]
+
+
+def scene_fit(state, fields, fit, cosine):
+    """The diffuse SG fit with its RGB amplitudes re-solved for this scene at the world's
+    current rotation (:func:`core.sg_lighting.fit_scene_amplitudes`): the lobes' eq. 39
+    transfer with the SSDF visibility (what is drawn) against REFERENCE's exact shadowed
+    irradiance at :func:`scene_fit_points`.  Same form as ``fit`` (texture-space axes,
+    amplitudes for strength 1), plus ``(error with the environment-only amplitudes,
+    error after, points)`` in the scene's metric; ``fit`` itself when nothing is fitted."""
+    axes, lam, mu, rel = fit
+    world = state.world
+    strength = float(world.strength)
+    if len(lam) == 0 or not state.objects or strength <= 0.0:
+        return fit
+    key = (runtime.env_key(world, state.resolution)[0], world.rotation.round(9).tobytes(),
+           state.resolution, id(fit), cosine.sharpness, len(cosine.amplitudes),
+           tuple((st.name, id(st.bits), id(f), id(st.arrays)) for st, f in zip(state.objects, fields)),
+           tuple(tuple(bool(np.any(sg_brdf.diffuse_albedo(m) > 0)) for m in object_sg_materials(st))
+                 for st in state.objects))
+    hit = _SCENE_FIT_CACHE.get(key)
+    if hit is not None:
+        return hit
+    picks = scene_fit_points(state, fields)
+    if not picks:
+        return fit
+    cube = directions.cubemap(state.resolution)
+    L = runtime.environment_cubemap(world, state.resolution)
+    axes_w = sg_lighting.rotate_to_world(axes, world.rotation)
+    T, E, W = [], [], []
+    for st, field, rows, w in picks:
+        n = st.points.normals[rows]
+        T.append(ssdf_sg.diffuse_lobe_transfer(field.numpy, rows, n, axes_w, lam, cosine=cosine))
+        E.append(reference.diffuse_irradiance(st.bits[rows], n, cube, L) / strength)
+        W.append(w)
+    T, E, W = np.concatenate(T), np.concatenate(E).astype(np.float64), np.concatenate(W)
+    scene_mu = sg_lighting.fit_scene_amplitudes(T, E, W)
+    sw = np.sqrt(W)[:, None]
+    norm = max(float(np.linalg.norm(E * sw)), 1e-300)
+    before = float(np.linalg.norm((T @ mu - E) * sw)) / norm
+    after = float(np.linalg.norm((T @ scene_mu - E) * sw)) / norm
+    hit = (axes, lam, scene_mu, rel, (before, after, len(W)))
+    if len(_SCENE_FIT_CACHE) >= 4:
+        _SCENE_FIT_CACHE.pop(next(iter(_SCENE_FIT_CACHE)))
+    _SCENE_FIT_CACHE[key] = hit
+    return hit
+
+
 def world_sgs(world, fit):
     """The diffuse SG fit in world space: ``L(d) = s E(R d)`` has axes ``R^T a``."""
-    axes, lam, mu, _ = fit
+    axes, lam, mu = fit[:3]
     return axes @ world.rotation, lam, mu * float(world.strength)
 
 
@@ -176,6 +264,16 @@ class SSDFSGMethod(Method):
             "ssdf_max_terms": IntProperty(
                 name="SSDF Max Terms", default=48, min=4, max=60,
                 description="Upper limit of PCA terms per object"),
+            "sg_lighting_fit": EnumProperty(
+                name="Lighting Fit", default="SCENE", update=runtime.redraw_viewports,
+                items=[("SCENE", "Scene",
+                        "Lobes from the environment, amplitudes fitted to the scene's exact "
+                        "shadowed irradiance at up to 2048 surface points (redone when the "
+                        "world turns, tens of milliseconds)"),
+                       ("ENVIRONMENT", "Environment",
+                        "Lobes and amplitudes from the environment alone (the paper's §6): "
+                        "keeps the unshadowed irradiance")],
+                description="How the diffuse term's SG lighting (eq. 39) is fitted"),
             "sg_environment_lobes": IntProperty(
                 name="Environment Lobes", default=8, min=1, max=16,
                 update=runtime.redraw_viewports,
@@ -264,7 +362,15 @@ class SSDFSGMethod(Method):
     # ------------------------------------------------------------- shading
     def _lighting(self, state):
         lobes = int(state.settings.get("sg_environment_lobes", 8))
-        return environment_lighting(state.world, state.resolution, lobes)
+        fit, pre = environment_lighting(state.world, state.resolution, lobes)
+        if str(state.settings.get("sg_lighting_fit", "SCENE")) == "SCENE":
+            fields = [self._field(state, st) for st in state.objects]
+            fit = scene_fit(state, fields, fit, cosine_of(state.settings))
+            if len(fit) > 4:
+                before, after, count = fit[4]
+                state.note(f"SSDF_SG lighting: {len(fit[1])} lobes, diffuse error at {count} "
+                           f"scene points {after:.1%} (environment-only amplitudes {before:.1%})")
+        return fit, pre
 
     def _field(self, state, st):
         """The object's SSDF field (``sync`` loads or derives it when a state was built
@@ -481,17 +587,22 @@ def field_textures(field):
 
 
 def environment_textures(fit, pre):
-    key = (id(fit), id(pre))
-    hit = _GPU.get("env")
-    if hit is None or hit[0] != key:
-        axes, lam, mu, _ = fit
+    """(prefiltered atlas texture, light-lobe texture, lobe count): the atlas is made
+    once per pyramid, the small lobe texture per fit (a turned world re-solves the
+    scene-fitted amplitudes, the pyramid stays)."""
+    atlas = _GPU.get("atlas")
+    if atlas is None or atlas[0] is not pre:
+        atlas = _GPU["atlas"] = (pre, _texture(pre.atlas()))
+    lights = _GPU.get("lights")
+    if lights is None or lights[0] is not fit:
+        axes, lam, mu = fit[:3]
         J = max(len(lam), 1)
         light = np.zeros((J, 2, 4), np.float32)
         light[:len(lam), 0, :3] = axes
         light[:len(lam), 0, 3] = lam
         light[:len(lam), 1, :3] = mu
-        hit = _GPU["env"] = (key, _texture(pre.atlas()), _texture(light), len(lam))
-    return hit[1:]
+        lights = _GPU["lights"] = (fit, _texture(light), len(lam))
+    return atlas[1], lights[1], lights[2]
 
 
 def material_uniforms(material):
