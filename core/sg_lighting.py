@@ -40,7 +40,8 @@ __all__ = [
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 #: sharpness ladder the greedy environment fit chooses from (capped by the cubemap).
-ENV_LAMBDA_CANDIDATES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0)
+ENV_LAMBDA_CANDIDATES = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0, 512.0,
+                         1024.0, 2048.0, 4096.0)
 
 
 def _check_radiance(cube_radiance, cube: Cubemap):
@@ -81,8 +82,17 @@ def rotate_to_world(axes, rotation):
     return np.asarray(axes, dtype=np.float64) @ np.asarray(rotation, dtype=np.float64)
 
 
-#: finer cubemaps are box-filtered to this resolution before the diffuse SG fit.
+#: the diffuse SG fit scores broad lobes (and its irradiance) on the cubemap box-filtered
+#: to this resolution; sharp lobes on the full one.
 FIT_RESOLUTION = 32
+
+
+def _box_down(values, N, Ns, w):
+    """Solid-angle weighted mean of per-texel values (6N^2, C) over Ns-cube texels."""
+    f = N // Ns
+    v = (values.reshape(6, N, N, -1) * w.reshape(6, N, N, 1)).reshape(6, Ns, f, Ns, f, -1)
+    ws = w.reshape(6, Ns, f, Ns, f).sum(axis=(2, 4))
+    return (v.sum(axis=(2, 4)) / ws[..., None]).reshape(6 * Ns * Ns, -1)
 
 
 def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: float = 0.03):
@@ -90,11 +100,15 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
     diffuse term (§6, after Tsai & Shih 2006): few lobes, brightest areas first.
 
     1. Greedy on the radiance: each new lobe is the (axis, sharpness) with the
-       largest reduction of the luminance residual, ``<g, r>^2/<g, g>`` (axes: the
-       texels of a 6x8^2 cubemap plus the brightest residual texel; sharpnesses:
-       :data:`ENV_LAMBDA_CANDIDATES` up to ``(N/pi)^2`` so lobes stay resolved by
-       the N-cube); the residual is then the luminance minus its solid-angle
-       weighted non-negative least-squares fit by the chosen lobes.
+       largest reduction of the luminance residual, ``<g, r>^2/<g, g>``.  Broad
+       candidates: the texels of a 6x8^2 cubemap with the sharpnesses of
+       :data:`ENV_LAMBDA_CANDIDATES` up to ``(32/pi)^2``, scored on the residual
+       box-filtered to a 6x32^2 cube; sharp candidates: the brightest residual
+       texel of the given cube with every sharpness up to ``(N/pi)^2`` (a lobe
+       about one texel wide), scored on the full cube -- so a small sun gets a lobe
+       as sharp as the cube resolves and casts a sharp shadow through eq. 30.  The
+       residual is then the luminance minus its solid-angle weighted non-negative
+       least-squares fit by the chosen lobes (on the full cube).
     2. RGB amplitudes by non-negative least squares on the **irradiance** over the
        normals of a 6x8^2 cubemap -- what eq. 39 uses (a scene-aware re-solve of
        them is :func:`fit_scene_amplitudes`).
@@ -103,53 +117,60 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
        (a joint non-linear refinement of axes and sharpnesses was tried and left:
        it diverged on the bundled 'sunrise' HDRI, 220 % irradiance error).
 
-    Cubes finer than :data:`FIT_RESOLUTION` are box-filtered to it first.
     Returns ``(axes (J, 3), lam (J,), mu (J, 3), rel_error)`` in the cube's
     space (texture space for an unrotated world).  A black world gives J = 0.
     """
     L = _check_radiance(cube_radiance, cube)
-    if cube.resolution > FIT_RESOLUTION and cube.resolution % FIT_RESOLUTION == 0:
-        # the diffuse lobes need no more than a 6 x 32^2 cube (box-filtered, energy kept)
-        L = _downsample(L, cube.resolution, FIT_RESOLUTION)[0]
-        cube = cubemap(FIT_RESOLUTION)
+    N = cube.resolution
     dirs = np.asarray(cube.directions, dtype=np.float64)
     w = np.asarray(cube.solid_angles, dtype=np.float64)
     sw = np.sqrt(w)
-    normals, C = _irradiance_operator(cube)
-    E = C @ L
+    Nc = FIT_RESOLUTION if (N > FIT_RESOLUTION and N % FIT_RESOLUTION == 0) else N
+    coarse = cubemap(Nc)
+    dirs_c = np.asarray(coarse.directions, dtype=np.float64)
+    w_c = np.asarray(coarse.solid_angles, dtype=np.float64)
+    L_c = L if Nc == N else _downsample(L, N, Nc)[0]
+    normals, C = _irradiance_operator(coarse)
+    E = C @ L_c
     En = math.sqrt(float(np.sum(E * E)))
     empty = (np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), 0.0)
     if En <= 0.0:
         return empty
     Y = L @ LUMINANCE
-    lam_cap = max(ENV_LAMBDA_CANDIDATES[0], (cube.resolution / math.pi) ** 2)
-    lams = np.array([x for x in ENV_LAMBDA_CANDIDATES if x <= lam_cap] or [ENV_LAMBDA_CANDIDATES[0]])
+    cap_c = max(ENV_LAMBDA_CANDIDATES[0], (Nc / math.pi) ** 2)
+    cap_f = max(ENV_LAMBDA_CANDIDATES[0], (N / math.pi) ** 2)
+    lams_c = np.array([x for x in ENV_LAMBDA_CANDIDATES if x <= cap_c] or [ENV_LAMBDA_CANDIDATES[0]])
+    lams_f = np.array([x for x in ENV_LAMBDA_CANDIDATES if x <= cap_f] or [ENV_LAMBDA_CANDIDATES[0]])
     cand = np.asarray(cubemap(8).directions, dtype=np.float64)
-    dot_c = cand @ dirs.T                                      # (384, D)
+    dot_c = cand @ dirs_c.T                                    # (384, Dc)
     axes, lamv = [], []
     rel, mu = 1.0, np.zeros((0, 3))
     residual = Y.copy()
-    while len(axes) < max_lobes:
-        rw = residual * w
-        best = None
-        brightest = dirs[int(np.argmax(residual))]
-        cands = np.vstack([cand, brightest[None]])
-        dots = np.vstack([dot_c, (brightest @ dirs.T)[None]])
+
+    def best_of(cands, dots, lams, r, wt, best):
+        rw = r * wt
         for lm in lams:
-            G = np.exp(lm * (dots - 1.0))                       # (Cn, D)
+            G = np.exp(lm * (dots - 1.0))
             num = G @ rw
-            den = (G * G) @ w
+            den = (G * G) @ wt
             gain = np.where(num > 0, num * num / den, 0.0)
             k = int(np.argmax(gain))
             if best is None or gain[k] > best[0]:
                 best = (gain[k], cands[k], lm)
+        return best
+
+    while len(axes) < max_lobes:
+        r_c = residual if Nc == N else _box_down(residual[:, None], N, Nc, w)[:, 0]
+        best = best_of(cand, dot_c, lams_c, r_c, w_c, None)
+        brightest = dirs[int(np.argmax(residual))]
+        best = best_of(brightest[None], (brightest @ dirs.T)[None], lams_f, residual, w, best)
         if best is None or best[0] <= 0.0:
             break
         axes.append(best[1])
         lamv.append(float(best[2]))
         G = _lobe_matrix(dirs, np.array(axes), np.array(lamv))           # (D, J)
         residual = Y - G @ nonnegative_least_squares(G * sw[:, None], Y * sw)
-        A = C @ G
+        A = C @ (G if Nc == N else _box_down(G, N, Nc, w))
         mu = np.stack([nonnegative_least_squares(A, E[:, c]) for c in range(3)], axis=1)
         rel = math.sqrt(float(np.sum(np.square(A @ mu - E)))) / En
         if rel <= tol:

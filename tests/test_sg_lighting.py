@@ -62,6 +62,53 @@ def test_environment_sg_fit_black_world_and_bad_input():
         sg_lighting.fit_environment_sgs(bad, cube)
 
 
+def test_environment_sg_fit_gives_a_small_sun_a_sharp_lobe():
+    """A 1-texel sun on a 6x128^2 cube: the first lobe sits on it with a sharpness the
+    32-cube could not resolve (so eq. 30 casts a sharp shadow), and the fit keeps the
+    irradiance; the bundled-HDRI failure this replaced (a diverging refinement) is
+    covered by the irradiance bound."""
+    cube = cubemap(128)
+    sun_dir = np.array([0.5, -0.5, 0.707]) / np.linalg.norm([0.5, -0.5, 0.707])
+    L = _smooth_env(cube) * 0.3
+    L[cube.texel_index(sun_dir)] += 5e4
+    axes, lam, mu, rel = sg_lighting.fit_environment_sgs(L, cube, max_lobes=8, tol=0.03)
+    j = int(np.argmax(mu @ sg_lighting.LUMINANCE * sg.integral(lam, 1.0)))
+    assert lam[j] >= 1000.0 and float(axes[j] @ sun_dir) > math.cos(math.radians(1.0))
+    assert rel <= 0.03 or len(lam) == 8
+    normals = _random_dirs(60, 3)
+    dirs = fibonacci_sphere(400_000)
+    Lsg = sg_lighting.sg_mixture_radiance(dirs, axes, lam, mu)
+    E_sg = (np.maximum(normals @ dirs.T, 0) @ Lsg) * (4 * math.pi / len(dirs))
+    E = sg_lighting.environment_irradiance(L, cube, normals)
+    assert np.linalg.norm(E_sg - E) / np.linalg.norm(E) <= 0.05
+
+
+def test_scene_amplitudes_solve_weighted_nonnegative_least_squares():
+    rng = np.random.default_rng(5)
+    T = np.abs(rng.normal(size=(300, 6)))
+    mu_true = np.abs(rng.normal(size=(6, 3)))
+    mu_true[2] = 0.0
+    E = T @ mu_true
+    np.testing.assert_allclose(sg_lighting.fit_scene_amplitudes(T, E), mu_true, atol=1e-9)
+    # a target no non-negative mix reaches: the optimum is non-negative and beats any
+    # clipped unconstrained solution under the same weights
+    E2 = E - 2.0 * T[:, 2:3] + rng.normal(scale=0.1, size=E.shape)
+    w = rng.uniform(0.1, 3.0, size=300)
+    mu = sg_lighting.fit_scene_amplitudes(T, E2, w)
+    assert np.all(mu >= 0)
+    ls = np.clip(np.linalg.lstsq(T * np.sqrt(w)[:, None], E2 * np.sqrt(w)[:, None], rcond=None)[0], 0, None)
+    cost = lambda m: float(np.sum(w[:, None] * (T @ m - E2) ** 2))
+    assert cost(mu) <= cost(ls) + 1e-9
+    with pytest.raises(ValueError):
+        sg_lighting.fit_scene_amplitudes(T, E[:, :2])
+    with pytest.raises(ValueError):
+        sg_lighting.fit_scene_amplitudes(T, E, -w)
+    bad = E.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError):
+        sg_lighting.fit_scene_amplitudes(T, bad)
+
+
 # --------------------------------------------------------------------------- prefiltered pyramid
 
 def _brute_force_mean(L, cube, p, lam):

@@ -61,6 +61,11 @@ def derive_object(bits, normals, cube, settings, cancel=None, progress=None):
                          cancel=cancel, progress=progress)
 
 
+#: the diffuse SG fit reads the environment at this cubemap resolution (at least), so a
+#: small sun gets a lobe about one 128-texel wide (sharpness ~1000) and a sharp shadow
+FIT_CUBE_RESOLUTION = 128
+
+
 def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes: int = 8):
     """``(axes, lam, mu)`` diffuse SG fit and the SG-prefiltered pyramid of the
     world's image without rotation/strength (texture space), cached per image."""
@@ -71,7 +76,11 @@ def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes
         base = envmap.WorldLighting(image=world.image, color=world.color, strength=1.0)
         cube = directions.cubemap(resolution)
         radiance = np.asarray(base.to_cubemap(resolution).radiance, np.float64)
-        axes, lam, mu, rel = sg_lighting.fit_environment_sgs(radiance, cube, max_lobes=max_lobes)
+        fine = max(FIT_CUBE_RESOLUTION, resolution)
+        fit_radiance = (radiance if fine == resolution
+                        else np.asarray(base.to_cubemap(fine).radiance, np.float64))
+        axes, lam, mu, rel = sg_lighting.fit_environment_sgs(
+            fit_radiance, directions.cubemap(fine), max_lobes=max_lobes)
         pre = sg_lighting.PrefilteredEnvironment(radiance, cube)
         hit = ((axes, lam, mu, rel), pre)
         _LIGHTING_CACHE.clear()
