@@ -91,43 +91,52 @@ def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes
 #: scene points (drawn by surface area among the points with a diffuse part) at which
 #: the diffuse lighting amplitudes are fitted (``sg_lighting_fit = 'SCENE'``)
 SCENE_FIT_POINTS = 2048
-# (lighting, rotation, objects, cosine) -> the scene-fitted diffuse SGs
-_SCENE_FIT_CACHE: dict = {}
+# "points": the last scene_fit_points draw; "fit": the last scene-fitted lighting (entries
+# keep their fields alive, which may hold GPU textures: freed with the GPU caches)
+_SCENE_FIT_CACHE: dict = drawing.gpu_cache({})
 
 
 def scene_fit_points(state, fields, count: int = SCENE_FIT_POINTS, seed: int = 0):
-    """``[(object state, field, rows (sorted), weights)]``: up to ``count`` shading points
-    drawn with probability proportional to surface area among the points whose material
-    has a diffuse part (all points when there are fewer); weights = times drawn (or
-    the area when every point is taken)."""
+    """``[(object index, rows (sorted), weights)]``: up to ``count`` shading points drawn
+    with probability proportional to surface area among the points whose material has a
+    diffuse part (all of them when there are fewer; weights = their areas), weights =
+    times drawn."""
     per = []
-    for st, field in zip(state.objects, fields):
+    for st in state.objects:
         pts = st.points
         area = core_mesh.point_areas(st.arrays, pts)
-        table = object_sg_materials(st)
-        diffuse = np.array([
-            bool(np.any(sg_brdf.diffuse_albedo(
-                table[int(m)] if 0 <= m < len(table) else sg_brdf.sg_material_from_brdf(
-                    core_brdf.Material())) > 0)) for m in range(max(len(table), 1))])
-        mats = np.clip(pts.materials, 0, len(diffuse) - 1)
-        per.append(area * diffuse[mats])
-    total = sum(float(w.sum()) for w in per)
-    if total <= 0.0:
+        diffuse = _diffuse_slots(st)
+        per.append(area * diffuse[np.clip(pts.materials, 0, len(diffuse) - 1)])
+    if sum(float(w.sum()) for w in per) <= 0.0:
         return []
-    sizes = [len(w) for w in per]
     if sum(int(np.count_nonzero(w)) for w in per) <= count:
         picks = [(np.flatnonzero(w), w[w > 0]) for w in per]
     else:
         flat = np.concatenate(per)
         draw = np.random.default_rng(seed).choice(flat.size, count, p=flat / flat.sum())
         idx, times = np.unique(draw, return_counts=True)
-        start = np.concatenate([[0], np.cumsum(sizes)])
+        start = np.concatenate([[0], np.cumsum([len(w) for w in per])])
         picks = []
         for o in range(len(per)):
             sel = (idx >= start[o]) & (idx < start[o + 1])
             picks.append((idx[sel] - start[o], times[sel].astype(np.float64)))
-    return [(st, field, rows, w) for st, field, (rows, w) in zip(state.objects, fields, picks)
-            if rows.size]
+    return [(o, rows, w) for o, (rows, w) in enumerate(picks) if rows.size]
+
+
+def _diffuse_slots(st) -> np.ndarray:
+    """Per material slot: whether its SG material has a diffuse part (at least one entry)."""
+    table = object_sg_materials(st) or [sg_brdf.sg_material_from_brdf(core_brdf.Material())]
+    return np.array([bool(np.any(np.asarray(sg_brdf.diffuse_albedo(m)) > 0)) for m in table])
+
+
+def _cached(cache: dict, name: str, refs: tuple, key, compute):
+    """``cache[name]`` when it was made for ``key`` from the very objects ``refs`` (kept
+    alive by the entry, so their ids in ``key`` cannot be reused meanwhile)."""
+    got = cache.get(name)
+    if got is None or got[1] != key or len(got[0]) != len(refs) or \
+            not all(x is y for x, y in zip(got[0], refs)):
+        got = cache[name] = (refs, key, compute())
+    return got[2]
 
 
 def scene_fit(state, fields, fit, cosine):
@@ -137,29 +146,39 @@ def scene_fit(state, fields, fit, cosine):
     irradiance at :func:`scene_fit_points`.  Same form as ``fit`` (texture-space axes,
     amplitudes for strength 1), plus ``(error with the environment-only amplitudes,
     error after, points)`` in the scene's metric; ``fit`` itself when nothing is fitted."""
-    axes, lam, mu, rel = fit
+    axes, lam, mu, rel = fit[:4]
     world = state.world
     strength = float(world.strength)
     if len(lam) == 0 or not state.objects or strength <= 0.0:
         return fit
-    key = (runtime.env_key(world, state.resolution)[0], world.rotation.round(9).tobytes(),
-           state.resolution, id(fit), cosine.sharpness, len(cosine.amplitudes),
-           tuple((st.name, id(st.bits), id(f), id(st.arrays)) for st, f in zip(state.objects, fields)),
-           tuple(tuple(bool(np.any(sg_brdf.diffuse_albedo(m) > 0)) for m in object_sg_materials(st))
-                 for st in state.objects))
-    hit = _SCENE_FIT_CACHE.get(key)
-    if hit is not None:
-        return hit
-    picks = scene_fit_points(state, fields)
+    refs = tuple(x for st, f in zip(state.objects, fields) for x in (st.bits, f, st.arrays))
+    objects_key = (tuple(st.name for st in state.objects),
+                   tuple(tuple(_diffuse_slots(st)) for st in state.objects))
+    # drawn points: the same while the objects and their diffuse slots are (a turned world
+    # or a new fit reuses them)
+    picks = _cached(_SCENE_FIT_CACHE, "points", refs, objects_key,
+                    lambda: scene_fit_points(state, fields))
     if not picks:
         return fit
+    lighting_key = (runtime.env_key(world, state.resolution)[0], world.rotation.round(9).tobytes(),
+                    state.resolution, cosine.sharpness, len(cosine.amplitudes), objects_key)
+    return _cached(_SCENE_FIT_CACHE, "fit", refs + (fit,), lighting_key,
+                   lambda: _solve_scene_fit(state, fields, fit, cosine, picks))
+
+
+def _solve_scene_fit(state, fields, fit, cosine, picks):
+    axes, lam, mu, rel = fit[:4]
+    world = state.world
+    strength = float(world.strength)
     cube = directions.cubemap(state.resolution)
     L = runtime.environment_cubemap(world, state.resolution)
     axes_w = sg_lighting.rotate_to_world(axes, world.rotation)
     T, E, W = [], [], []
-    for st, field, rows, w in picks:
+    for o, rows, w in picks:
+        st = state.objects[o]
         n = st.points.normals[rows]
-        T.append(ssdf_sg.diffuse_lobe_transfer(field.numpy, rows, n, axes_w, lam, cosine=cosine))
+        T.append(ssdf_sg.diffuse_lobe_transfer(fields[o].numpy, rows, n, axes_w, lam,
+                                               cosine=cosine))
         E.append(reference.diffuse_irradiance(st.bits[rows], n, cube, L) / strength)
         W.append(w)
     T, E, W = np.concatenate(T), np.concatenate(E).astype(np.float64), np.concatenate(W)
@@ -168,11 +187,7 @@ def scene_fit(state, fields, fit, cosine):
     norm = max(float(np.linalg.norm(E * sw)), 1e-300)
     before = float(np.linalg.norm((T @ mu - E) * sw)) / norm
     after = float(np.linalg.norm((T @ scene_mu - E) * sw)) / norm
-    hit = (axes, lam, scene_mu, rel, (before, after, len(W)))
-    if len(_SCENE_FIT_CACHE) >= 4:
-        _SCENE_FIT_CACHE.pop(next(iter(_SCENE_FIT_CACHE)))
-    _SCENE_FIT_CACHE[key] = hit
-    return hit
+    return (axes, lam, scene_mu, rel, (before, after, len(W)))
 
 
 def world_sgs(world, fit):
