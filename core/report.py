@@ -196,6 +196,18 @@ def fastest_meeting(rows, target: float, key: str = "error_ref"):
     return min(ok, key=lambda r: r["frame_seconds"]) if ok else None
 
 
+def fastest_candidates(rows, target: float, count: int = 3, within: float = 2.0,
+                       key: str = "error_ref"):
+    """Up to ``count`` rows meeting ``target`` (as :func:`fastest_meeting`), fastest first,
+    whose ``frame_seconds`` is at most ``within`` times the fastest one's: the fixed
+    methods worth timing again side by side, since one sweep's timings move with the
+    machine's load."""
+    ok = [r for r in rows if r.get(key) is not None and np.isfinite(r[key])
+          and r[key] <= target and np.isfinite(r.get("frame_seconds", math.inf))]
+    ok.sort(key=lambda r: r["frame_seconds"])
+    return [r for r in ok if r["frame_seconds"] <= within * ok[0]["frame_seconds"]][:count]
+
+
 # --------------------------------------------------------------------- SVG plot
 
 _PALETTE = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2",
@@ -488,7 +500,9 @@ def write_html(path, report: dict) -> pathlib.Path:
             f"<p>AUTO ({_fmt(100 * check['auto_error'], '.2f', ' %')} against REFERENCE) "
             f"against the fastest fixed method within {100 * check['target']:.3g} %, "
             f"{esc(check['fixed'])} ({_fmt(100 * check['fixed_error'], '.2f', ' %')}), "
-            f"timed on {check['rounds']} interleaved relit frames each: "
+            + (f"of {esc(', '.join(check['candidates']))} (the sweep's fastest within 2× of "
+               f"each other), " if len(check.get("candidates", ())) > 1 else "")
+            + f"timed on {check['rounds']} interleaved relit frames each: "
             f"{1e3 * check['auto_seconds']:.2f} ms against {1e3 * check['fixed_seconds']:.2f} ms "
             f"(median), {check['ratio']:.2f}× — AUTO is {verdict}.</p>")
     if report.get("stability"):

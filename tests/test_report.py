@@ -62,6 +62,21 @@ def test_pareto_frontier_is_exactly_the_non_dominated_set():
     assert core_report.pareto_frontier([1.0, np.nan, 2.0], [0.5, 0.0, np.inf]) == [0]
 
 
+def test_fastest_candidates_are_the_fast_rows_meeting_the_target():
+    rows = [dict(method="A", frame_seconds=0.010, error_ref=0.03),      # misses
+            dict(method="B", frame_seconds=0.020, error_ref=0.01),
+            dict(method="C", frame_seconds=0.030, error_ref=0.015),
+            dict(method="D", frame_seconds=0.039, error_ref=0.0),
+            dict(method="E", frame_seconds=0.041, error_ref=0.0),       # > 2x the fastest
+            dict(method="F", frame_seconds=0.025, error_ref=float("nan")),
+            dict(method="G", frame_seconds=float("inf"), error_ref=0.0)]
+    got = [r["method"] for r in core_report.fastest_candidates(rows, 0.02)]
+    assert got == ["B", "C", "D"]
+    assert [r["method"] for r in core_report.fastest_candidates(rows, 0.02, count=2)] == ["B", "C"]
+    assert core_report.fastest_candidates(rows, 0.02)[0] is core_report.fastest_meeting(rows, 0.02)
+    assert core_report.fastest_candidates(rows, -1.0) == []
+
+
 def test_png_round_trip_and_heatmap_ramp(tmp_path):
     rng = np.random.default_rng(3)
     rgb = rng.integers(0, 256, (5, 11, 3), dtype=np.uint8)
@@ -165,11 +180,16 @@ def test_report_measures_each_method_and_restores_the_scene(tmp_path):
         assert (out / r["image"]).is_file() and (out / r["heatmap"]).is_file()
     # AUTO against the fastest fixed method within its target, timed interleaved
     target = scene.prt.auto_error_target
-    fastest = core_report.fastest_meeting([r for r in run.rows if r["method"] != "AUTO"], target)
+    fixed_rows = [r for r in run.rows if r["method"] != "AUTO"]
+    fastest = core_report.fastest_meeting(fixed_rows, target)
+    candidates = core_report.fastest_candidates(fixed_rows, target)
     check = run.auto_check
     assert (check is None) == (fastest is None)
     if check is not None:
-        assert check["fixed"] == f"{fastest['method']} {fastest['budget']}".strip()
+        assert candidates[0] is fastest and 1 <= len(candidates) <= 3
+        assert all(r["frame_seconds"] <= 2.0 * fastest["frame_seconds"] for r in candidates)
+        assert check["fixed"] in [f"{r['method']} {r['budget']}".strip() for r in candidates]
+        assert len(check["candidates"]) == len(candidates)
         assert check["rounds"] == 3 and check["auto_seconds"] > 0 and check["fixed_seconds"] > 0
         assert check["ratio"] == pytest.approx(check["fixed_seconds"] / check["auto_seconds"])
         assert "interleaved relit frames" in text
