@@ -17,7 +17,10 @@ visibility, eq. 35 inner product with the SG-prefiltered environment).
 ``shade`` does it per vertex in numpy (``core.ssdf_sg``) for tests/benches.
 Lighting is fitted/prefiltered once per environment image; the world's
 rotation and strength are applied at draw time (eq. 7: rotating an SG rotates
-its axis), so neither they nor BRDF sliders need a new precompute.
+its axis), so neither they nor BRDF sliders need a new precompute.  With
+``sg_lighting_fit = 'SCENE'`` (default) the diffuse lobes' amplitudes are
+re-solved for the scene when the world turns (:func:`scene_fit`: non-negative
+least squares against the exact shadowed irradiance at <= 2048 points, ~0.1 s).
 """
 
 from __future__ import annotations
@@ -97,10 +100,10 @@ _SCENE_FIT_CACHE: dict = drawing.gpu_cache({})
 
 
 def scene_fit_points(state, fields, count: int = SCENE_FIT_POINTS, seed: int = 0):
-    """``[(object index, rows (sorted), weights)]``: up to ``count`` shading points drawn
-    with probability proportional to surface area among the points whose material has a
-    diffuse part (all of them when there are fewer; weights = their areas), weights =
-    times drawn."""
+    """``[(object index, rows (sorted), weights)]``: the shading points whose material has
+    a diffuse part, weighted by the surface area they stand for -- all of them (weights =
+    their areas) when there are at most ``count``, else ``count`` draws with probability
+    proportional to area (weights = how often each point was drawn)."""
     per = []
     for st in state.objects:
         pts = st.points
@@ -392,6 +395,9 @@ class SSDFSGMethod(Method):
             fit = scene_fit(state, fields, fit, cosine_of(state.settings))
             if len(fit) > 4:
                 before, after, count = fit[4]
+                # one line for the current fit (a turned world re-fits: replace, not add)
+                state.warnings[:] = [w for w in state.warnings
+                                     if not w.startswith("SSDF_SG lighting:")]
                 state.note(f"SSDF_SG lighting: {len(fit[1])} lobes, diffuse error at {count} "
                            f"scene points {after:.1%} (environment-only amplitudes {before:.1%})")
         return fit, pre
