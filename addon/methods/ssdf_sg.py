@@ -20,7 +20,7 @@ rotation and strength are applied at draw time (eq. 7: rotating an SG rotates
 its axis), so neither they nor BRDF sliders need a new precompute.  With
 ``sg_lighting_fit = 'SCENE'`` (default) the diffuse lobes' amplitudes are
 re-solved for the scene when the world turns (:func:`scene_fit`: non-negative
-least squares against the exact shadowed irradiance at <= 2048 points, ~0.1 s).
+least squares against the exact shadowed irradiance at <= 1024 points, ~0.1 s).
 """
 
 from __future__ import annotations
@@ -93,7 +93,7 @@ def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes
 
 #: scene points (drawn by surface area among the points with a diffuse part) at which
 #: the diffuse lighting amplitudes are fitted (``sg_lighting_fit = 'SCENE'``)
-SCENE_FIT_POINTS = 2048
+SCENE_FIT_POINTS = 1024
 # "points": the last scene_fit_points draw; "fit": the last scene-fitted lighting (entries
 # keep their fields alive, which may hold GPU textures: freed with the GPU caches)
 _SCENE_FIT_CACHE: dict = drawing.gpu_cache({})
@@ -295,7 +295,7 @@ class SSDFSGMethod(Method):
                 name="Lighting Fit", default="SCENE", update=runtime.redraw_viewports,
                 items=[("SCENE", "Scene",
                         "Lobes from the environment, amplitudes fitted to the scene's exact "
-                        "shadowed irradiance at up to 2048 surface points (redone when the "
+                        "shadowed irradiance at up to 1024 surface points (redone when the "
                         "world turns, tens of milliseconds)"),
                        ("ENVIRONMENT", "Environment",
                         "Lobes and amplitudes from the environment alone (the paper's §6): "
