@@ -137,28 +137,32 @@ def visibility_ratio(theta_d, lam, exact=False):
 
 
 def diffuse_lobe_transfer(field, rows, normals, light_axes, light_lam, tangents=None,
-                          bitangents=None, exact_fh=False, cosine=COSINE_EQ40):
+                          bitangents=None, exact_fh=False, cosine=COSINE_EQ40,
+                          per_cosine=False):
     """Eq. 39 per light lobe: ``T[r, j] = (C*(i; n_r) (x) G(i; p_j, lam_j, 1)) . V^d_r``
     (R, J), the diffuse transfer of each *unit-amplitude* light lobe, so that
-    ``R_d = T mu`` for RGB amplitudes ``mu`` (J, 3).  ``light_axes`` (J, 3) or
-    (R, J, 3) world, ``light_lam`` (J,)/(R, J); the rest as :func:`diffuse_transfer`."""
+    ``R_d = T mu`` for RGB amplitudes ``mu`` (J, 3).  ``per_cosine``: keep the terms of
+    the clamped-cosine mixture's lobes apart, ``T[r, m, j]`` (R, M, J), for amplitudes
+    ``mu[m, j]`` per (cosine lobe, light lobe) (:func:`diffuse_transfer_per_cosine`).
+    ``light_axes`` (J, 3) or (R, J, 3) world, ``light_lam`` (J,)/(R, J); the rest as
+    :func:`diffuse_transfer`."""
     n = np.asarray(normals, np.float64)
     R = len(n)
     if tangents is None:
         tangents, bitangents = ssdf_frames(n)
     ax = np.broadcast_to(np.asarray(light_axes, np.float64), (R,) + np.shape(light_axes)[-2:])
     lam = np.broadcast_to(np.asarray(light_lam, np.float64), ax.shape[:2])
-    out = np.zeros(ax.shape[:2])
-    if ax.shape[1] == 0:
-        return out
-    for d, c in zip(cosine.directions, cosine.amplitudes):
-        cw = d[0] * tangents + d[1] * bitangents + d[2] * n
-        cn = np.broadcast_to(cw[:, None, :], ax.shape)
-        p, lam_m, amp = sg.product(cn, np.full(ax.shape[:2], cosine.sharpness),
-                                   np.full(ax.shape[:2], c), ax, lam, 1.0)
-        theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
-        out += visibility_integral(theta, lam_m, exact_fh) * amp                  # (R, J)
-    return out
+    M = len(cosine.amplitudes)
+    out = np.zeros((R, M, ax.shape[1]))
+    if ax.shape[1] > 0:
+        for k, (d, c) in enumerate(zip(cosine.directions, cosine.amplitudes)):
+            cw = d[0] * tangents + d[1] * bitangents + d[2] * n
+            cn = np.broadcast_to(cw[:, None, :], ax.shape)
+            p, lam_m, amp = sg.product(cn, np.full(ax.shape[:2], cosine.sharpness),
+                                       np.full(ax.shape[:2], c), ax, lam, 1.0)
+            theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
+            out[:, k] = visibility_integral(theta, lam_m, exact_fh) * amp           # (R, J)
+    return out if per_cosine else out.sum(axis=1)
 
 
 def diffuse_transfer(field, rows, normals, light_axes, light_lam, light_mu,
@@ -174,6 +178,19 @@ def diffuse_transfer(field, rows, normals, light_axes, light_lam, light_mu,
                               bitangents, exact_fh, cosine)
     mu = np.broadcast_to(np.asarray(light_mu, np.float64), T.shape + (3,))
     return np.einsum("rj,rjc->rc", T, mu)
+
+
+def diffuse_transfer_per_cosine(field, rows, normals, light_axes, light_lam, cosine_mu,
+                                tangents=None, bitangents=None, exact_fh=False,
+                                cosine=COSINE_EQ40):
+    """Eq. 39 with an RGB amplitude per (cosine lobe m, light lobe j), ``cosine_mu``
+    (M, J, 3): ``R_d = sum_m sum_j cosine_mu[m, j] f_h(...)`` -- each lobe of the
+    clamped-cosine mixture sees its own amplitudes of the same light lobes (the
+    scene-fitted lighting, ``core.sg_lighting.fit_scene_amplitudes``).  With
+    ``cosine_mu[m] = mu`` for every m it is :func:`diffuse_transfer`."""
+    T = diffuse_lobe_transfer(field, rows, normals, light_axes, light_lam, tangents,
+                              bitangents, exact_fh, cosine, per_cosine=True)
+    return np.einsum("rmj,mjc->rc", T, np.asarray(cosine_mu, np.float64))
 
 
 def specular_radiance(field, rows, normals, lobe_axes, lobe_lam, lobe_mu, env_lookup,
@@ -265,6 +282,6 @@ def equirect_from_sgs(height, axes, lam, mu):
         height, 2 * height, 3).astype(np.float32)
 
 
-__all__ = ["CosineLobes", "COSINE_EQ40", "COSINE_SG7", "COSINE_SG19", "COSINE_MODELS", "PCAField", "ImageField", "diffuse_transfer", "diffuse_lobe_transfer", "specular_radiance", "lamp_radiance",
+__all__ = ["CosineLobes", "COSINE_EQ40", "COSINE_SG7", "COSINE_SG19", "COSINE_MODELS", "PCAField", "ImageField", "diffuse_transfer", "diffuse_lobe_transfer", "diffuse_transfer_per_cosine", "specular_radiance", "lamp_radiance",
            "visibility_integral", "visibility_ratio", "analytic_sg_environment",
            "sg_mixture_radiance", "equirect_from_sgs", "LAMBDA_C", "MU_C"]

@@ -10,7 +10,8 @@
  *                     per point, rows of 4096 texels;
  *           eigenTex  2D array, layer l = SSDF images 4l..4l+3 (mean, E_1, ..., E_K);
  *           envTex    prefiltered atlas, row (level * 6 + face) * envRes + row;
- *           lightTex  per diffuse lobe j: texel (0, j) = (axis, lam), (1, j) = (mu, 0)
+ *           lightTex  per diffuse lobe j: texel (0, j) = (axis, lam), (1 + m, j) = (mu, 0) as
+ *                     seen by clamped-cosine lobe m (the scene fit: one amplitude per pair)
  *                     in texture space (world axis = R^T axis, amplitude * strength);
  *           paramTex  9 texels of scalar parameters (environment, SSDF, material slot),
  *                     read into the globals below (push constants are kept to 128 bytes),
@@ -220,7 +221,7 @@ void main()
     vec3 cw = cl.x * t + cl.y * b + cl.z * n;
     for (int j = 0; j < lightCount; j++) {
       vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
-      vec3 mu = texelFetch(lightTex, ivec2(1, j), 0).rgb;
+      vec3 mu = texelFetch(lightTex, ivec2(1 + m, j), 0).rgb;   /* this cosine lobe's amplitude */
       vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */
       vec3 p;
       float lam, amp;

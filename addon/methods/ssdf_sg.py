@@ -181,20 +181,32 @@ def _solve_scene_fit(state, fields, fit, cosine, picks):
         st = state.objects[o]
         n = st.points.normals[rows]
         T.append(ssdf_sg.diffuse_lobe_transfer(fields[o].numpy, rows, n, axes_w, lam,
-                                               cosine=cosine))
+                                               cosine=cosine, per_cosine=True))
         E.append(reference.diffuse_irradiance(st.bits[rows], n, cube, L) / strength)
         W.append(w)
     T, E, W = np.concatenate(T), np.concatenate(E).astype(np.float64), np.concatenate(W)
-    scene_mu = sg_lighting.fit_scene_amplitudes(T, E, W)
+    S, M, J = T.shape
+    T = T.reshape(S, M * J)
+    # one RGB amplitude per (cosine lobe, light lobe): each lobe of the clamped-cosine
+    # mixture gets its own mix of the same light lobes (same per-pixel cost)
+    scene_mu = sg_lighting.fit_scene_amplitudes(T, E, W).reshape(M, J, 3)
     sw = np.sqrt(W)[:, None]
     norm = max(float(np.linalg.norm(E * sw)), 1e-300)
-    before = float(np.linalg.norm((T @ mu - E) * sw)) / norm
-    after = float(np.linalg.norm((T @ scene_mu - E) * sw)) / norm
+    before = float(np.linalg.norm((T @ cosine_amplitudes(mu, M).reshape(M * J, 3) - E) * sw)) / norm
+    after = float(np.linalg.norm((T @ scene_mu.reshape(M * J, 3) - E) * sw)) / norm
     return (axes, lam, scene_mu, rel, (before, after, len(W)))
 
 
+def cosine_amplitudes(mu, cosine_lobes: int) -> np.ndarray:
+    """Amplitudes per (cosine lobe, light lobe) (M, J, 3): the scene fit's as they are,
+    the environment fit's (J, 3) repeated for every cosine lobe."""
+    mu = np.asarray(mu, np.float64)
+    return mu if mu.ndim == 3 else np.broadcast_to(mu, (cosine_lobes,) + mu.shape)
+
+
 def world_sgs(world, fit):
-    """The diffuse SG fit in world space: ``L(d) = s E(R d)`` has axes ``R^T a``."""
+    """The diffuse SG fit in world space: ``L(d) = s E(R d)`` has axes ``R^T a``
+    (amplitudes (J, 3), or (M, J, 3) per cosine lobe from the scene fit)."""
     axes, lam, mu = fit[:3]
     return axes @ world.rotation, lam, mu * float(world.strength)
 
@@ -238,7 +250,9 @@ def shade_object(field, normals, positions, materials_of_points, materials, worl
             sel = sel_all[a:a + chunk]
             n = normals[sel]
             t, b = ssdf.ssdf_frames(n)
-            rd = ssdf_sg.diffuse_transfer(field, sel, n, axes, lam, mu, t, b, cosine=cosine)
+            rd = ssdf_sg.diffuse_transfer_per_cosine(
+                field, sel, n, axes, lam, cosine_amplitudes(mu, len(cosine.amplitudes)), t, b,
+                cosine=cosine)
             out[sel] = rd * kd
             lobes = (None, None, None)
             if glossy:
@@ -616,23 +630,25 @@ def field_textures(field):
     return field.gpu
 
 
-def environment_textures(fit, pre):
+def environment_textures(fit, pre, cosine_lobes: int):
     """(prefiltered atlas texture, light-lobe texture, lobe count): the atlas is made
     once per pyramid, the small lobe texture per fit (a turned world re-solves the
-    scene-fitted amplitudes, the pyramid stays)."""
+    scene-fitted amplitudes, the pyramid stays).  Lobe texture row j: texel 0 = (axis,
+    lam), texel 1 + m = the amplitude seen by cosine lobe m."""
     atlas = _GPU.get("atlas")
     if atlas is None or atlas[0] is not pre:
         atlas = _GPU["atlas"] = (pre, _texture(pre.atlas()))
     lights = _GPU.get("lights")
-    if lights is None or lights[0] is not fit:
+    if lights is None or lights[0] is not fit or lights[1] != cosine_lobes:
         axes, lam, mu = fit[:3]
         J = max(len(lam), 1)
-        light = np.zeros((J, 2, 4), np.float32)
+        light = np.zeros((J, 1 + cosine_lobes, 4), np.float32)
         light[:len(lam), 0, :3] = axes
         light[:len(lam), 0, 3] = lam
-        light[:len(lam), 1, :3] = mu
-        lights = _GPU["lights"] = (fit, _texture(light), len(lam))
-    return atlas[1], lights[1], lights[2]
+        if len(lam):
+            light[:len(lam), 1:, :3] = cosine_amplitudes(mu, cosine_lobes).transpose(1, 0, 2)
+        lights = _GPU["lights"] = (fit, cosine_lobes, _texture(light), len(lam))
+    return atlas[1], lights[2], lights[3]
 
 
 def material_uniforms(material):
@@ -697,8 +713,8 @@ def object_batches(st, field):
 
 def gpu_draws(state, fields, fit, pre, eye, view_dir):
     """draw(view_projection) callables, one per object."""
-    env_tex, light_tex, light_count = environment_textures(fit, pre)
     cosine = cosine_of(state.settings)
+    env_tex, light_tex, light_count = environment_textures(fit, pre, len(cosine.amplitudes))
     world = state.world
     rot = [list(map(float, r)) for r in np.asarray(world.rotation, np.float64)]
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None
