@@ -180,20 +180,23 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
     return np.array(axes), np.array(lamv), mu, rel
 
 
-def fit_scene_amplitudes(transfer, target, row_weights=None):
+def fit_scene_amplitudes(transfer, target, row_weights=None, prior=None,
+                         prior_weight: float = 0.0):
     """RGB amplitudes ``mu`` (J, 3) of fixed light lobes that best reproduce the
-    shading at a set of scene points: ``argmin_{mu >= 0} sum_s w_s |T_s mu - E_s|^2``
-    per channel (non-negative least squares).
+    shading at a set of scene points: ``argmin_{mu >= 0} sum_s w_s |T_s mu - E_s|^2
+    + a |mu - prior|^2`` per channel (non-negative least squares).
 
     ``transfer`` (S, J): each unit-amplitude lobe's diffuse transfer at the points
     as the renderer computes it (for SSDF_SG, eq. 39 with the SSDF visibility:
     ``core.ssdf_sg.diffuse_lobe_transfer``); ``target`` (S, 3) the exact shadowed
     irradiance there (``core.reference.diffuse_irradiance``); ``row_weights`` (S,)
-    or (S, 3) non-negative (e.g. surface area times diffuse albedo).  The lobes'
-    axes and sharpnesses come from the environment (:func:`fit_environment_sgs`);
-    only their amplitudes are chosen for the scene, so that the error that reaches
-    the image -- fit, clamped-cosine and visibility approximations together -- is
-    the one minimised."""
+    or (S, 3) non-negative (e.g. surface area times diffuse albedo).  ``prior``
+    (J, 3) with ``prior_weight`` > 0 adds a ridge toward it, ``a = prior_weight *
+    mean diagonal of T^T W T`` (what few points cannot decide stays near the
+    prior, e.g. the environment fit's amplitudes).  The lobes' axes and sharpnesses
+    come from the environment (:func:`fit_environment_sgs`); only their amplitudes
+    are chosen for the scene, so that the error that reaches the image -- fit,
+    clamped-cosine and visibility approximations together -- is the one minimised."""
     T = np.asarray(transfer, dtype=np.float64)
     Et = np.asarray(target, dtype=np.float64)
     S, J = T.shape
@@ -205,9 +208,20 @@ def fit_scene_amplitudes(transfer, target, row_weights=None):
         np.asarray(row_weights, dtype=np.float64).reshape(S, -1), (S, 3))
     if np.any(w < 0) or not np.all(np.isfinite(w)):
         raise ValueError("row_weights must be finite and >= 0")
+    if prior is not None:
+        prior = np.asarray(prior, dtype=np.float64).reshape(J, 3)
+        if not (np.all(np.isfinite(prior)) and np.isfinite(prior_weight) and prior_weight >= 0):
+            raise ValueError("prior/prior_weight must be finite (weight >= 0)")
     sw = np.sqrt(w)
-    return np.stack([nonnegative_least_squares(T * sw[:, c:c + 1], Et[:, c] * sw[:, c])
-                     for c in range(3)], axis=1)
+    out = np.zeros((J, 3))
+    for c in range(3):
+        A, b = T * sw[:, c:c + 1], Et[:, c] * sw[:, c]
+        if prior is not None and prior_weight > 0 and J:
+            a = prior_weight * float(np.sum(A * A)) / J
+            A = np.vstack([A, math.sqrt(a) * np.eye(J)])
+            b = np.concatenate([b, math.sqrt(a) * prior[:, c]])
+        out[:, c] = nonnegative_least_squares(A, b)
+    return out
 
 
 # --------------------------------------------------------------------------- prefiltered environment

@@ -99,6 +99,16 @@ def test_scene_amplitudes_solve_weighted_nonnegative_least_squares():
     ls = np.clip(np.linalg.lstsq(T * np.sqrt(w)[:, None], E2 * np.sqrt(w)[:, None], rcond=None)[0], 0, None)
     cost = lambda m: float(np.sum(w[:, None] * (T @ m - E2) ** 2))
     assert cost(mu) <= cost(ls) + 1e-9
+    # the ridge: no weight changes nothing, a dominant one returns the prior, and with
+    # fewer points than unknowns it decides what the points cannot
+    prior = np.abs(rng.normal(size=(6, 3)))
+    np.testing.assert_allclose(sg_lighting.fit_scene_amplitudes(T, E2, w, prior, 0.0), mu)
+    np.testing.assert_allclose(sg_lighting.fit_scene_amplitudes(T, E2, w, prior, 1e9), prior,
+                               rtol=1e-6)
+    few = sg_lighting.fit_scene_amplitudes(T[:3], E[:3], prior=mu_true + 0.01, prior_weight=1e-3)
+    assert np.abs(few - mu_true).max() < 0.1
+    with pytest.raises(ValueError):
+        sg_lighting.fit_scene_amplitudes(T, E, prior=prior, prior_weight=-1.0)
     with pytest.raises(ValueError):
         sg_lighting.fit_scene_amplitudes(T, E[:, :2])
     with pytest.raises(ValueError):

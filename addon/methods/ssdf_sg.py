@@ -94,6 +94,8 @@ def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes
 #: scene points (drawn by surface area among the points with a diffuse part) at which
 #: the diffuse lighting amplitudes are fitted (``sg_lighting_fit = 'SCENE'``)
 SCENE_FIT_POINTS = 1024
+#: ridge of the scene fit toward the environment fit, per unknown per point (see scene_fit)
+PRIOR_WEIGHT = 1e-3
 # "points": the last scene_fit_points draw; "fit": the last scene-fitted lighting (entries
 # keep their fields alive, which may hold GPU textures: freed with the GPU caches)
 _SCENE_FIT_CACHE: dict = drawing.gpu_cache({})
@@ -189,10 +191,14 @@ def _solve_scene_fit(state, fields, fit, cosine, picks):
     T = T.reshape(S, M * J)
     # one RGB amplitude per (cosine lobe, light lobe): each lobe of the clamped-cosine
     # mixture gets its own mix of the same light lobes (same per-pixel cost)
-    scene_mu = sg_lighting.fit_scene_amplitudes(T, E, W).reshape(M, J, 3)
+    # a ridge toward the environment fit's amplitudes that fades as the points outnumber
+    # the unknowns (a small object: 5 points held 8 % -> 3.8 % off on tests' occluder)
+    prior = cosine_amplitudes(mu, M).reshape(M * J, 3)
+    scene_mu = sg_lighting.fit_scene_amplitudes(
+        T, E, W, prior=prior, prior_weight=PRIOR_WEIGHT * M * J / S).reshape(M, J, 3)
     sw = np.sqrt(W)[:, None]
     norm = max(float(np.linalg.norm(E * sw)), 1e-300)
-    before = float(np.linalg.norm((T @ cosine_amplitudes(mu, M).reshape(M * J, 3) - E) * sw)) / norm
+    before = float(np.linalg.norm((T @ prior - E) * sw)) / norm
     after = float(np.linalg.norm((T @ scene_mu.reshape(M * J, 3) - E) * sw)) / norm
     return (axes, lam, scene_mu, rel, (before, after, len(W)))
 
