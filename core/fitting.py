@@ -48,8 +48,10 @@ def nonnegative_least_squares(A, b, tol: float | None = None):
     """``argmin_{x >= 0} |A x - b|`` by Lawson & Hanson's active-set method (1974,
     ch. 23): move the variable with the largest gradient component into the passive
     set, solve the unconstrained problem on that set, and step back toward the
-    previous point while any passive variable would turn negative.  Exact for the
-    small problems of the SG fits (tens of columns).  Returns ``x`` (n,)."""
+    previous point while any passive variable would turn negative.  The sub-problems
+    are solved on the Gram matrix ``A^T A`` (Bro & De Jong's "fast NNLS"), so a tall
+    ``A`` is read once.  Exact for the small problems of the SG fits (tens of
+    columns).  Returns ``x`` (n,)."""
     A = np.asarray(A, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     m, n = A.shape
@@ -58,16 +60,26 @@ def nonnegative_least_squares(A, b, tol: float | None = None):
         return x
     if tol is None:
         tol = 10.0 * np.finfo(np.float64).eps * max(m, n) * max(np.abs(A).max(initial=0.0), 1e-300)
+    AtA = A.T @ A
+    Atb = A.T @ b
+    scale = tol * max(float(np.abs(b).max()), 1.0)
     passive = np.zeros(n, dtype=bool)
-    w = A.T @ (b - A @ x)
+    w = Atb - AtA @ x
     for _ in range(3 * n + 10):
         free = ~passive
-        if not np.any(free) or np.max(np.where(free, w, -np.inf)) <= tol * max(np.abs(b).max(), 1.0):
+        if not np.any(free) or np.max(np.where(free, w, -np.inf)) <= scale:
             break
         passive[int(np.argmax(np.where(free, w, -np.inf)))] = True
         while True:
             z = np.zeros(n)
-            z[passive] = np.linalg.lstsq(A[:, passive], b, rcond=None)[0]
+            idx = np.flatnonzero(passive)
+            G = AtA[np.ix_(idx, idx)]
+            try:
+                z[idx] = np.linalg.solve(G, Atb[idx])
+                if not np.all(np.isfinite(z[idx])):
+                    raise np.linalg.LinAlgError
+            except np.linalg.LinAlgError:          # dependent columns: least norm
+                z[idx] = np.linalg.lstsq(G, Atb[idx], rcond=None)[0]
             if np.all(z[passive] > 0.0):
                 x = z
                 break
@@ -78,5 +90,5 @@ def nonnegative_least_squares(A, b, tol: float | None = None):
             x[~passive] = 0.0
             if not np.any(passive):
                 break
-        w = A.T @ (b - A @ x)
+        w = Atb - AtA @ x
     return x
