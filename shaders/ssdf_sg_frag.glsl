@@ -222,6 +222,9 @@ void main()
     for (int j = 0; j < lightCount; j++) {
       vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
       vec3 mu = texelFetch(lightTex, ivec2(1 + m, j), 0).rgb;   /* this cosine lobe's amplitude */
+      if (mu.r == 0.0 && mu.g == 0.0 && mu.b == 0.0) {
+        continue;                                 /* the scene fit left this pair out */
+      }
       vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */
       vec3 p;
       float lam, amp;
