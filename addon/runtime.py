@@ -81,15 +81,25 @@ def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> envmap.
     return cube
 
 
-def per_visibility(cache: dict, key, bits, compute, limit: int = 64):
-    """``cache[key]`` derived from ``bits`` (computed when missing).  An entry keeps
-    its ``bits`` alive, so the ``id(bits)`` in ``key`` cannot be reused meanwhile."""
+def held(cache: dict, key, refs: tuple, compute, limit: int = 64):
+    """``cache[key]``, made by ``compute()`` from the objects ``refs`` -- made again when
+    missing or when it was made from other objects.  An entry keeps its ``refs`` alive,
+    so ids of them in ``key`` cannot be reused meanwhile; the oldest entry goes when a
+    new key would pass ``limit``."""
+    refs = tuple(refs)
     entry = cache.get(key)
-    if entry is None or entry[0] is not bits:
-        if len(cache) >= limit:
+    if entry is None or len(entry[0]) != len(refs) or \
+            not all(a is b for a, b in zip(entry[0], refs)):
+        if entry is None and len(cache) >= limit:
             cache.pop(next(iter(cache)))
-        entry = cache[key] = (bits, compute())
+        entry = cache[key] = (refs, compute())
     return entry[1]
+
+
+def per_visibility(cache: dict, key, bits, compute, limit: int = 64):
+    """``cache[key]`` derived from ``bits`` (:func:`held` with ``bits`` as the one
+    object it is made from)."""
+    return held(cache, key, (bits,), compute, limit)
 
 
 def stored_visibility(ob_orig, points: int, nbytes: int):

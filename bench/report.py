@@ -28,33 +28,14 @@ import scenes  # noqa: E402
 MESHES = scenes.ROOT.parent / "shared/data/meshes"
 
 
-def _assign_bsdf(ob, name, node_type, **inputs):
-    """Give ``ob`` one new material whose surface is a single ``node_type`` BSDF;
-    ``inputs`` are socket default values, ``distribution`` the node's setting."""
-    import bpy
-    mat = bpy.data.materials.new(name)
-    nt = mat.node_tree
-    for node in list(nt.nodes):
-        if node.type == "BSDF_PRINCIPLED":
-            nt.nodes.remove(node)
-    node = nt.nodes.new(node_type)
-    if "distribution" in inputs:
-        node.distribution = inputs.pop("distribution")
-    for socket, value in inputs.items():
-        node.inputs[socket].default_value = value
-    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
-    ob.data.materials.clear()
-    ob.data.materials.append(mat)
-
-
 def _diffuse(ob, name, colour):
-    _assign_bsdf(ob, name, "ShaderNodeBsdfDiffuse", Color=colour)
+    scenes.add_bsdf_material(ob, name, "ShaderNodeBsdfDiffuse", Color=colour)
 
 
 def _glossy(ob, name, colour, roughness):
     """Cycles Glossy BSDF, Beckmann (the issue 3/5 glossy material)."""
-    _assign_bsdf(ob, name, "ShaderNodeBsdfGlossy", distribution="BECKMANN", Color=colour,
-                 Roughness=roughness)
+    scenes.add_bsdf_material(ob, name, "ShaderNodeBsdfGlossy", distribution="BECKMANN",
+                             Color=colour, Roughness=roughness)
 
 
 def build(name: str, cuts: int):

@@ -191,9 +191,8 @@ def pareto_frontier(times, errors) -> list[int]:
 
 def fastest_meeting(rows, target: float, key: str = "error_ref"):
     """The row with the smallest ``frame_seconds`` whose ``key`` ≤ ``target``, or None."""
-    ok = [r for r in rows if r.get(key) is not None and np.isfinite(r[key])
-          and r[key] <= target and np.isfinite(r.get("frame_seconds", math.inf))]
-    return min(ok, key=lambda r: r["frame_seconds"]) if ok else None
+    best = fastest_candidates(rows, target, count=1, key=key)
+    return best[0] if best else None
 
 
 def fastest_candidates(rows, target: float, count: int = 3, within: float = 2.0,
@@ -202,9 +201,9 @@ def fastest_candidates(rows, target: float, count: int = 3, within: float = 2.0,
     whose ``frame_seconds`` is at most ``within`` times the fastest one's: the fixed
     methods worth timing again side by side, since one sweep's timings move with the
     machine's load."""
-    ok = [r for r in rows if r.get(key) is not None and np.isfinite(r[key])
-          and r[key] <= target and np.isfinite(r.get("frame_seconds", math.inf))]
-    ok.sort(key=lambda r: r["frame_seconds"])
+    ok = sorted((r for r in rows if r.get(key) is not None and np.isfinite(r[key])
+                 and r[key] <= target and np.isfinite(r.get("frame_seconds", math.inf))),
+                key=lambda r: r["frame_seconds"])
     return [r for r in ok if r["frame_seconds"] <= within * ok[0]["frame_seconds"]][:count]
 
 

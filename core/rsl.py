@@ -174,24 +174,27 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
     q_total = max(float(np.sum(Y * dw)) ** 2 / (4.0 * np.pi), 1e-300)
     total_var = 0.0               # sum of Q - E²/A over subregions (0 for single texels)
 
-    def merged(a, b):
-        Am = A[a] + A[b]
+    def merged_moments(a, b):
         Ma, Mb = M[a], M[b]
-        Mm = (Ma[0] + Mb[0], Ma[1] + Mb[1], Ma[2] + Mb[2])
-        return _fit_error(Am, E[a] + E[b], Q[a] + Q[b], Mm) * Am ** p, Mm
+        return (Ma[0] + Mb[0], Ma[1] + Mb[1], Ma[2] + Mb[2])
+
+    def merged(a, b):
+        """Penalised fitting error ``|S|^p E(eta²)`` of the union of regions a and b."""
+        Am = A[a] + A[b]
+        return _fit_error(Am, E[a] + E[b], Q[a] + Q[b], merged_moments(a, b)) * Am ** p
 
     heap = []
     for a in range(D):
         for b in neigh[a]:
             if a < b:
-                heap.append((merged(a, b)[0], a, b, 0, 0))
+                heap.append((merged(a, b), a, b, 0, 0))
     heapq.heapify(heap)
     regions = D
     while regions > target and heap:
         _, a, b, sa, sb = heapq.heappop(heap)
         if not (alive[a] and alive[b]) or stamp[a] != sa or stamp[b] != sb:
             continue
-        Mm = merged(a, b)[1]
+        Mm = merged_moments(a, b)
         if len(neigh[a]) < len(neigh[b]):
             a, b = b, a
         total_var += (Q[a] + Q[b] - (E[a] + E[b]) ** 2 / (A[a] + A[b])
@@ -218,7 +221,7 @@ def decompose(lighting: CubeLighting, cube: Cubemap, count: int | None = 30,
             _history.append((regions, max(total_var, 0.0) / q_total))
         sa = stamp[a]
         for x in na:
-            heapq.heappush(heap, (merged(a, x)[0], a, x, sa, stamp[x]))
+            heapq.heappush(heap, (merged(a, x), a, x, sa, stamp[x]))
     labels = np.array(parent)
     while True:                       # follow merge parents to the surviving roots
         nxt = labels[labels]

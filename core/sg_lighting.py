@@ -129,7 +129,7 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
     coarse = cubemap(Nc)
     dirs_c = np.asarray(coarse.directions, dtype=np.float64)
     w_c = np.asarray(coarse.solid_angles, dtype=np.float64)
-    L_c = L if Nc == N else _downsample(L, N, Nc)[0]
+    L_c = L if Nc == N else _box_down(L, N, Nc, w)
     normals, C = _irradiance_operator(coarse)
     E = C @ L_c
     En = math.sqrt(float(np.sum(E * E)))
@@ -236,7 +236,6 @@ def _downsample(L, N, Ns):
         return L, np.asarray(fine.directions), np.asarray(fine.solid_angles)
     f = N // Ns
     w = fine.solid_angles.reshape(6, N, N)
-    e = (L.reshape(6, N, N, 3) * w[..., None]).reshape(6, Ns, f, Ns, f, 3).sum(axis=(2, 4))
     ws = w.reshape(6, Ns, f, Ns, f).sum(axis=(2, 4))
     y = (L @ LUMINANCE).reshape(6, N, N) * w
     m = (y[..., None] * np.asarray(fine.directions).reshape(6, N, N, 3)).reshape(
@@ -247,7 +246,7 @@ def _downsample(L, N, Ns):
     lit = ysum > 0
     md = m[lit] / ysum[lit][:, None]
     dirs[lit] = md / np.linalg.norm(md, axis=1, keepdims=True)
-    return (e / ws[..., None]).reshape(-1, 3), dirs.reshape(-1, 3), ws.reshape(-1)
+    return _box_down(L, N, Ns, fine.solid_angles), dirs.reshape(-1, 3), ws.reshape(-1)
 
 
 def _bilinear(level, face, s, t):

@@ -96,12 +96,12 @@ _ANGLE = [0.0]
 _CHOICE_CACHE: dict = {}
 # The scene-level assignment for the newest tuple of per-object keys (and camera).
 _SCENE_CACHE: dict = {}
-# Whole-scene relit times of assignments, per tuple of per-object keys: (visibility
-# arrays, {assignment: seconds}); a new camera picks among the same options, so it
-# times only assignments not timed before.
+# Whole-scene relit times of assignments, per tuple of per-object keys ({assignment:
+# seconds}, held with the objects' visibility arrays); a new camera picks among the same
+# options, so it times only assignments not timed before.
 _TIMED: dict = {}
-# Embree scene of the frame's triangles for the camera weights, per geometry (the
-# objects' mesh arrays, held with it).
+# Embree scene of the frame's triangles for the camera weights (held with the objects'
+# mesh arrays: made again for other geometry).
 _OCCLUDERS: dict = {}
 #: The newest per-object choices (what the panel and the report show).
 LAST_CHOICES: list = []
@@ -414,7 +414,7 @@ class AutoMethod(Method):
         return spend_slack(best) if sum(o[2] for o in best) <= budget2 else best
 
     @staticmethod
-    def _on_camera(state, measured, target, objects_key):
+    def _on_camera(state, measured, target):
         """``measured`` weighed for the frame's camera (``state.camera``, set by the
         engine): each point's squared error and reference norm count by the pixels its
         corners cover in this image (:func:`core.screen.corner_pixel_weights`; hidden,
@@ -426,14 +426,11 @@ class AutoMethod(Method):
         if camera is None or not measured:
             return measured, False
         arrays = [st.arrays for st in state.objects]
-        geometry = tuple(id(a) for a in arrays)         # the cache holds them: ids stay
-        got = _OCCLUDERS.get(geometry)
-        occluders = got[1] if got is not None else None
-        if occluders is None and visibility.have_embree():
-            occluders = visibility.build_occluder_scene(
+        occluders = runtime.held(
+            _OCCLUDERS, "frame", arrays,
+            lambda: (visibility.build_occluder_scene(
                 np.concatenate([a.triangle_positions for a in arrays]))
-            _OCCLUDERS.clear()
-            _OCCLUDERS[geometry] = (arrays, occluders)
+                if visibility.have_embree() else None), limit=1)
         weights = screen.corner_pixel_weights(
             arrays, camera["clip"], camera["width"],
             camera["height"], eye=camera["eye"], view_dir=camera["view_dir"],
@@ -457,13 +454,13 @@ class AutoMethod(Method):
             return measured, False
         return out, True
 
-    def _assign(self, state, measured, target, objects_key=None):
+    def _assign(self, state, measured, target, objects_key):
         """The frame's assignment: the Lagrangian per-object mix against the whole scene's
         rel-L2 budget (in the frame camera's image when known, else at the probes),
         timed (relit frames of the whole scene) against each single candidate that also
         fits the budget; the fastest wins.  Timings are kept per assignment, so a new
         camera times only assignments not seen before."""
-        measured, on_camera = self._on_camera(state, measured, target, objects_key)
+        measured, on_camera = self._on_camera(state, measured, target)
         limit = min(m["limit"] for m in measured) if measured else target
         total_ref2 = sum(m["ref_norm2"] for m in measured)
         budget2 = (limit ** 2) * total_ref2
@@ -499,14 +496,8 @@ class AutoMethod(Method):
                               1)[0]
             # the timings of this scene's objects (their visibility arrays held with
             # them, so an id in the key is never another object's)
-            bits = [st.bits for st in state.objects]
-            got = _TIMED.get(objects_key)
-            if got is None or objects_key is None or \
-                    not all(a is b for a, b in zip(got[0], bits)):
-                if len(_TIMED) > 16:
-                    _TIMED.clear()
-                got = _TIMED[objects_key] = (bits, {})
-            seen = got[1]
+            seen = runtime.held(_TIMED, objects_key, [st.bits for st in state.objects], dict,
+                                limit=16)
             for name, assignment in options.items():
                 tkey = tuple(assignment)
                 if tkey not in seen:

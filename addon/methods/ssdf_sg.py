@@ -96,8 +96,9 @@ def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes
 SCENE_FIT_POINTS = 1024
 #: ridge of the scene fit toward the environment fit, per unknown per point (see scene_fit)
 PRIOR_WEIGHT = 1e-3
-# "points": the last scene_fit_points draw; "fit": the last scene-fitted lighting (entries
-# keep their fields alive, which may hold GPU textures: freed with the GPU caches)
+# ("points", objects) -> scene_fit_points' draw; ("fit", lighting) -> the scene-fitted
+# lighting (entries keep their fields alive, which may hold GPU textures: freed with the
+# GPU caches)
 _SCENE_FIT_CACHE: dict = drawing.gpu_cache({})
 
 
@@ -134,16 +135,6 @@ def _diffuse_slots(st) -> np.ndarray:
     return np.array([bool(np.any(np.asarray(sg_brdf.diffuse_albedo(m)) > 0)) for m in table])
 
 
-def _cached(cache: dict, name: str, refs: tuple, key, compute):
-    """``cache[name]`` when it was made for ``key`` from the very objects ``refs`` (kept
-    alive by the entry, so their ids in ``key`` cannot be reused meanwhile)."""
-    got = cache.get(name)
-    if got is None or got[1] != key or len(got[0]) != len(refs) or \
-            not all(x is y for x, y in zip(got[0], refs)):
-        got = cache[name] = (refs, key, compute())
-    return got[2]
-
-
 def scene_fit(state, fields, fit, cosine):
     """The diffuse SG fit with its RGB amplitudes re-solved for this scene at the world's
     current rotation (:func:`core.sg_lighting.fit_scene_amplitudes`): the lobes' eq. 39
@@ -161,14 +152,14 @@ def scene_fit(state, fields, fit, cosine):
                    tuple(tuple(_diffuse_slots(st)) for st in state.objects))
     # drawn points: the same while the objects and their diffuse slots are (a turned world
     # or a new fit reuses them)
-    picks = _cached(_SCENE_FIT_CACHE, "points", refs, objects_key,
-                    lambda: scene_fit_points(state, fields))
+    picks = runtime.held(_SCENE_FIT_CACHE, ("points", objects_key), refs,
+                         lambda: scene_fit_points(state, fields), limit=8)
     if not picks:
         return fit
     lighting_key = (runtime.env_key(world, state.resolution)[0], world.rotation.round(9).tobytes(),
                     state.resolution, cosine.sharpness, len(cosine.amplitudes), objects_key)
-    return _cached(_SCENE_FIT_CACHE, "fit", refs + (fit,), lighting_key,
-                   lambda: _solve_scene_fit(state, fields, fit, cosine, picks))
+    return runtime.held(_SCENE_FIT_CACHE, ("fit", lighting_key), refs + (fit,),
+                        lambda: _solve_scene_fit(state, fields, fit, cosine, picks), limit=8)
 
 
 def _solve_scene_fit(state, fields, fit, cosine, picks):
