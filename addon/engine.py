@@ -10,6 +10,7 @@ import numpy as np
 from gpu_extras.presets import draw_texture_2d
 from mathutils import Matrix
 
+from ..core import pixel_filter
 from . import drawing
 from .runtime import FrameState
 
@@ -59,28 +60,33 @@ def frame_camera(view: Matrix, projection: Matrix, width: int, height: int, eye,
 
 def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, width: int,
                 height: int, transparent: bool, supersampling: int = 1,
-                object_draws=None) -> np.ndarray:
+                object_draws=None, filter_width: float = 0.0) -> np.ndarray:
     """Draw per-corner ``radiance`` (or a per-pixel method's ``object_draws``) offscreen:
-    linear RGBA (height, width, 4), bottom row first."""
+    linear RGBA (height, width, 4), bottom row first.
+
+    With ``supersampling`` > 1 the samples are resolved with Cycles' Blackman-Harris pixel
+    filter of ``filter_width`` pixels (the scene's Film *Filter Size*; 0 = each pixel's
+    own samples averaged), so an F12 frame is filtered as Cycles filters its samples."""
     batches = [] if object_draws is not None else _batches(state, radiance)
     s = max(1, int(supersampling))
     big = drawing.render_offscreen(batches, _background(state), projection @ view,
                                    width * s, height * s, transparent,
                                    object_draws=object_draws or ())
     if s > 1:
-        big = big.reshape(height, s, width, s, 4).mean(axis=(1, 3))
+        big = pixel_filter.resolve(big, s, filter_width)
     return big
 
 
 def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: int, height: int,
-                  transparent: bool, is_perspective: bool, supersampling: int = 1) -> np.ndarray:
+                  transparent: bool, is_perspective: bool, supersampling: int = 1,
+                  filter_width: float = 0.0) -> np.ndarray:
     """Shade for this view and draw: the engine's one drawing path (viewport and F12)."""
     eye, view_dir = _eye(view, is_perspective)
     state.camera = frame_camera(view, projection, width, height, eye, view_dir)
     object_draws = state.draw_objects(eye, view_dir)
     radiance = None if object_draws is not None else state.shade(eye, view_dirs_for=view_dir)
     return draw_pixels(state, radiance, view, projection, width, height, transparent,
-                       supersampling, object_draws=object_draws)
+                       supersampling, object_draws=object_draws, filter_width=filter_width)
 
 
 class ViewportShading:
@@ -174,7 +180,7 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         view = cam_eval.matrix_world.inverted()
         persp = cam_eval.data.type != "ORTHO"
         pixels = render_pixels(state, view, projection, width, height, r.film_transparent, persp,
-                               scene.prt.supersampling)
+                               scene.prt.supersampling, r.filter_size)
         result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
         result.layers[0].passes["Combined"].rect.foreach_set(
             np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1))

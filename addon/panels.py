@@ -16,6 +16,9 @@ def draw_settings(layout, context):
     col.prop(prt, "resolution")
     col.prop(prt, "ray_offset")
     col.prop(prt, "supersampling")
+    sub = col.row()
+    sub.active = prt.supersampling > 1
+    sub.prop(scene.render, "filter_size")
     row = layout.row(align=True)
     row.enabled = not RUNNING
     row.operator("prt.precompute", icon="LIGHT_SUN")

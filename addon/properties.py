@@ -26,7 +26,8 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
                                           "bounding diagonal")
     supersampling: IntProperty(name="Anti-Aliasing", default=3, min=1, max=4,
                                description="Final renders are drawn at this many times the "
-                                           "resolution per axis and box-filtered")
+                                           "resolution per axis and resolved with the Film's "
+                                           "Filter Size (Blackman-Harris, as Cycles)")
     # Written by the precompute operator (read-only in the UI).
     precomputed_resolution: IntProperty(name="Precomputed Directions", default=0)
     last_report: StringProperty(name="Last Precompute", default="")

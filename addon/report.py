@@ -235,11 +235,12 @@ class ReportRun:
         self._frames = 0
 
     # -------------------------------------------------------------- helpers
-    def _frame(self, depsgraph, view, projection, w, h, persp, supersampling):
+    def _frame(self, depsgraph, view, projection, w, h, persp, supersampling, filter_width):
         from .engine import render_pixels
         state = FrameState()
         state.sync(depsgraph)
-        img = render_pixels(state, view, projection, w, h, True, persp, supersampling)
+        img = render_pixels(state, view, projection, w, h, True, persp, supersampling,
+                            filter_width)
         return state, img[::-1].copy()
 
     def _time_frames(self, state, view, projection, w, h, persp):
@@ -351,7 +352,8 @@ class ReportRun:
                 view, projection, persp = _camera_matrices(scene, depsgraph, w, h)
                 notes = ""
                 try:
-                    state, img = self._frame(depsgraph, view, projection, w, h, persp, ss)
+                    state, img = self._frame(depsgraph, view, projection, w, h, persp, ss,
+                                             r.filter_size)
                     times = self._time_frames(state, view, projection, w, h, persp)
                     notes = "; ".join(([state.error] if state.error else []) + [
                         x for x in state.warnings if "Not precomputed" not in x])
@@ -446,6 +448,8 @@ class ReportRun:
                 scene=[("scene", scene.name), ("objects", len(job.objects)),
                        ("shading points", points), ("directions", f"6×{job.resolution}²"),
                        ("camera", f"{w}×{h}"), ("F12 supersampling", ss),
+                       ("pixel filter", f"Blackman-Harris {r.filter_size:g} px" if ss > 1
+                        and r.filter_size > 0 else "box"),
                        ("timing", f"render_pixels at {w}×{h}, median of {self.repeats}"),
                        ("machine GPU", _gpu_name())],
                 rows=self.rows, reference_image=ref_name, cycles_image=cycles_name,
