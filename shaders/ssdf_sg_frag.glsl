@@ -216,7 +216,9 @@ void main()
   }
   /* eq. 39: every (clamped-cosine lobe, light lobe) product probes the SSDF at its axis */
   vec3 rd = vec3(0.0);
-  for (int m = 0; m < cosLobes; m++) {
+  /* a slot without a diffuse part (kd = 0: a pure Glossy BSDF) skips eq. 39 */
+  int diffuseLobes = (kd.r > 0.0 || kd.g > 0.0 || kd.b > 0.0) ? cosLobes : 0;
+  for (int m = 0; m < diffuseLobes; m++) {
     vec4 cl = texelFetch(paramTex, ivec2(10 + m, 0), 0);
     vec3 cw = cl.x * t + cl.y * b + cl.z * n;
     for (int j = 0; j < lightCount; j++) {
