@@ -18,9 +18,6 @@ import sys
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
 
-sys.path.insert(0, str(scenes.ROOT))
-from tests.blender_scene import bsdf_material  # noqa: E402
-
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -42,11 +39,9 @@ def main(argv=None):
         scenes.add_world(hdri, rotation_z=0.6)
         ground = scenes.add_ground(cuts=96)
         obj = scenes.add_obj(args.mesh) if args.mesh.is_file() else scenes.add_suzanne()
-        mat = bsdf_material("diffuse", "ShaderNodeBsdfDiffuse",
-                            Color=(0.8, 0.8, 0.8, 1.0))
         for ob in (ground, obj):
-            ob.data.materials.clear()
-            ob.data.materials.append(mat)
+            scenes.add_bsdf_material(ob, "diffuse", "ShaderNodeBsdfDiffuse",
+                                     Color=(0.8, 0.8, 0.8, 1.0))
         scenes.add_camera()
         r = bpy.context.scene.render
         r.resolution_x, r.resolution_y, r.resolution_percentage = w, h, 100
