@@ -357,6 +357,11 @@ class SSDFBasis:
     budget: float
     #: predicted RMS reconstruction error (radians) of K terms over all texels and points
     rms_error: float
+    #: share of the blocked texels (SSDF < 0) whose reconstruction is still blocked, over
+    #: all points (1 when nothing is blocked); set by :func:`ssdf_pca`.  The RMS budget is
+    #: dominated by open sky: a ground's small occluders (a sun shadow) can be lost at a
+    #: budget that looks tight, and this says how much of the occlusion the terms keep.
+    occlusion_kept: float = 1.0
 
     @property
     def terms(self) -> int:
@@ -463,7 +468,18 @@ def ssdf_pca(bits, normals, cube, grid: SSDFGrid, budget: float, max_terms: int 
 
     basis = fit_basis(first_pass(), grid.resolution, budget, max_terms)
     coeffs = np.empty((P, basis.terms), np.float32)
+    blocked = kept = 0
     for i, (a, b) in enumerate(spans):
         r = cache[i] if keep else rows(a, b)
         coeffs[a:b] = basis.project(r)
+        b_now, k_now = occlusion_counts(r, basis.reconstruct(coeffs[a:b]))
+        blocked, kept = blocked + b_now, kept + k_now
+    basis.occlusion_kept = kept / blocked if blocked else 1.0
     return basis, coeffs
+
+
+def occlusion_counts(exact, reconstructed):
+    """``(blocked texels, of them still blocked after compression)`` of SSDF rows: a texel
+    is blocked where its signed distance is negative (eq. 23)."""
+    blocked = np.asarray(exact) < 0.0
+    return int(blocked.sum()), int((blocked & (np.asarray(reconstructed) < 0.0)).sum())

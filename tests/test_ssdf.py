@@ -167,3 +167,32 @@ def test_open_field_equals_computed_open_ssdf():
     computed = ssdf.compute_ssdf(bits, normals, cube, method.method_grid(8))
     field = method.open_field(2, 8)
     assert np.allclose(field.numpy.images[0][None, :], computed, atol=1e-5)
+
+
+def test_pca_reports_the_share_of_blocked_directions_it_keeps(cube):
+    """``occlusion_kept``: of the texels with a negative SSDF (blocked, eq. 23), the share
+    whose compressed SSDF is still negative -- counted here from the reconstruction."""
+    rng = np.random.default_rng(11)
+    P = 300
+    normals = _unit(rng.normal(size=(P, 3)) * 0.2 + [0, 0, 1])
+    # mostly open points with a small blocker each (a ground near small objects)
+    centres = _unit(normals + 1.2 * rng.normal(size=(P, 3)))
+    bits = _cap_bits(normals, centres, rng.uniform(-0.95, -0.6, P), cube)
+    grid = ssdf.SSDFGrid(8, 2, 1)
+    full = ssdf.compute_ssdf(bits, normals, cube, grid)
+    assert 0.0 < np.mean(full < 0) < 0.5
+    kept = []
+    for budget in (0.2, 0.05, 0.001):
+        basis, coeffs = ssdf.ssdf_pca(bits, normals, cube, grid, budget, max_terms=64,
+                                      chunk_points=70)
+        rec = basis.reconstruct(coeffs)
+        blocked = full < 0
+        expect = np.sum(blocked & (rec < 0)) / np.sum(blocked)
+        assert basis.occlusion_kept == pytest.approx(expect, abs=1e-12)
+        kept.append(basis.occlusion_kept)
+    assert kept[0] < kept[1] <= kept[2]
+    assert kept[2] > 0.98                  # 64 terms of 64 texels: (almost) exact
+    # nothing blocked: nothing to lose
+    open_bits = _cap_bits(normals, normals, np.full(P, -2.0), cube)
+    basis, _ = ssdf.ssdf_pca(open_bits, normals, cube, grid, 0.2)
+    assert basis.occlusion_kept == 1.0

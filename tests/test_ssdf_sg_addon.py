@@ -256,3 +256,26 @@ def test_scene_fitted_lighting_is_closer_to_reference_than_the_environment_fit(t
     np.testing.assert_allclose(turned[1], fit[1])
     assert not np.allclose(turned[2], fit[2])
     assert suz.prt.precompute_id == pid
+
+
+def test_pca_tells_how_much_occlusion_it_keeps():
+    """The PCA's share of blocked directions kept (core.ssdf.SSDFBasis.occlusion_kept) is
+    stored with the field, shown in the note, and grows with a smaller error budget."""
+    scene = _scene()
+    kept = {}
+    for budget in (0.05, 0.005):
+        scene.prt.ssdf_error_budget = budget
+        assert bpy.ops.prt.precompute() == {"FINISHED"}
+        img = bpy.data.images[method.IMAGE_PREFIX + "Grid"]
+        kept[budget] = float(img["prt_occlusion_kept"])
+        state = _state()
+        grid = next(st for st in state.objects if st.name == "Grid")
+        field = state.method_impl._field(state, grid)
+        assert field.occlusion_kept == pytest.approx(kept[budget])       # read back
+        note = next(w for w in state.warnings if w.startswith("SSDF_SG PCA:"))
+        assert f"Grid: {field.terms} PCA terms" in note and "blocked directions kept" in note
+        faded = any("blocked directions: shadows of small occluders" in w
+                    for w in state.warnings)
+        assert faded == (kept[budget] < method.OCCLUSION_KEPT_WARNING)
+    print("Grid: blocked directions kept", kept)
+    assert 0.0 < kept[0.05] < kept[0.005] <= 1.0
