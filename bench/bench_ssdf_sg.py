@@ -14,9 +14,9 @@ REFERENCE's own error against Cycles, and the F12 times of SSDF_SG, REFERENCE an
 Workbench of the same scene in the same run (lighting fit/prefilter warm: the first
 F12 after a lighting change is timed separately).  Both F12s are resolved with the Film's
 pixel filter (Blackman-Harris 1.5 px, as Cycles' default).  Cycles renders the glossy scene
-with more samples: at 128 spp its own noise there is 6-7 % rel-L2 (against 4096 spp).  Targets: diffuse <= 3 % of Cycles
-and <= 2 % of REFERENCE; glossy <= 6 % of Cycles; F12 <= REFERENCE / 5 and <= 2 x
-Workbench.  Writes out/bench/ssdf_sg.txt.
+with more samples: at 128 spp its own noise there is 6-7 % rel-L2 (against 4096 spp).
+Targets: diffuse <= 3 % of Cycles and <= 2 % of REFERENCE; glossy <= 6 % of Cycles;
+F12 <= REFERENCE / 5 and <= 2 x Workbench.  Writes out/bench/ssdf_sg.txt.
 """
 
 from __future__ import annotations
