@@ -95,3 +95,59 @@ def test_f12_pixel_filter_matches_cycles_at_a_silhouette(tmp_path):
     # Away from the edge the white world lights the open plane to 0.8 in both.
     inside = cycles[..., 3] > 0.999
     assert np.allclose(ours[inside][:, :3], 0.8, rtol=0.03)
+
+
+def test_ssdf_sg_glossy_within_six_percent_of_cycles(tmp_path):
+    """Issue 3's glossy goal on a small scene: a Beckmann Glossy BSDF (roughness 0.3)
+    Suzanne on a diffuse ground under 'city' (a small sun), SSDF_SG's per-pixel F12
+    against Cycles (direct light, 2048 spp: glossy highlights of a small sun are noisy)."""
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("city"), rotation_z=0.6)
+    ground = bs.add_ground(size=6.0, cuts=48)
+    ground.data.materials.append(bs.bsdf_material("Ground", "ShaderNodeBsdfDiffuse",
+                                                  Color=(0.8, 0.8, 0.8, 1.0)))
+    suz = bs.add_suzanne(subdiv=2)
+    suz.data.materials.append(bs.bsdf_material("Glossy", "ShaderNodeBsdfGlossy",
+                                               distribution="BECKMANN", Roughness=0.3))
+    bs.add_camera()
+    bs.set_resolution(80, 60)
+    scene = bpy.context.scene
+    scene.prt.method = "SSDF_SG"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    ours = bs.render_exr(tmp_path / "ssdf_sg.exr")
+    cycles = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=2048)
+    err = bs.rel_l2(ours, cycles)
+    # the same frame with the slider at roughness 0.6 (a redraw, no precompute) is far off:
+    # the comparison sees the glossy lobe
+    node = suz.data.materials[0].node_tree.nodes["Glossy BSDF"]
+    node.inputs["Roughness"].default_value = 0.6
+    rougher = bs.rel_l2(bs.render_exr(tmp_path / "rougher.exr"), cycles)
+    print(f"SSDF_SG glossy vs Cycles rel-L2: {err:.4f} (roughness 0.6 instead: {rougher:.4f})")
+    assert err <= 0.06, err
+    assert rougher > 2.0 * err
+
+
+def test_ssdf_sg_diffuse_within_three_percent_of_cycles(tmp_path):
+    """Issue 3's diffuse goal on a small scene: diffuse Suzanne (subdivision 2) on a 48²
+    ground under 'sunset', SSDF_SG's F12 (scene-fitted lighting, SG7 cosine) against
+    Cycles 512 spp and against REFERENCE (measured 2.3 % / 2.0 %)."""
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("sunset"), rotation_z=0.6)
+    ground = bs.add_ground(size=6.0, cuts=48)
+    suz = bs.add_suzanne(subdiv=2)
+    for ob in (ground, suz):
+        ob.data.materials.append(bs.bsdf_material("Clay", "ShaderNodeBsdfDiffuse",
+                                                  Color=(0.8, 0.8, 0.8, 1.0)))
+    bs.add_camera()
+    bs.set_resolution(80, 60)
+    scene = bpy.context.scene
+    scene.prt.method = "SSDF_SG"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    ours = bs.render_exr(tmp_path / "ssdf_sg.exr")
+    scene.prt.method = "REFERENCE"
+    ref = bs.render_exr(tmp_path / "reference.exr")
+    cycles = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=512)
+    err_cycles, err_ref = bs.rel_l2(ours, cycles), bs.rel_l2(ours, ref)
+    print(f"SSDF_SG diffuse vs Cycles {err_cycles:.4f}, vs REFERENCE {err_ref:.4f}")
+    assert err_cycles <= 0.03, err_cycles
+    assert err_ref <= 0.025, err_ref
