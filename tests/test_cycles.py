@@ -1,4 +1,5 @@
-"""REFERENCE against Cycles direct lighting (max_bounces 0): slow, small scenes.
+"""REFERENCE and SSDF_SG against Cycles direct lighting (max_bounces 0), and the F12 pixel
+filter against Cycles' at a silhouette: slow, small scenes.
 
 Thresholds: Cycles' own noise at these sample counts is about 1 % rel-L2, and
 per-vertex shading of a tessellated scene is 1.6-3.7 % off per-pixel shading
