@@ -362,6 +362,9 @@ class SSDFBasis:
     #: dominated by open sky: a ground's small occluders (a sun shadow) can be lost at a
     #: budget that looks tight, and this says how much of the occlusion the terms keep.
     occlusion_kept: float = 1.0
+    #: eigen-images after the budget's K, up to the term cap (only while ``ssdf_pca`` picks
+    #: the terms by an occlusion target; None in a finished basis)
+    spare: np.ndarray | None = None
 
     @property
     def terms(self) -> int:
@@ -379,7 +382,7 @@ def choose_terms(eigenvalues, dim: int, budget: float, max_terms: int) -> int:
     ev = np.clip(np.asarray(eigenvalues, np.float64), 0.0, None)
     tail = np.concatenate([np.cumsum(ev[::-1])[::-1], [0.0]])       # tail[k] = sum_{j>=k}
     rms = np.sqrt(tail / dim)
-    cap = max(4, min(int(max_terms) // 4 * 4, dim // 4 * 4 if dim >= 4 else 4))
+    cap = term_cap(dim, max_terms)
     for k in range(4, cap + 1, 4):
         if k >= len(rms) or rms[min(k, len(rms) - 1)] <= budget:
             return min(k, cap)
@@ -412,8 +415,15 @@ class CovarianceAccumulator:
         return m + self.shift, 0.5 * (cov + cov.T)
 
 
-def fit_basis(chunks, resolution: int, budget: float, max_terms: int = 64) -> SSDFBasis:
-    """PCA basis from an iterable of SSDF chunks (rows (p, n*n)), eq. 24."""
+def term_cap(dim: int, max_terms: int) -> int:
+    """Most PCA terms :func:`choose_terms` may pick (a multiple of 4, at least 4)."""
+    return max(4, min(int(max_terms) // 4 * 4, dim // 4 * 4 if dim >= 4 else 4))
+
+
+def fit_basis(chunks, resolution: int, budget: float, max_terms: int = 64,
+              spare: bool = False) -> SSDFBasis:
+    """PCA basis from an iterable of SSDF chunks (rows (p, n*n)), eq. 24; ``spare`` keeps
+    the eigen-images after the budget's terms up to the cap in ``basis.spare``."""
     dim = resolution * resolution
     acc = CovarianceAccumulator(dim)
     for rows in chunks:
@@ -426,10 +436,12 @@ def fit_basis(chunks, resolution: int, budget: float, max_terms: int = 64) -> SS
     ev, vec = np.clip(ev[order], 0.0, None), vec[:, order]
     k = choose_terms(ev, dim, budget, max_terms)
     rms = float(math.sqrt(max(ev[k:].sum(), 0.0) / dim))
-    eigen = np.zeros((k, dim), np.float32)
-    kk = min(k, vec.shape[1])
-    eigen[:kk] = vec[:, :kk].T
-    return SSDFBasis(resolution, mean.astype(np.float32), eigen, ev, acc.count, float(budget), rms)
+    cap = max(k, term_cap(dim, max_terms)) if spare else k
+    rows = np.zeros((cap, dim), np.float32)
+    kk = min(cap, vec.shape[1])
+    rows[:kk] = vec[:, :kk].T
+    return SSDFBasis(resolution, mean.astype(np.float32), rows[:k].copy(), ev, acc.count,
+                     float(budget), rms, spare=rows[k:].copy() if spare else None)
 
 
 #: SSDF rows kept in memory between the two PCA passes (else recomputed)
@@ -437,13 +449,18 @@ CACHE_BYTES = 512 * 1024 * 1024
 
 
 def ssdf_pca(bits, normals, cube, grid: SSDFGrid, budget: float, max_terms: int = 64,
-             chunk_points: int = 8192, cancel=None, threads=None, progress=None):
+             chunk_points: int = 8192, cancel=None, threads=None, progress=None,
+             occlusion_target: float = 0.0):
     """SSDFs of all points compressed by PCA (eq. 24), streamed over chunks of points.
 
     Pass 1 accumulates the covariance chunk by chunk; pass 2 projects every
     SSDF on the chosen eigen-images (SSDFs are kept between the passes when they
-    fit in :data:`CACHE_BYTES`, else recomputed).  Returns
-    ``(basis, coefficients (P, K) float32)``.
+    fit in :data:`CACHE_BYTES`, else recomputed) and counts the blocked texels the
+    compression keeps blocked (``basis.occlusion_kept``).  The RMS ``budget`` picks the
+    number of terms; with ``occlusion_target`` > 0 more terms (in steps of 4, up to
+    ``max_terms``) are taken until that share of the blocked texels stays blocked (the
+    RMS is dominated by open sky: small occluders -- a low sun's shadow on a ground -- can
+    be lost at a budget that looks tight).  Returns ``(basis, coefficients (P, K) float32)``.
     """
     normals = np.asarray(normals, np.float64).reshape(-1, 3)
     P = len(normals)
@@ -466,16 +483,35 @@ def ssdf_pca(bits, normals, cube, grid: SSDFGrid, budget: float, max_terms: int 
                 cache.append(r)
             yield r
 
-    basis = fit_basis(first_pass(), grid.resolution, budget, max_terms)
-    coeffs = np.empty((P, basis.terms), np.float32)
-    blocked = kept = 0
+    basis = fit_basis(first_pass(), grid.resolution, budget, max_terms,
+                      spare=occlusion_target > 0.0)
+    eigen = basis.eigen if basis.spare is None else np.concatenate([basis.eigen, basis.spare])
+    steps = [basis.terms] + list(range(basis.terms + 4, len(eigen) + 1, 4))
+    coeffs = np.empty((P, len(eigen)), np.float32)
+    blocked, kept = 0, np.zeros(len(steps), np.int64)
     for i, (a, b) in enumerate(spans):
-        r = cache[i] if keep else rows(a, b)
-        coeffs[a:b] = basis.project(r)
-        b_now, k_now = occlusion_counts(r, basis.reconstruct(coeffs[a:b]))
-        blocked, kept = blocked + b_now, kept + k_now
-    basis.occlusion_kept = kept / blocked if blocked else 1.0
-    return basis, coeffs
+        r = np.asarray(cache[i] if keep else rows(a, b), np.float32)
+        c = ((r - basis.mean) @ eigen.T).astype(np.float32)
+        coeffs[a:b] = c
+        rec = basis.mean + c[:, :steps[0]] @ eigen[:steps[0]]
+        b_now, k_now = occlusion_counts(r, rec)
+        blocked += b_now
+        kept[0] += k_now
+        for j in range(1, len(steps)):
+            rec += c[:, steps[j - 1]:steps[j]] @ eigen[steps[j - 1]:steps[j]]
+            kept[j] += occlusion_counts(r, rec)[1]
+    share = kept / blocked if blocked else np.ones(len(steps))
+    pick = 0
+    if occlusion_target > 0.0:
+        meets = np.flatnonzero(share >= occlusion_target)
+        pick = int(meets[0]) if len(meets) else len(steps) - 1
+    K = steps[pick]
+    dim = grid.texels
+    basis.eigen = np.ascontiguousarray(eigen[:K])
+    basis.spare = None
+    basis.rms_error = float(math.sqrt(max(float(basis.eigenvalues[K:].sum()), 0.0) / dim))
+    basis.occlusion_kept = float(share[pick])
+    return basis, np.ascontiguousarray(coeffs[:, :K])
 
 
 def occlusion_counts(exact, reconstructed):

@@ -196,3 +196,37 @@ def test_pca_reports_the_share_of_blocked_directions_it_keeps(cube):
     open_bits = _cap_bits(normals, normals, np.full(P, -2.0), cube)
     basis, _ = ssdf.ssdf_pca(open_bits, normals, cube, grid, 0.2)
     assert basis.occlusion_kept == 1.0
+
+
+def test_pca_takes_more_terms_for_an_occlusion_target(cube):
+    """``occlusion_target``: the fewest terms (steps of 4 from the RMS budget's) whose
+    compression keeps that share of the blocked texels blocked; the cap when none does."""
+    rng = np.random.default_rng(12)
+    P = 300
+    normals = _unit(rng.normal(size=(P, 3)) * 0.2 + [0, 0, 1])
+    centres = _unit(normals + 1.2 * rng.normal(size=(P, 3)))
+    bits = _cap_bits(normals, centres, rng.uniform(-0.95, -0.6, P), cube)
+    grid = ssdf.SSDFGrid(8, 2, 1)
+    full = ssdf.compute_ssdf(bits, normals, cube, grid)
+    blocked = full < 0
+
+    def share(basis, k):
+        e = basis.eigen[:k]
+        rec = basis.mean + ((full - basis.mean) @ e.T) @ e
+        return np.sum(blocked & (rec < 0)) / np.sum(blocked)
+
+    plain, _ = ssdf.ssdf_pca(bits, normals, cube, grid, 0.2, max_terms=48)
+    target = min(0.97, plain.occlusion_kept + 0.5 * (1 - plain.occlusion_kept))
+    basis, coeffs = ssdf.ssdf_pca(bits, normals, cube, grid, 0.2, max_terms=48,
+                                  chunk_points=70, occlusion_target=target)
+    assert basis.terms > plain.terms and basis.terms % 4 == 0 and coeffs.shape == (P, basis.terms)
+    assert basis.occlusion_kept >= target
+    assert basis.occlusion_kept == pytest.approx(share(basis, basis.terms), abs=1e-3)
+    assert share(basis, basis.terms - 4) < target          # 4 fewer terms would not do
+    assert np.allclose(coeffs, basis.project(full), atol=1e-4)
+    ev = basis.eigenvalues
+    assert basis.rms_error == pytest.approx(np.sqrt(ev[basis.terms:].sum() / 64))
+    # an unreachable target takes the cap
+    capped, _ = ssdf.ssdf_pca(bits, normals, cube, grid, 0.2, max_terms=24,
+                              occlusion_target=1.01)
+    assert capped.terms == 24

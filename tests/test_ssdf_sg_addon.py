@@ -279,3 +279,16 @@ def test_pca_tells_how_much_occlusion_it_keeps():
         assert faded == (kept[budget] < method.OCCLUSION_KEPT_WARNING)
     print("Grid: blocked directions kept", kept)
     assert 0.0 < kept[0.05] < kept[0.005] <= 1.0
+    # Min Occlusion Kept takes terms until the share is reached (the default budget again)
+    scene.prt.ssdf_error_budget = 0.05
+    scene.prt.ssdf_occlusion_target = 0.9
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    state = _state()
+    field = state.method_impl._field(state, next(st for st in state.objects if st.name == "Grid"))
+    img = bpy.data.images[method.IMAGE_PREFIX + "Grid"]
+    assert field.occlusion_kept >= 0.9 or field.terms == scene.prt.ssdf_max_terms
+    assert float(img["prt_occlusion_target"]) == pytest.approx(0.9)
+    assert not any("blocked directions: shadows" in w for w in state.warnings)
+    # a stored field made for another target is not used: the setting needs a precompute
+    scene.prt.ssdf_occlusion_target = 0.0
+    assert method.read_image("Grid", field.coefficients.shape[0], 32, 32, 0.05, 48, 0.0) is None

@@ -53,15 +53,17 @@ def method_grid(resolution: int) -> ssdf.SSDFGrid:
 
 
 def pca_settings(settings):
+    """(SSDF resolution, RMS budget, max terms, occlusion target) of the PCA."""
     return (int(settings.get("ssdf_resolution", 32)), float(settings.get("ssdf_error_budget", 0.05)),
-            int(settings.get("ssdf_max_terms", 48)))
+            int(settings.get("ssdf_max_terms", 48)),
+            float(settings.get("ssdf_occlusion_target", 0.0)))
 
 
 def derive_object(bits, normals, cube, settings, cancel=None, progress=None):
     """(basis, coefficients) of one object's SSDFs (eq. 23-24)."""
-    res, budget, max_terms = pca_settings(settings)
+    res, budget, max_terms, occlusion = pca_settings(settings)
     return ssdf.ssdf_pca(bits, normals, cube, method_grid(res), budget, max_terms,
-                         cancel=cancel, progress=progress)
+                         cancel=cancel, progress=progress, occlusion_target=occlusion)
 
 
 #: the diffuse SG fit reads the environment at this cubemap resolution (at least), so a
@@ -302,6 +304,12 @@ class SSDFSGMethod(Method):
             "ssdf_max_terms": IntProperty(
                 name="SSDF Max Terms", default=48, min=4, max=60,
                 description="Upper limit of PCA terms per object"),
+            "ssdf_occlusion_target": FloatProperty(
+                name="Min Occlusion Kept", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
+                description="Take more PCA terms (up to the maximum) until this share of each "
+                            "object's blocked directions stays blocked after compression; the "
+                            "RMS budget alone can drop small occluders' shadows on a ground "
+                            "(0 = the budget alone; needs a precompute)"),
             "sg_lighting_fit": EnumProperty(
                 name="Lighting Fit", default="SCENE", update=runtime.redraw_viewports,
                 items=[("SCENE", "Scene",
@@ -358,7 +366,8 @@ class SSDFSGMethod(Method):
                 continue
             basis, coeffs = derived[o.name]
             ob = bpy.data.objects[o.name]
-            write_image(o.name, basis, coeffs, ob.prt.precompute_id, job.resolution)
+            write_image(o.name, basis, coeffs, ob.prt.precompute_id, job.resolution,
+                        pca_settings(job.settings)[3])
 
     # ------------------------------------------------------------- sync
     def sync(self, state):
@@ -371,19 +380,21 @@ class SSDFSGMethod(Method):
                     sg_material.export_sg_material(bpy.data.materials.get(n) if n else None,
                                                    state.warnings) for n in names]
         cube = directions.cubemap(state.resolution)
-        res, budget, max_terms = pca_settings(state.settings)
+        res, budget, max_terms, occlusion = pca_settings(state.settings)
         derived_now = []
         faded = []
         LAST_TERMS.clear()
         for st in state.objects:
             field = None
-            loaded = read_image(st.name, st.points.count, state.resolution, res, budget, max_terms)
+            loaded = read_image(st.name, st.points.count, state.resolution, res, budget,
+                                max_terms, occlusion)
             if loaded is not None and st.status == "ok":
                 field = loaded
             elif st.status == "missing":
                 field = open_field(st.points.count, res)        # no shadows: exact, instant
             else:
-                key = (st.name, id(st.bits), res, budget, max_terms, state.resolution)
+                key = (st.name, id(st.bits), res, budget, max_terms, occlusion,
+                       state.resolution)
                 field = runtime.per_visibility(
                     _FIELD_CACHE, key, st.bits,
                     lambda: _field_from(derive_object(st.bits, st.points.normals, cube,
@@ -402,8 +413,9 @@ class SSDFSGMethod(Method):
             state.note("SSDF_SG PCA: " + "; ".join(LAST_TERMS))
         if faded:
             state.note("SSDF_SG: the PCA keeps only " + ", ".join(faded) + " of the blocked "
-                       "directions: shadows of small occluders (a low sun's) fade; a smaller "
-                       "SSDF Error Budget keeps more (more terms, slower), then precompute")
+                       "directions: shadows of small occluders (a low sun's) fade; Min Occlusion "
+                       "Kept (or a smaller SSDF Error Budget) takes more terms (slower), then "
+                       "precompute")
 
     # ------------------------------------------------------------- shading
     def _lighting(self, state):
@@ -515,7 +527,7 @@ def _field_from(result):
 _ROW_FLOATS = 4096
 
 
-def write_image(name, basis, coeffs, precompute_id, cube_resolution):
+def write_image(name, basis, coeffs, precompute_id, cube_resolution, occlusion_target=0.0):
     """Store the PCA SSDF of one object in a packed RGBA float image."""
     import bpy
     flat = np.concatenate([basis.mean.ravel(), basis.eigen.ravel(),
@@ -530,6 +542,7 @@ def write_image(name, basis, coeffs, precompute_id, cube_resolution):
     img["prt_max_terms"] = int(-1)
     img["prt_rms"] = float(basis.rms_error)
     img["prt_occlusion_kept"] = float(basis.occlusion_kept)
+    img["prt_occlusion_target"] = float(occlusion_target)
     img["prt_cube_resolution"] = int(cube_resolution)
     return img
 
@@ -537,7 +550,8 @@ def write_image(name, basis, coeffs, precompute_id, cube_resolution):
 _READ_CACHE: dict = drawing.gpu_cache({})    # fields read from the .blend (GPU textures too)
 
 
-def read_image(name, points, cube_resolution, resolution, budget, max_terms):
+def read_image(name, points, cube_resolution, resolution, budget, max_terms,
+               occlusion_target=0.0):
     """The stored StoredField of an object, or None when missing or made otherwise."""
     import bpy
     ob = bpy.data.objects.get(name)
@@ -551,7 +565,8 @@ def read_image(name, points, cube_resolution, resolution, budget, max_terms):
         return None
     pid, res, K, P, bud, cres = meta
     if (pid != ob.prt.precompute_id or P != points or res != resolution or cres != cube_resolution
-            or abs(bud - budget) > 1e-9 or K > max(max_terms, 4) + 3):
+            or abs(bud - budget) > 1e-9 or K > max(max_terms, 4) + 3
+            or abs(float(img.get("prt_occlusion_target", 0.0)) - occlusion_target) > 1e-9):
         return None
     key = (img.name_full, pid, P, res, K)
     hit = _READ_CACHE.get(key)
