@@ -98,23 +98,30 @@ def test_f12_pixel_filter_matches_cycles_at_a_silhouette(tmp_path):
     assert np.allclose(ours[inside][:, :3], 0.8, rtol=0.03)
 
 
-def test_ssdf_sg_glossy_within_six_percent_of_cycles(tmp_path):
-    """Issue 3's glossy goal on a small scene: a Beckmann Glossy BSDF (roughness 0.3)
-    Suzanne on a diffuse ground under 'city' (a small sun), SSDF_SG's per-pixel F12
-    against Cycles (direct light, 2048 spp: glossy highlights of a small sun are noisy)."""
+def _suzanne_on_ground_with_ssdf_sg(hdri, node_type, **inputs):
+    """Suzanne (subdivision 2, one ``node_type`` BSDF with ``inputs``) on a diffuse 0.8
+    ground of 48², the bundled ``hdri`` turned 0.6 rad, 80×60, precomputed for SSDF_SG;
+    returns Suzanne."""
     bs.reset()
-    bs.add_world(path=bs.hdri_path("city"), rotation_z=0.6)
+    bs.add_world(path=bs.hdri_path(hdri), rotation_z=0.6)
     ground = bs.add_ground(size=6.0, cuts=48)
     ground.data.materials.append(bs.bsdf_material("Ground", "ShaderNodeBsdfDiffuse",
                                                   Color=(0.8, 0.8, 0.8, 1.0)))
     suz = bs.add_suzanne(subdiv=2)
-    suz.data.materials.append(bs.bsdf_material("Glossy", "ShaderNodeBsdfGlossy",
-                                               distribution="BECKMANN", Roughness=0.3))
+    suz.data.materials.append(bs.bsdf_material("Suzanne", node_type, **inputs))
     bs.add_camera()
     bs.set_resolution(80, 60)
-    scene = bpy.context.scene
-    scene.prt.method = "SSDF_SG"
+    bpy.context.scene.prt.method = "SSDF_SG"
     assert bpy.ops.prt.precompute() == {"FINISHED"}
+    return suz
+
+
+def test_ssdf_sg_glossy_within_six_percent_of_cycles(tmp_path):
+    """Issue 3's glossy goal on a small scene: a Beckmann Glossy BSDF (roughness 0.3)
+    Suzanne on a diffuse ground under 'city' (a small sun), SSDF_SG's per-pixel F12
+    against Cycles (direct light, 2048 spp: glossy highlights of a small sun are noisy)."""
+    suz = _suzanne_on_ground_with_ssdf_sg("city", "ShaderNodeBsdfGlossy",
+                                          distribution="BECKMANN", Roughness=0.3)
     ours = bs.render_exr(tmp_path / "ssdf_sg.exr")
     cycles = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=2048)
     err = bs.rel_l2(ours, cycles)
@@ -132,18 +139,9 @@ def test_ssdf_sg_diffuse_within_three_percent_of_cycles(tmp_path):
     """Issue 3's diffuse goal on a small scene: diffuse Suzanne (subdivision 2) on a 48²
     ground under 'sunset', SSDF_SG's F12 (scene-fitted lighting, SG7 cosine) against
     Cycles 512 spp and against REFERENCE (measured 2.3 % / 2.0 %)."""
-    bs.reset()
-    bs.add_world(path=bs.hdri_path("sunset"), rotation_z=0.6)
-    ground = bs.add_ground(size=6.0, cuts=48)
-    suz = bs.add_suzanne(subdiv=2)
-    for ob in (ground, suz):
-        ob.data.materials.append(bs.bsdf_material("Clay", "ShaderNodeBsdfDiffuse",
-                                                  Color=(0.8, 0.8, 0.8, 1.0)))
-    bs.add_camera()
-    bs.set_resolution(80, 60)
+    _suzanne_on_ground_with_ssdf_sg("sunset", "ShaderNodeBsdfDiffuse",
+                                    Color=(0.8, 0.8, 0.8, 1.0))
     scene = bpy.context.scene
-    scene.prt.method = "SSDF_SG"
-    assert bpy.ops.prt.precompute() == {"FINISHED"}
     ours = bs.render_exr(tmp_path / "ssdf_sg.exr")
     scene.prt.method = "REFERENCE"
     ref = bs.render_exr(tmp_path / "reference.exr")

@@ -169,17 +169,22 @@ def test_open_field_equals_computed_open_ssdf():
     assert np.allclose(field.numpy.images[0][None, :], computed, atol=1e-5)
 
 
-def test_pca_reports_the_share_of_blocked_directions_it_keeps(cube):
-    """``occlusion_kept``: of the texels with a negative SSDF (blocked, eq. 23), the share
-    whose compressed SSDF is still negative -- counted here from the reconstruction."""
-    rng = np.random.default_rng(11)
-    P = 300
+def _small_occluders(cube, seed, P=300):
+    """Mostly open points with a small blocker each (a ground near small objects):
+    ``(normals, bits, grid, exact SSDFs)``."""
+    rng = np.random.default_rng(seed)
     normals = _unit(rng.normal(size=(P, 3)) * 0.2 + [0, 0, 1])
-    # mostly open points with a small blocker each (a ground near small objects)
     centres = _unit(normals + 1.2 * rng.normal(size=(P, 3)))
     bits = _cap_bits(normals, centres, rng.uniform(-0.95, -0.6, P), cube)
     grid = ssdf.SSDFGrid(8, 2, 1)
-    full = ssdf.compute_ssdf(bits, normals, cube, grid)
+    return normals, bits, grid, ssdf.compute_ssdf(bits, normals, cube, grid)
+
+
+def test_pca_reports_the_share_of_blocked_directions_it_keeps(cube):
+    """``occlusion_kept``: of the texels with a negative SSDF (blocked, eq. 23), the share
+    whose compressed SSDF is still negative -- counted here from the reconstruction."""
+    normals, bits, grid, full = _small_occluders(cube, 11)
+    P = len(normals)
     assert 0.0 < np.mean(full < 0) < 0.5
     kept = []
     for budget in (0.2, 0.05, 0.001):
@@ -201,13 +206,8 @@ def test_pca_reports_the_share_of_blocked_directions_it_keeps(cube):
 def test_pca_takes_more_terms_for_an_occlusion_target(cube):
     """``occlusion_target``: the fewest terms (steps of 4 from the RMS budget's) whose
     compression keeps that share of the blocked texels blocked; the cap when none does."""
-    rng = np.random.default_rng(12)
-    P = 300
-    normals = _unit(rng.normal(size=(P, 3)) * 0.2 + [0, 0, 1])
-    centres = _unit(normals + 1.2 * rng.normal(size=(P, 3)))
-    bits = _cap_bits(normals, centres, rng.uniform(-0.95, -0.6, P), cube)
-    grid = ssdf.SSDFGrid(8, 2, 1)
-    full = ssdf.compute_ssdf(bits, normals, cube, grid)
+    normals, bits, grid, full = _small_occluders(cube, 12)
+    P = len(normals)
     blocked = full < 0
 
     def share(basis, k):
