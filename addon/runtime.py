@@ -25,21 +25,15 @@ _VIS_CACHE_MAX = 16
 _ENV_CACHE: dict = {}
 
 
-# Content hashes of the newest environment images, per array: (image, key).  Every sync
+# Content hashes of the newest environment images, per array (held with it).  Every sync
 # and every turned copy of a world shares the exported pixel array, so it is hashed
 # once (an array is not modified in place; new pixels are a new array).
 _CONTENT_KEYS: dict = {}
 
 
 def _image_key(img: np.ndarray):
-    got = _CONTENT_KEYS.get(id(img))
-    if got is not None and got[0] is img:
-        return got[1]
-    key = (img.shape, hashlib.sha1(np.ascontiguousarray(img).view(np.uint8)).hexdigest())
-    if len(_CONTENT_KEYS) >= 4:
-        _CONTENT_KEYS.pop(next(iter(_CONTENT_KEYS)))
-    _CONTENT_KEYS[id(img)] = (img, key)
-    return key
+    return held(_CONTENT_KEYS, id(img), (img,), lambda: (
+        img.shape, hashlib.sha1(np.ascontiguousarray(img).view(np.uint8)).hexdigest()), limit=4)
 
 
 def env_key(world: envmap.WorldLighting, resolution: int):

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .directions import Cubemap, cubemap, direction_to_texel, texel_of_components
+from .directions import Cubemap, cubemap, texel_of_components
 
 try:  # OpenImageIO ships inside Blender 4.5/5.0, not 4.2.
     import OpenImageIO as _oiio

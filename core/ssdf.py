@@ -362,9 +362,8 @@ class SSDFBasis:
     #: dominated by open sky: a ground's small occluders (a sun shadow) can be lost at a
     #: budget that looks tight, and this says how much of the occlusion the terms keep.
     occlusion_kept: float = 1.0
-    #: eigen-images after the budget's K, up to the term cap (only while ``ssdf_pca`` picks
-    #: the terms by an occlusion target; None in a finished basis)
-    spare: np.ndarray | None = None
+    #: the share of blocked texels the terms were chosen to keep (0: the RMS budget alone)
+    occlusion_target: float = 0.0
 
     @property
     def terms(self) -> int:
@@ -420,11 +419,9 @@ def term_cap(dim: int, max_terms: int) -> int:
     return max(4, min(int(max_terms) // 4 * 4, dim // 4 * 4 if dim >= 4 else 4))
 
 
-def fit_basis(chunks, resolution: int, budget: float, max_terms: int = 64,
-              spare: bool = False) -> SSDFBasis:
-    """PCA basis from an iterable of SSDF chunks (rows (p, n*n)), eq. 24; ``spare`` keeps
-    the eigen-images after the budget's terms up to the cap in ``basis.spare``."""
-    dim = resolution * resolution
+def _covariance_eigen(chunks, dim: int):
+    """``(mean (D,), eigenvalues (D,) descending, clipped >= 0, eigenvectors (D, D) as
+    columns, row count)`` of SSDF rows streamed over ``chunks``."""
     acc = CovarianceAccumulator(dim)
     for rows in chunks:
         acc.add(rows)
@@ -433,15 +430,29 @@ def fit_basis(chunks, resolution: int, budget: float, max_terms: int = 64,
     mean, cov = acc.finish()
     ev, vec = np.linalg.eigh(cov)
     order = np.argsort(ev)[::-1]
-    ev, vec = np.clip(ev[order], 0.0, None), vec[:, order]
-    k = choose_terms(ev, dim, budget, max_terms)
-    rms = float(math.sqrt(max(ev[k:].sum(), 0.0) / dim))
-    cap = max(k, term_cap(dim, max_terms)) if spare else k
-    rows = np.zeros((cap, dim), np.float32)
-    kk = min(cap, vec.shape[1])
+    return mean, np.clip(ev[order], 0.0, None), vec[:, order], acc.count
+
+
+def _leading_rows(vec, k: int, dim: int) -> np.ndarray:
+    """The first ``k`` eigenvectors as float32 rows (zero rows past the dimension)."""
+    rows = np.zeros((k, dim), np.float32)
+    kk = min(k, vec.shape[1])
     rows[:kk] = vec[:, :kk].T
-    return SSDFBasis(resolution, mean.astype(np.float32), rows[:k].copy(), ev, acc.count,
-                     float(budget), rms, spare=rows[k:].copy() if spare else None)
+    return rows
+
+
+def _tail_rms(ev, k: int, dim: int) -> float:
+    """RMS reconstruction error (radians) of ``k`` terms: the dropped eigenvalues' share."""
+    return float(math.sqrt(max(float(ev[k:].sum()), 0.0) / dim))
+
+
+def fit_basis(chunks, resolution: int, budget: float, max_terms: int = 64) -> SSDFBasis:
+    """PCA basis from an iterable of SSDF chunks (rows (p, n*n)), eq. 24."""
+    dim = resolution * resolution
+    mean, ev, vec, count = _covariance_eigen(chunks, dim)
+    k = choose_terms(ev, dim, budget, max_terms)
+    return SSDFBasis(resolution, mean.astype(np.float32), _leading_rows(vec, k, dim), ev,
+                     count, float(budget), _tail_rms(ev, k, dim))
 
 
 #: SSDF rows kept in memory between the two PCA passes (else recomputed)
@@ -483,17 +494,20 @@ def ssdf_pca(bits, normals, cube, grid: SSDFGrid, budget: float, max_terms: int 
                 cache.append(r)
             yield r
 
-    basis = fit_basis(first_pass(), grid.resolution, budget, max_terms,
-                      spare=occlusion_target > 0.0)
-    eigen = basis.eigen if basis.spare is None else np.concatenate([basis.eigen, basis.spare])
-    steps = [basis.terms] + list(range(basis.terms + 4, len(eigen) + 1, 4))
-    coeffs = np.empty((P, len(eigen)), np.float32)
+    dim = grid.texels
+    mean, ev, vec, count = _covariance_eigen(first_pass(), dim)
+    mean = mean.astype(np.float32)
+    k0 = choose_terms(ev, dim, budget, max_terms)
+    cap = max(k0, term_cap(dim, max_terms)) if occlusion_target > 0.0 else k0
+    eigen = _leading_rows(vec, cap, dim)
+    steps = [k0] + list(range(k0 + 4, cap + 1, 4))
+    coeffs = np.empty((P, cap), np.float32)
     blocked, kept = 0, np.zeros(len(steps), np.int64)
     for i, (a, b) in enumerate(spans):
         r = np.asarray(cache[i] if keep else rows(a, b), np.float32)
-        c = ((r - basis.mean) @ eigen.T).astype(np.float32)
+        c = ((r - mean) @ eigen.T).astype(np.float32)
         coeffs[a:b] = c
-        rec = basis.mean + c[:, :steps[0]] @ eigen[:steps[0]]
+        rec = mean + c[:, :steps[0]] @ eigen[:steps[0]]
         b_now, k_now = occlusion_counts(r, rec)
         blocked += b_now
         kept[0] += k_now
@@ -506,11 +520,9 @@ def ssdf_pca(bits, normals, cube, grid: SSDFGrid, budget: float, max_terms: int 
         meets = np.flatnonzero(share >= occlusion_target)
         pick = int(meets[0]) if len(meets) else len(steps) - 1
     K = steps[pick]
-    dim = grid.texels
-    basis.eigen = np.ascontiguousarray(eigen[:K])
-    basis.spare = None
-    basis.rms_error = float(math.sqrt(max(float(basis.eigenvalues[K:].sum()), 0.0) / dim))
-    basis.occlusion_kept = float(share[pick])
+    basis = SSDFBasis(grid.resolution, mean, np.ascontiguousarray(eigen[:K]), ev, count,
+                      float(budget), _tail_rms(ev, K, dim), occlusion_kept=float(share[pick]),
+                      occlusion_target=float(occlusion_target))
     return basis, np.ascontiguousarray(coeffs[:, :K])
 
 

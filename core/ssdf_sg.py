@@ -155,14 +155,22 @@ def diffuse_lobe_transfer(field, rows, normals, light_axes, light_lam, tangents=
     M = len(cosine.amplitudes)
     out = np.zeros((R, M, ax.shape[1]))
     if ax.shape[1] > 0:
-        for k, (d, c) in enumerate(zip(cosine.directions, cosine.amplitudes)):
-            cw = d[0] * tangents + d[1] * bitangents + d[2] * n
-            cn = np.broadcast_to(cw[:, None, :], ax.shape)
-            p, lam_m, amp = sg.product(cn, np.full(ax.shape[:2], cosine.sharpness),
-                                       np.full(ax.shape[:2], c), ax, lam, 1.0)
+        for k, (p, lam_m, amp) in enumerate(_cosine_products(cosine, n, tangents, bitangents,
+                                                               ax, lam)):
             theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
             out[:, k] = visibility_integral(theta, lam_m, exact_fh) * amp           # (R, J)
     return out if per_cosine else out.sum(axis=1)
+
+
+def _cosine_products(cosine, n, tangents, bitangents, axes, lam):
+    """Per lobe of the clamped-cosine mixture ``C*`` (in each point's frame): its SG product
+    ``(axis (R, J, 3), sharpness (R, J), amplitude (R, J))`` with the lobes ``axes``
+    (R, J, 3), ``lam`` (R, J) of unit amplitude (eq. 39 and 41 both probe the SSDF there)."""
+    for d, c in zip(cosine.directions, cosine.amplitudes):
+        cw = d[0] * tangents + d[1] * bitangents + d[2] * n
+        cn = np.broadcast_to(cw[:, None, :], axes.shape)
+        yield sg.product(cn, np.full(axes.shape[:2], cosine.sharpness),
+                         np.full(axes.shape[:2], c), axes, lam, 1.0)
 
 
 def diffuse_transfer(field, rows, normals, light_axes, light_lam, light_mu,
@@ -206,12 +214,8 @@ def specular_radiance(field, rows, normals, lobe_axes, lobe_lam, lobe_mu, env_lo
         return out
     if tangents is None:
         tangents, bitangents = ssdf_frames(n)
-    for d, c in zip(cosine.directions, cosine.amplitudes):
-        cw = d[0] * tangents + d[1] * bitangents + d[2] * n
-        cn = np.broadcast_to(cw[:, None, :], ax.shape)
-        p, lam_m, amp = sg.product(cn, np.full(ax.shape[:2], cosine.sharpness),
-                                   np.full(ax.shape[:2], c), ax,
-                                   np.asarray(lobe_lam, np.float64), 1.0)
+    for p, lam_m, amp in _cosine_products(cosine, n, tangents, bitangents, ax,
+                                          np.asarray(lobe_lam, np.float64)):
         theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
         scale = amp * visibility_ratio(theta, lam_m, exact_fh)                    # (R, K)
         gamma = np.asarray(env_lookup(p.reshape(-1, 3), lam_m.reshape(-1)), np.float64)

@@ -144,10 +144,9 @@ def scene_fit(state, fields, fit, cosine):
     irradiance at :func:`scene_fit_points`.  Same form as ``fit`` (texture-space axes,
     amplitudes for strength 1), plus ``(error with the environment-only amplitudes,
     error after, points)`` in the scene's metric; ``fit`` itself when nothing is fitted."""
-    axes, lam, mu, rel = fit[:4]
+    lam = fit[1]
     world = state.world
-    strength = float(world.strength)
-    if len(lam) == 0 or not state.objects or strength <= 0.0:
+    if len(lam) == 0 or not state.objects or float(world.strength) <= 0.0:
         return fit
     refs = tuple(x for st, f in zip(state.objects, fields) for x in (st.bits, f, st.arrays))
     objects_key = (tuple(st.name for st in state.objects),
@@ -366,8 +365,7 @@ class SSDFSGMethod(Method):
                 continue
             basis, coeffs = derived[o.name]
             ob = bpy.data.objects[o.name]
-            write_image(o.name, basis, coeffs, ob.prt.precompute_id, job.resolution,
-                        pca_settings(job.settings)[3])
+            write_image(o.name, basis, coeffs, ob.prt.precompute_id, job.resolution)
 
     # ------------------------------------------------------------- sync
     def sync(self, state):
@@ -527,7 +525,7 @@ def _field_from(result):
 _ROW_FLOATS = 4096
 
 
-def write_image(name, basis, coeffs, precompute_id, cube_resolution, occlusion_target=0.0):
+def write_image(name, basis, coeffs, precompute_id, cube_resolution):
     """Store the PCA SSDF of one object in a packed RGBA float image."""
     import bpy
     flat = np.concatenate([basis.mean.ravel(), basis.eigen.ravel(),
@@ -542,7 +540,7 @@ def write_image(name, basis, coeffs, precompute_id, cube_resolution, occlusion_t
     img["prt_max_terms"] = int(-1)
     img["prt_rms"] = float(basis.rms_error)
     img["prt_occlusion_kept"] = float(basis.occlusion_kept)
-    img["prt_occlusion_target"] = float(occlusion_target)
+    img["prt_occlusion_target"] = float(basis.occlusion_target)
     img["prt_cube_resolution"] = int(cube_resolution)
     return img
 
