@@ -121,10 +121,14 @@ def open_visibility(normals: np.ndarray, cube) -> np.ndarray:
 
 
 class ObjectState:
-    __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "data")
+    __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "data",
+                 "fingerprint")
 
-    def __init__(self, name, arrays, points, materials, bits, status):
+    def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
+        #: core.mesh.fingerprint of ``arrays`` (what caches of derived geometry key on:
+        #: every sync exports new arrays)
+        self.fingerprint = fingerprint
         self.arrays = arrays
         self.points = points
         self.materials = materials
@@ -197,7 +201,7 @@ class FrameState:
                 orig.name)
             if data.coarse_warning and status == "ok":
                 self.warnings.append(data.coarse_warning)
-            st = ObjectState(orig.name, arrays, points, mats, bits, status)
+            st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
             # the original material per slot, for methods with their own material settings
             st.data["material_names"] = [
                 slot.material.original.name if slot.material is not None else None

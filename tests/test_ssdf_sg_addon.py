@@ -245,6 +245,15 @@ def test_scene_fitted_lighting_is_closer_to_reference_than_the_environment_fit(t
     before, after, count = fit[4]
     assert 0 < count <= method.SCENE_FIT_POINTS and after < before
     assert any("SSDF_SG lighting" in w for w in state.warnings)
+    # every F12 syncs a new state (new mesh arrays): the same geometry reuses the fit, an
+    # edited mesh is fitted again
+    again = _state()
+    assert again.method_impl._lighting(again)[0] is fit
+    suz.data.vertices[0].co.z += 0.05
+    edited = _state()
+    refit = edited.method_impl._lighting(edited)[0]
+    assert refit is not fit and refit[4][2] == count
+    suz.data.vertices[0].co.z -= 0.05
     assert errors["SCENE"] < 0.75 * errors["ENVIRONMENT"]
     assert errors["SCENE"] < 0.08          # measured 0.066 (ENVIRONMENT 0.119; per-pixel vs REFERENCE per vertex)
     # a turned world re-solves the amplitudes (no precompute): a different fit, same lobes

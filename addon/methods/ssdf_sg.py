@@ -148,8 +148,10 @@ def scene_fit(state, fields, fit, cosine):
     world = state.world
     if len(lam) == 0 or not state.objects or float(world.strength) <= 0.0:
         return fit
-    refs = tuple(x for st, f in zip(state.objects, fields) for x in (st.bits, f, st.arrays))
+    # keyed on the geometry's fingerprint, not the arrays: every F12 syncs new arrays
+    refs = tuple(x for st, f in zip(state.objects, fields) for x in (st.bits, f))
     objects_key = (tuple(st.name for st in state.objects),
+                   tuple(st.fingerprint for st in state.objects),
                    tuple(tuple(_diffuse_slots(st)) for st in state.objects))
     # drawn points: the same while the objects and their diffuse slots are (a turned world
     # or a new fit reuses them)
@@ -713,7 +715,7 @@ def parameter_texture(env, mat, res, kt, eye4, cosine):
 def object_batches(st, field):
     """One batch per material slot: per-corner position, normal, triangle points, barycentrics."""
     from gpu_extras.batch import batch_for_shader
-    key = ("batches", st.name, id(st.arrays))
+    key = ("batches", st.name, st.fingerprint)
     cache = field.__dict__.setdefault("_batches", {})
     if key in cache:
         return cache[key]
