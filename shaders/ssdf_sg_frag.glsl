@@ -1,207 +1,13 @@
-/* SSDF_SG per-pixel shading (Wang, Ren, Gong, Snyder, Guo 2009, paper 003):
- *   radiance = kd R_d + R_s(o)
- *   R_d    = sum_j (C*(i; n) (x) L*_j) . V^d            eq. 39 (f_h of eq. 30, fit eq. 47-49)
- *   R_s(o) = sum   ((C* (x) rho*_s(i; o)) (x) V^d) . L   eq. 41 (eq. 31, Gamma_L of eq. 35)
- * GLSL twin of core/ssdf_sg.py (same formulas and the same texel arithmetic:
- * bilinear SSDF lookups by texelFetch in the Shirley-Chiu square, the prefiltered
- * pyramid's level/face interpolation of core/sg_lighting.PrefilteredEnvironment).
- *
- * Textures: coeffTex  per point (1, w_1..w_K) packed 4 per texel, coeffTexels texels
- *                     per point, rows of 4096 texels;
- *           eigenTex  2D array, layer l = SSDF images 4l..4l+3 (mean, E_1, ..., E_K);
- *           envTex    prefiltered atlas, row (level * 6 + face) * envRes + row;
- *           lightTex  per diffuse lobe j: texel (0, j) = (axis, lam), (1 + m, j) = (mu, 0) as
- *                     seen by clamped-cosine lobe m (the scene fit: one amplitude per pair)
- *                     in texture space (world axis = R^T axis, amplitude * strength);
- *           paramTex  9 texels of scalar parameters (environment, SSDF, material slot),
- *                     read into the globals below (push constants are kept to 128 bytes),
- *                     texel 9 = (cosine lobe count, sharpness), texels 10.. = (local
- *                     direction, amplitude) of the clamped-cosine SG mixture C*. */
-
-int cosLobes;
-float cosLambda;
-int lightCount, ssdfRes, coeffTexels, envRes, envLevels, glossy, brdfModel, principled;
-float envStrength, envLambdaFirst, envRatio, envTop, roughness, ior, ndfLambda, ndfMu;
-vec4 kd, fresA, fresBd, fresBs, eye;
-
-void read_parameters()
+/* Per-pixel main pass: kd R_d + R_s(o) of the fragment's material slot.  Built twice:
+ * as is for every triangle, and with FLAT_PAIRS for flat ones (pairTex, vFlat). */
+#ifdef FLAT_PAIRS
+/* texel c of flat point q's row of the pair table (stride texels per point) */
+vec4 pair_fetch(float q, int stride, int c)
 {
-  vec4 p0 = texelFetch(paramTex, ivec2(0, 0), 0);
-  vec4 p1 = texelFetch(paramTex, ivec2(1, 0), 0);
-  vec4 p2 = texelFetch(paramTex, ivec2(2, 0), 0);
-  vec4 p3 = texelFetch(paramTex, ivec2(3, 0), 0);
-  envStrength = p0.x;
-  lightCount = int(p0.y + 0.5);
-  ssdfRes = int(p0.z + 0.5);
-  coeffTexels = int(p0.w + 0.5);
-  envRes = int(p1.x + 0.5);
-  envLevels = int(p1.y + 0.5);
-  envLambdaFirst = p1.z;
-  envRatio = p1.w;
-  envTop = p2.x;
-  glossy = int(p2.y + 0.5);
-  brdfModel = int(p2.z + 0.5);
-  principled = int(p2.w + 0.5);
-  roughness = p3.x;
-  ior = p3.y;
-  ndfLambda = p3.z;
-  ndfMu = p3.w;
-  kd = texelFetch(paramTex, ivec2(4, 0), 0);
-  fresA = texelFetch(paramTex, ivec2(5, 0), 0);
-  fresBd = texelFetch(paramTex, ivec2(6, 0), 0);
-  fresBs = texelFetch(paramTex, ivec2(7, 0), 0);
-  eye = texelFetch(paramTex, ivec2(8, 0), 0);
-  vec4 p9 = texelFetch(paramTex, ivec2(9, 0), 0);
-  cosLobes = int(p9.x + 0.5);
-  cosLambda = p9.y;   /* (position, 1) or (direction to camera, 0) */
+  int idx = int(q + 0.5) * stride + c;
+  return texelFetch(pairTex, ivec2(idx % 4096, idx / 4096), 0);
 }
-
-const float PI = 3.14159265358979;
-const float TWO_PI = 6.28318530717959;
-const float FH_A = 1.05;
-const vec4 FH_K = vec4(-4.091177817839644e-05, 0.013875614940571624, 0.8602564494071566,
-                       1.4436420622237864);
-const vec3 FRAME_REF = vec3(0.2672612419124244, 0.5345224838248488, 0.8017837257372732);
-const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.5345224838248488);
-const float FRAME_SWITCH = 0.999;
-const float COS_MIN = 1e-4;
-const float LAMBDA_MAX = 1e5;
-
-/* ------------------------------------------------------------ SG helpers (core/sg.py) */
-float one_minus_exp_neg_over(float lam, float x)   /* (1 - exp(-lam x)) / lam */
-{
-  return lam > 1e-6 ? (1.0 - exp(-lam * x)) / lam : x;
-}
-
-float sg_hemisphere_integral(float lam) { return TWO_PI * one_minus_exp_neg_over(lam, 1.0); }
-
-/* eq. 47-48 (refit in sqrt(lam), core/sg.py): f_h(theta_d, lam) / f_h(pi/2, lam) */
-float fh_hat(float theta_d, float lam)
-{
-  float x = sqrt(max(lam, 0.0));
-  float k = ((FH_K.x * x + FH_K.y) * x + FH_K.z) * x + FH_K.w;
-  float td = clamp(theta_d, -0.5 * PI, 0.5 * PI);
-  float z = clamp(k * td, -60.0, 60.0);
-  float sig = FH_A * 0.5 * (1.0 + tanh(0.5 * z)) + 0.5 * (1.0 - FH_A);
-  return clamp(sig, 0.0, 1.0);
-}
-
-/* ------------------------------------------------------------ SSDF (core/ssdf.py) */
-void ssdf_frame(vec3 n, out vec3 t, out vec3 b)
-{
-  vec3 ref = abs(dot(n, FRAME_REF)) > FRAME_SWITCH ? FRAME_REF_ALT : FRAME_REF;
-  t = cross(ref, n);
-  t = t / max(length(t), 1e-30);
-  b = cross(n, t);
-}
-
-vec2 square_coordinates(vec3 d)
-{
-  float z = clamp(d.z, 0.0, 1.0);
-  float r = sqrt(1.0 - z);
-  float x = d.x, y = d.y;
-  if (x == 0.0 && y == 0.0) {
-    return vec2(0.5, 0.5);
-  }
-  float phi = atan(y, x);
-  float a, b;
-  if (abs(x) >= abs(y)) {
-    float phix = x >= 0.0 ? phi : (phi >= 0.0 ? phi - PI : phi + PI);
-    a = x >= 0.0 ? r : -r;
-    b = a * (4.0 / PI) * phix;
-  }
-  else {
-    float phiy = y >= 0.0 ? 0.5 * PI - phi : -0.5 * PI - phi;
-    b = y >= 0.0 ? r : -r;
-    a = b * (4.0 / PI) * phiy;
-  }
-  return vec2(0.5 * (a + 1.0), 0.5 * (b + 1.0));
-}
-
-/* SSDF value (eq. 24 reconstruction) at a local direction: bilinear per eigen-image
- * layer, combined with the interpolated weights W (first weight 1 = the mean). */
-float ssdf_value(vec3 local, vec4 W[16])
-{
-  vec2 uv = square_coordinates(local);
-  float n = float(ssdfRes);
-  float x = clamp(uv.x * n - 0.5, 0.0, n - 1.0);
-  float y = clamp(uv.y * n - 0.5, 0.0, n - 1.0);
-  int x0 = min(int(floor(x)), max(ssdfRes - 2, 0));
-  int y0 = min(int(floor(y)), max(ssdfRes - 2, 0));
-  float fx = x - float(x0), fy = y - float(y0);
-  int x1 = min(x0 + 1, ssdfRes - 1);
-  int y1 = min(y0 + 1, ssdfRes - 1);
-  float v = 0.0;
-  for (int l = 0; l < coeffTexels; l++) {
-    vec4 e = texelFetch(eigenTex, ivec3(x0, y0, l), 0) * ((1.0 - fx) * (1.0 - fy)) +
-             texelFetch(eigenTex, ivec3(x1, y0, l), 0) * (fx * (1.0 - fy)) +
-             texelFetch(eigenTex, ivec3(x0, y1, l), 0) * ((1.0 - fx) * fy) +
-             texelFetch(eigenTex, ivec3(x1, y1, l), 0) * (fx * fy);
-    v += dot(e, W[l]);
-  }
-  return v - asin(clamp(-local.z, 0.0, 1.0));
-}
-
-vec4 coeff_fetch(float point, int l)
-{
-  int idx = int(point + 0.5) * coeffTexels + l;
-  return texelFetch(coeffTex, ivec2(idx % 4096, idx / 4096), 0);
-}
-
-/* ------------------------------------------------------------ prefiltered environment */
-float level_coordinate(float lam)
-{
-  lam = max(lam, 0.0);
-  float nf = float(envLevels - 2);
-  if (lam < envLambdaFirst) {
-    return lam / envLambdaFirst;
-  }
-  if (lam <= envTop) {
-    return 1.0 + log(lam / envLambdaFirst) / log(envRatio);
-  }
-  return nf + 1.0 - envTop / lam;
-}
-
-vec3 env_level(int level, int face, float s, float t)
-{
-  float N = float(envRes);
-  float x = clamp((s + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0);
-  float y = clamp((t + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0);
-  int x0 = min(int(floor(x)), envRes - 1);
-  int y0 = min(int(floor(y)), envRes - 1);
-  int x1 = min(x0 + 1, envRes - 1);
-  int y1 = min(y0 + 1, envRes - 1);
-  float fx = x - float(x0), fy = y - float(y0);
-  int base = (level * 6 + face) * envRes;
-  vec3 a = texelFetch(envTex, ivec2(x0, base + y0), 0).rgb * (1.0 - fx) +
-           texelFetch(envTex, ivec2(x1, base + y0), 0).rgb * fx;
-  vec3 b = texelFetch(envTex, ivec2(x0, base + y1), 0).rgb * (1.0 - fx) +
-           texelFetch(envTex, ivec2(x1, base + y1), 0).rgb * fx;
-  return a * (1.0 - fy) + b * fy;
-}
-
-/* kernel-weighted mean radiance of the (unrotated, unit strength) environment */
-vec3 env_lookup(vec3 world_dir, float lam)
-{
-  vec3 d = envRot * world_dir;
-  int face;
-  float s, t;
-  sg_face_coordinates(d, face, s, t);
-  float x = level_coordinate(lam);
-  int l0 = min(int(floor(x)), envLevels - 1);
-  int l1 = min(l0 + 1, envLevels - 1);
-  float f = x - float(l0);
-  return env_level(l0, face, s, t) * (1.0 - f) + env_level(l1, face, s, t) * f;
-}
-
-/* ------------------------------------------------------------ BRDF view slice (core/sg_brdf.py) */
-/* M_o(i) of the slot's model (sg_common.glsl's sg_m_factor; brdfModel 0 CT/Blinn-Phong,
- * 1 Ward, 2 Ashikhmin-Shirley -> core.sg_brdf.MODEL_INDEX 0, 2, 4) */
-float m_factor(float cos_i, float cos_o, float h_dot_i)
-{
-  return sg_m_factor(brdfModel == 0 ? 0 : (brdfModel == 1 ? 2 : 4), roughness, cos_i, cos_o,
-                     h_dot_i);
-}
+#endif
 
 void main()
 {
@@ -210,32 +16,48 @@ void main()
   vec3 t, b;
   ssdf_frame(n, t, b);
   vec4 W[16];
-  for (int l = 0; l < coeffTexels; l++) {
+  bool perPixelSSDF = glossy != 0;
+#ifndef FLAT_PAIRS
+  perPixelSSDF = true;
+#endif
+  for (int l = 0; perPixelSSDF && l < coeffTexels; l++) {
     W[l] = vBary.x * coeff_fetch(vTri.x, l) + vBary.y * coeff_fetch(vTri.y, l) +
            vBary.z * coeff_fetch(vTri.z, l);
   }
   /* eq. 39: every (clamped-cosine lobe, light lobe) product probes the SSDF at its axis */
   vec3 rd = vec3(0.0);
   /* a slot without a diffuse part (kd = 0: a pure Glossy BSDF) skips eq. 39 */
-  int diffuseLobes = (kd.r > 0.0 || kd.g > 0.0 || kd.b > 0.0) ? cosLobes : 0;
-  for (int m = 0; m < diffuseLobes; m++) {
-    vec4 cl = texelFetch(paramTex, ivec2(10 + m, 0), 0);
-    vec3 cw = cl.x * t + cl.y * b + cl.z * n;
-    for (int j = 0; j < lightCount; j++) {
-      vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
-      vec3 mu = texelFetch(lightTex, ivec2(1 + m, j), 0).rgb;   /* this cosine lobe's amplitude */
-      if (mu.r == 0.0 && mu.g == 0.0 && mu.b == 0.0) {
-        continue;                                 /* the scene fit left this pair out */
+  bool diffuse = kd.r > 0.0 || kd.g > 0.0 || kd.b > 0.0;
+#ifdef FLAT_PAIRS
+  /* a flat triangle: n, t, b and so every pair's product lobe are the same at its three
+   * points and inside it, and eq. 24 is linear in the weights, so the SSDF angle at a
+   * pixel is the barycentric mix of the points' angles at the same axis: the pair pass
+   * (ssdf_sg_pairs_frag.glsl) tabulated them per point with the weight and slope */
+  int pairs = cosLobes * lightCount;
+  int thetaTexels = (pairs + 3) / 4;
+  int stride = thetaTexels + pairs;
+  if (diffuse) {
+    for (int c = 0; c < thetaTexels; c++) {
+      vec4 th = vBary.x * pair_fetch(vFlat.x, stride, c) +
+                vBary.y * pair_fetch(vFlat.y, stride, c) +
+                vBary.z * pair_fetch(vFlat.z, stride, c);
+      for (int i = 0; i < 4 && 4 * c + i < pairs; i++) {
+        vec4 wk = pair_fetch(vFlat.x, stride, thetaTexels + 4 * c + i);
+        rd += wk.rgb * fh_hat_slope(th[i], wk.w);
       }
-      vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */
-      vec3 p;
-      float lam, amp;
-      amp = sg_product(cw, cosLambda, axis, al.w, p, lam);
-      vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
-      float theta = ssdf_value(local, W);
-      rd += mu * (cl.w * amp * fh_hat(theta, lam) * sg_hemisphere_integral(lam));
     }
   }
+#else
+  for (int m = 0; diffuse && m < cosLobes; m++) {
+    for (int j = 0; j < lightCount; j++) {
+      float theta, k;
+      vec3 w;
+      if (diffuse_pair(m, j, n, t, b, W, true, theta, w, k)) {
+        rd += w * fh_hat_slope(theta, k);
+      }
+    }
+  }
+#endif
   vec3 color = kd.rgb * rd * envStrength;
   /* eq. 41 with the one-lobe isotropic NDF view slice (eq. 17-22) */
   if (glossy != 0) {

@@ -7,5 +7,8 @@ void main()
   vNrm = nrm;
   vBary = bary;
   vTri = triPoints;
+#ifdef FLAT_PAIRS
+  vFlat = triFlat;   /* the three points' rows in the pair table */
+#endif
   gl_Position = viewProjection * vec4(pos, 1.0);
 }

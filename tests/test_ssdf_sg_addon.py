@@ -67,6 +67,12 @@ def test_glsl_equals_numpy_per_pixel():
     vp = proj @ view
     draws = state.draw_objects(eye, None)
     assert draws is not None and len(draws) == len(state.objects)
+    # the ground's triangles are flat: drawn by the FLAT_PAIRS shader from the pair table
+    ground = next(st for st in state.objects if st.name == "Grid")
+    assert method.flat_triangles(ground.arrays, ground.points).all()
+    batches = method.object_batches(ground, ground.data["ssdf_sg"])
+    assert batches.draws and all(flat for _, flat, _ in batches.draws)
+    assert len(batches.flat_points) == ground.points.count
     gpu_px = drawing.render_offscreen([], None, vp, W, H, True, draws)        # bottom row first
 
     # numpy: a ray through every pixel centre, the hit triangle's barycentrics, and the

@@ -13,7 +13,9 @@ Shading: eq. 39 (diffuse: the environment's SG fit times the clamped-cosine
 SG, visibility by eq. 30 at each product lobe's SSDF value) and eq. 41
 (specular: the BRDF's warped SG lobes times the clamped cosine, eq. 31
 visibility, eq. 35 inner product with the SG-prefiltered environment).
-``draw_objects`` does it per pixel on the GPU (``shaders/ssdf_sg_*.glsl``);
+``draw_objects`` does it per pixel on the GPU (``shaders/ssdf_sg_*.glsl``; flat
+triangles read eq. 39's per-pair SSDF angles, weights and slopes from a per-point pair
+table, :func:`pair_table`, since those are exactly linear inside them);
 ``shade`` does it per vertex in numpy (``core.ssdf_sg``) for tests/benches.
 Lighting is fitted/prefiltered once per environment image; the world's
 rotation and strength are applied at draw time (eq. 7: rotating an SG rotates
@@ -596,35 +598,68 @@ def read_image(name, points, cube_resolution, resolution, budget, max_terms,
 _GPU = drawing.gpu_cache({})
 
 
-def _gpu_shader():
+_SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"), ("FLOAT_2D", "envTex"),
+             ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
+
+
+def _fragment_source(main: str) -> str:
+    """sg_common.glsl (the SG algebra, BRDF factors and cube-face lookup shared with the
+    material helpers' GLSL twin, tested against numpy there), ssdf_sg_lib.glsl, ``main``."""
+    from ..drawing import SHADER_DIR
+    return "".join((SHADER_DIR / name).read_text()
+                   for name in ("sg_common.glsl", "ssdf_sg_lib.glsl", main))
+
+
+def _gpu_shader(flat: bool = False):
+    """The per-pixel shader; ``flat``: its variant for flat triangles (FLAT_PAIRS: eq. 39
+    from the pair table, see :func:`pair_table`)."""
     import gpu
-    sh = _GPU.get("shader")
+    name = "shader_flat" if flat else "shader"
+    sh = _GPU.get(name)
     if sh is None:
         from ..drawing import SHADER_DIR
         info = gpu.types.GPUShaderCreateInfo()
+        if flat:
+            info.define("FLAT_PAIRS", "1")
         for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot")):
             info.push_constant(kind, ident)
-        for slot, (kind, ident) in enumerate((("FLOAT_2D", "coeffTex"),
-                                              ("FLOAT_2D_ARRAY", "eigenTex"),
-                                              ("FLOAT_2D", "envTex"), ("FLOAT_2D", "lightTex"),
-                                              ("FLOAT_2D", "paramTex"))):
+        for slot, (kind, ident) in enumerate(_SAMPLERS + ((("FLOAT_2D", "pairTex"),) if flat
+                                                         else ())):
             info.sampler(slot, kind, ident)
-        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"),
-                                              ("VEC3", "triPoints"), ("VEC3", "bary"))):
+        inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"))
+        for slot, (kind, ident) in enumerate(inputs + ((("VEC3", "triFlat"),) if flat else ())):
             info.vertex_in(slot, kind, ident)
-        iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_iface")
+        iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_flat_iface" if flat
+                                                else "prt_ssdf_sg_iface")
         iface.smooth("VEC3", "vPos")
         iface.smooth("VEC3", "vNrm")
         iface.smooth("VEC3", "vBary")
         iface.flat("VEC3", "vTri")
+        if flat:
+            iface.flat("VEC3", "vFlat")
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
         info.vertex_source((SHADER_DIR / "ssdf_sg_vert.glsl").read_text())
-        # sg_common.glsl: the SG algebra, BRDF factors and cube-face lookup shared with
-        # the material helpers' GLSL twin (tested against numpy there)
-        info.fragment_source((SHADER_DIR / "sg_common.glsl").read_text()
-                             + (SHADER_DIR / "ssdf_sg_frag.glsl").read_text())
-        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
+        info.fragment_source(_fragment_source("ssdf_sg_frag.glsl"))
+        sh = _GPU[name] = gpu.shader.create_from_info(info)
+    return sh
+
+
+def _pairs_shader():
+    """The pair pass (``shaders/ssdf_sg_pairs_frag.glsl``) over a full-screen quad."""
+    import gpu
+    sh = _GPU.get("pairs")
+    if sh is None:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.push_constant("MAT3", "envRot")
+        info.push_constant("INT", "flatCount")
+        for slot, (kind, ident) in enumerate(_SAMPLERS + (("FLOAT_2D", "flatTex"),)):
+            info.sampler(slot, kind, ident)
+        info.vertex_in(0, "VEC2", "ndc")
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source("void main() { gl_Position = vec4(ndc, 0.0, 1.0); }")
+        info.fragment_source(_fragment_source("ssdf_sg_pairs_frag.glsl"))
+        sh = _GPU["pairs"] = gpu.shader.create_from_info(info)
     return sh
 
 
@@ -712,10 +747,39 @@ def parameter_texture(env, mat, res, kt, eye4, cosine):
     return _texture(p)
 
 
-def object_batches(st, field):
-    """One batch per material slot: per-corner position, normal, triangle points, barycentrics."""
+#: an object whose pair table would pass this many texels (256 MiB) is drawn without it
+MAX_PAIR_TEXELS = 1 << 24
+#: corner normals closer than this (per component) are "the same" for flat triangles
+FLAT_TOLERANCE = 1e-6
+
+
+def flat_triangles(arrays, points) -> np.ndarray:
+    """Per triangle: whether its three corner normals and their shading points' normals
+    are one normal (a plane's or a flat-shaded face's triangles), so that every eq. 39
+    pair's product lobe is the same at its points and inside it."""
+    tri = arrays.triangles
+    cn = arrays.corner_normals[tri]                                       # (T, 3, 3)
+    pn = points.normals[points.point_of_corner[tri]]
+    first = cn[:, :1]
+    return (np.all(np.abs(cn - first) <= FLAT_TOLERANCE, axis=(1, 2))
+            & np.all(np.abs(pn - first) <= FLAT_TOLERANCE, axis=(1, 2)))
+
+
+class ObjectBatches:
+    """Per material slot the batches of one object: ``draws`` = [(slot, flat, batch)];
+    ``flat_points`` the shading points of its flat triangles (pair table rows)."""
+
+    def __init__(self, draws, flat_points):
+        self.draws = draws
+        self.flat_points = flat_points
+
+
+def object_batches(st, field, use_flat: bool = True) -> ObjectBatches:
+    """Per material slot: per-corner position, normal, triangle points, barycentrics -- the
+    flat triangles (:func:`flat_triangles`) in a second batch for the FLAT_PAIRS shader
+    with their points' rows in the pair table."""
     from gpu_extras.batch import batch_for_shader
-    key = ("batches", st.name, st.fingerprint)
+    key = ("batches", st.name, st.fingerprint, use_flat)
     cache = field.__dict__.setdefault("_batches", {})
     if key in cache:
         return cache[key]
@@ -727,23 +791,91 @@ def object_batches(st, field):
     tri_points = np.repeat(pts.point_of_corner[tri].astype(np.float32), 3, axis=0)
     bary = np.tile(np.eye(3, dtype=np.float32), (len(tri), 1))
     slots = arrays.corner_materials[tri[:, 0]]
-    out = []
+    flat = flat_triangles(arrays, pts) if use_flat else np.zeros(len(tri), bool)
+    flat_points = np.unique(pts.point_of_corner[tri[flat]])
+    row = np.full(len(pts.normals), -1, np.int64)
+    row[flat_points] = np.arange(len(flat_points))
+    tri_flat = np.repeat(row[pts.point_of_corner[tri]].astype(np.float32), 3, axis=0)
+    draws = []
     for slot in np.unique(slots):
-        sel = np.repeat(slots == slot, 3)
-        batch = batch_for_shader(_gpu_shader(), "TRIS", {
-            "pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
-            "triPoints": np.ascontiguousarray(tri_points[sel]),
-            "bary": np.ascontiguousarray(bary[sel])})
-        out.append((int(slot), batch))
+        for is_flat in (False, True):
+            sel = np.repeat((slots == slot) & (flat == is_flat), 3)
+            if not sel.any():
+                continue
+            attrs = {"pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
+                     "triPoints": np.ascontiguousarray(tri_points[sel]),
+                     "bary": np.ascontiguousarray(bary[sel])}
+            if is_flat:
+                attrs["triFlat"] = np.ascontiguousarray(tri_flat[sel])
+            draws.append((int(slot), is_flat,
+                          batch_for_shader(_gpu_shader(is_flat), "TRIS", attrs)))
+    out = ObjectBatches(draws, flat_points)
     cache.clear()
     cache[key] = out
     return out
 
 
+def pair_texels(cosine_lobes: int, light_count: int) -> int:
+    """Texels per flat point in the pair table: ceil(P / 4) angles, then P (w, k)."""
+    pairs = cosine_lobes * light_count
+    return -(-pairs // 4) + pairs
+
+
+def pair_table(st, field, flat_points, light_tex, param_tex, light_count, cosine_lobes,
+               rotation, read_back=False):
+    """Run the pair pass for the object's flat points: a GPUTexture (rows of 4096 texels,
+    :func:`pair_texels` per point) -- with ``read_back`` the table as numpy (rows, 4096, 4)
+    too.  Eq. 39's per-pair work that a flat triangle's pixels share, done once per point."""
+    import gpu
+    import mathutils
+    from gpu_extras.batch import batch_for_shader
+    coeff_tex, eigen_tex, _ = field_textures(field)
+    normals = st.points.normals[flat_points]
+    count = len(flat_points)
+    flat = np.zeros((max(1, -(-count // 4096)) * 4096, 4), np.float32)
+    flat[:count, :3] = normals
+    flat[:count, 3] = flat_points
+    flat_tex = _texture(flat.reshape(-1, 4096, 4))
+    total = count * pair_texels(cosine_lobes, light_count)
+    rows = max(1, -(-total // 4096))
+    sh = _pairs_shader()
+    quad = _GPU.get("quad")
+    if quad is None:
+        quad = _GPU["quad"] = batch_for_shader(sh, "TRIS", {"ndc": [(-1, -1), (3, -1), (-1, 3)]})
+    offscreen = gpu.types.GPUOffScreen(4096, rows, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            gpu.state.depth_test_set("NONE")
+            gpu.state.blend_set("NONE")
+            sh.bind()
+            sh.uniform_float("envRot", mathutils.Matrix(rotation))
+            sh.uniform_int("flatCount", count)
+            sh.uniform_sampler("coeffTex", coeff_tex)
+            sh.uniform_sampler("eigenTex", eigen_tex)
+            sh.uniform_sampler("envTex", _GPU["atlas"][1])
+            sh.uniform_sampler("lightTex", light_tex)
+            sh.uniform_sampler("paramTex", param_tex)
+            sh.uniform_sampler("flatTex", flat_tex)
+            quad.draw(sh)
+            fb = gpu.state.active_framebuffer_get()
+            buf = fb.read_color(0, 0, 4096, rows, 4, 0, "FLOAT")
+    finally:
+        offscreen.free()
+    buf.dimensions = 4096 * rows * 4
+    table = np.array(buf, dtype=np.float32).reshape(rows, 4096, 4)
+    tex = _texture(table)
+    return (tex, table) if read_back else tex
+
+
+# pair tables per (object, geometry, lighting): entries hold the field and the fit
+_PAIR_TABLES: dict = drawing.gpu_cache({})
+
+
 def gpu_draws(state, fields, fit, pre, eye, view_dir):
     """draw(view_projection) callables, one per object."""
     cosine = cosine_of(state.settings)
-    env_tex, light_tex, light_count = environment_textures(fit, pre, len(cosine.amplitudes))
+    M = len(cosine.amplitudes)
+    env_tex, light_tex, light_count = environment_textures(fit, pre, M)
     world = state.world
     rot = [list(map(float, r)) for r in np.asarray(world.rotation, np.float64)]
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None
@@ -755,26 +887,44 @@ def gpu_draws(state, fields, fit, pre, eye, view_dir):
     draws = []
     for st, field in zip(state.objects, fields):
         coeff_tex, eigen_tex, kt = field_textures(field)
-        batches = object_batches(st, field)
         table = object_sg_materials(st)
+        batches = object_batches(st, field, use_flat=bool(_diffuse_slots(st).any()))
+        if len(batches.flat_points) * pair_texels(M, int(light_count)) > MAX_PAIR_TEXELS:
+            batches = object_batches(st, field, use_flat=False)
         params = {slot: parameter_texture(env_common, material_uniforms(
                       table[slot] if 0 <= slot < len(table) else core_brdf.Material()),
-                      field.resolution, kt, eye4, cosine) for slot, _ in batches}
+                      field.resolution, kt, eye4, cosine) for slot in
+                  sorted({slot for slot, _, _ in batches.draws})}
+        pair_tex = None
+        if len(batches.flat_points):
+            key = (st.name, st.fingerprint, np.asarray(world.rotation).round(12).tobytes(),
+                   cosine.sharpness, M, int(light_count))
+            pair_tex = runtime.held(
+                _PAIR_TABLES, key, (field, fit, batches),
+                lambda: pair_table(st, field, batches.flat_points, light_tex,
+                                   next(iter(params.values())), int(light_count), M, rot),
+                limit=8)
 
         def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
-                 eigen_tex=eigen_tex):
+                 eigen_tex=eigen_tex, pair_tex=pair_tex):
             import mathutils
-            sh = _gpu_shader()
-            sh.bind()
-            sh.uniform_float("viewProjection", view_projection)
-            sh.uniform_float("envRot", mathutils.Matrix(rot))
-            sh.uniform_sampler("coeffTex", coeff_tex)
-            sh.uniform_sampler("eigenTex", eigen_tex)
-            sh.uniform_sampler("envTex", env_tex)
-            sh.uniform_sampler("lightTex", light_tex)
-            for slot, batch in batches:
-                sh.uniform_sampler("paramTex", params[slot])
-                batch.draw(sh)
+            for flat in (False, True):
+                todo = [(slot, batch) for slot, f, batch in batches.draws if f == flat]
+                if not todo:
+                    continue
+                sh = _gpu_shader(flat)
+                sh.bind()
+                sh.uniform_float("viewProjection", view_projection)
+                sh.uniform_float("envRot", mathutils.Matrix(rot))
+                sh.uniform_sampler("coeffTex", coeff_tex)
+                sh.uniform_sampler("eigenTex", eigen_tex)
+                sh.uniform_sampler("envTex", env_tex)
+                sh.uniform_sampler("lightTex", light_tex)
+                if flat:
+                    sh.uniform_sampler("pairTex", pair_tex)
+                for slot, batch in todo:
+                    sh.uniform_sampler("paramTex", params[slot])
+                    batch.draw(sh)
 
         draws.append(draw)
     return draws
