@@ -277,6 +277,7 @@ def test_pca_tells_how_much_occlusion_it_keeps():
     """The PCA's share of blocked directions kept (core.ssdf.SSDFBasis.occlusion_kept) is
     stored with the field, shown in the note, and grows with a smaller error budget."""
     scene = _scene()
+    scene.prt.ssdf_occlusion_target = 0.0           # the RMS budget alone
     kept = {}
     for budget in (0.05, 0.005):
         scene.prt.ssdf_error_budget = budget

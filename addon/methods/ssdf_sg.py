@@ -54,11 +54,17 @@ def method_grid(resolution: int) -> ssdf.SSDFGrid:
     return ssdf.SSDFGrid(int(resolution), visibility_supersample=2, distance_supersample=1)
 
 
+#: default Min Occlusion Kept: at the RMS budget alone a ground keeps ~60 % of its blocked
+#: directions (small occluders' shadows fade); its flat triangles read the SSDF per point
+#: (pair_table), so the terms this takes cost no per-pixel time there
+OCCLUSION_TARGET_DEFAULT = 0.9
+
+
 def pca_settings(settings):
     """(SSDF resolution, RMS budget, max terms, occlusion target) of the PCA."""
     return (int(settings.get("ssdf_resolution", 32)), float(settings.get("ssdf_error_budget", 0.05)),
             int(settings.get("ssdf_max_terms", 48)),
-            float(settings.get("ssdf_occlusion_target", 0.0)))
+            float(settings.get("ssdf_occlusion_target", OCCLUSION_TARGET_DEFAULT)))
 
 
 def derive_object(bits, normals, cube, settings, cancel=None, progress=None):
@@ -308,11 +314,14 @@ class SSDFSGMethod(Method):
                 name="SSDF Max Terms", default=48, min=4, max=60,
                 description="Upper limit of PCA terms per object"),
             "ssdf_occlusion_target": FloatProperty(
-                name="Min Occlusion Kept", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
+                name="Min Occlusion Kept", default=OCCLUSION_TARGET_DEFAULT, min=0.0, max=1.0,
+                subtype="FACTOR",
                 description="Take more PCA terms (up to the maximum) until this share of each "
                             "object's blocked directions stays blocked after compression; the "
-                            "RMS budget alone can drop small occluders' shadows on a ground "
-                            "(0 = the budget alone; needs a precompute)"),
+                            "RMS budget alone can drop small occluders' shadows on a ground. "
+                            "Flat triangles (a ground) pay the terms only when the lighting "
+                            "changes, curved ones per pixel (0 = the budget alone; needs a "
+                            "precompute)"),
             "sg_lighting_fit": EnumProperty(
                 name="Lighting Fit", default="SCENE", update=runtime.redraw_viewports,
                 items=[("SCENE", "Scene",
