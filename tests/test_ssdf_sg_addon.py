@@ -125,6 +125,45 @@ def test_glsl_equals_numpy_per_pixel():
     assert np.quantile(rel, 0.99) < 2e-3, np.sort(rel)[-10:]
 
 
+def test_pair_table_holds_eq39_at_the_flat_points():
+    """The pair pass (shaders/ssdf_sg_pairs_frag.glsl) read back from the GPU: per point of
+    the ground's flat triangles, sum_p w_p sigma(theta_p, k_p) over the (cosine lobe, light
+    lobe) pairs equals numpy's eq. 39 (core.ssdf_sg.diffuse_transfer_per_cosine) there."""
+    from prt_relight.core import sg as core_sg, ssdf_sg as core_ssdf_sg
+    scene = _scene()
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    _gpu_ready()
+    state = _state()
+    _, _, eye = _camera_matrices()
+    method._PAIR_TABLES.clear()
+    assert state.draw_objects(eye, None) is not None
+    ground = next(st for st in state.objects if st.name == "Grid")
+    field = ground.data["ssdf_sg"]
+    flat_points = method.object_batches(ground, field).flat_points
+    tex = next(v[1] for k, v in method._PAIR_TABLES.items() if k[0] == "Grid")
+    fit, _ = state.method_impl._lighting(state)
+    cosine = method.cosine_of(state.settings)
+    M, J = len(cosine.amplitudes), len(fit[1])
+    pairs, stride = M * J, method.pair_texels(M, J)
+    theta_texels = stride - pairs
+    buf = tex.read()
+    buf.dimensions = tex.width * tex.height * 4             # (numpy reads a 3D Buffer wrongly)
+    table = np.array(buf, dtype=np.float64).reshape(-1, 4)[:len(flat_points) * stride]
+    table = table.reshape(len(flat_points), stride, 4)
+    theta = table[:, :theta_texels].reshape(len(flat_points), -1)[:, :pairs]
+    w, k = table[:, theta_texels:, :3], table[:, theta_texels:, 3]
+    sigma = core_sg.FH_A / (1.0 + np.exp(-k * np.clip(theta, -np.pi / 2, np.pi / 2))) \
+        + 0.5 * (1.0 - core_sg.FH_A)
+    gpu_rd = np.einsum("qpc,qp->qc", w, np.clip(sigma, 0.0, 1.0))
+    normals = ground.points.normals[flat_points]
+    numpy_rd = core_ssdf_sg.diffuse_transfer_per_cosine(
+        field.numpy, flat_points, normals, fit[0] @ state.world.rotation, fit[1],
+        method.cosine_amplitudes(fit[2], M), cosine=cosine)
+    rel = np.linalg.norm(gpu_rd - numpy_rd, axis=1) / np.maximum(
+        np.linalg.norm(numpy_rd, axis=1), 1e-6)
+    assert np.median(rel) < 1e-4 and rel.max() < 2e-3, np.sort(rel)[-5:]
+
+
 def test_f12_close_to_reference_and_sliders_need_no_recompute(tmp_path):
     scene = _scene()
     assert bpy.ops.prt.precompute() == {"FINISHED"}

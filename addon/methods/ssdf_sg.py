@@ -831,10 +831,10 @@ def pair_texels(cosine_lobes: int, light_count: int) -> int:
 
 
 def pair_table(st, field, flat_points, light_tex, param_tex, light_count, cosine_lobes,
-               rotation, read_back=False):
+               rotation):
     """Run the pair pass for the object's flat points: a GPUTexture (rows of 4096 texels,
-    :func:`pair_texels` per point) -- with ``read_back`` the table as numpy (rows, 4096, 4)
-    too.  Eq. 39's per-pair work that a flat triangle's pixels share, done once per point."""
+    :func:`pair_texels` per point).  Eq. 39's per-pair work that a flat triangle's pixels
+    share, done once per point."""
     import gpu
     import mathutils
     from gpu_extras.batch import batch_for_shader
@@ -871,9 +871,7 @@ def pair_table(st, field, flat_points, light_tex, param_tex, light_count, cosine
     finally:
         offscreen.free()
     buf.dimensions = 4096 * rows * 4
-    table = np.array(buf, dtype=np.float32).reshape(rows, 4096, 4)
-    tex = _texture(table)
-    return (tex, table) if read_back else tex
+    return _texture(np.array(buf, dtype=np.float32).reshape(rows, 4096, 4))
 
 
 # pair tables per (object, geometry, lighting): entries hold the field and the fit
