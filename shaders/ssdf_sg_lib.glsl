@@ -173,20 +173,7 @@ float level_coordinate(float lam)
 
 vec3 env_level(int level, int face, float s, float t)
 {
-  float N = float(envRes);
-  float x = clamp((s + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0);
-  float y = clamp((t + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0);
-  int x0 = min(int(floor(x)), envRes - 1);
-  int y0 = min(int(floor(y)), envRes - 1);
-  int x1 = min(x0 + 1, envRes - 1);
-  int y1 = min(y0 + 1, envRes - 1);
-  float fx = x - float(x0), fy = y - float(y0);
-  int base = (level * 6 + face) * envRes;
-  vec3 a = texelFetch(envTex, ivec2(x0, base + y0), 0).rgb * (1.0 - fx) +
-           texelFetch(envTex, ivec2(x1, base + y0), 0).rgb * fx;
-  vec3 b = texelFetch(envTex, ivec2(x0, base + y1), 0).rgb * (1.0 - fx) +
-           texelFetch(envTex, ivec2(x1, base + y1), 0).rgb * fx;
-  return a * (1.0 - fy) + b * fy;
+  return sg_atlas_bilinear(envTex, envRes, level, face, s, t);
 }
 
 /* kernel-weighted mean radiance of the (unrotated, unit strength) environment */
