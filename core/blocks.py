@@ -1207,7 +1207,6 @@ def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: 
     f32 = np.float32
     one = f32(1.0)
     floor = f32(_brdf._HALF_LEN2_FLOOR)
-    shape = np.shape(cos_i)
     # Nothing is below the horizon (every direction has cos_i > 0, so wi != -wo as cos_o
     # > 0) for most blocks: one minimum spares the masks below.
     lowest = float(cos_i.min()) if np.size(cos_i) else 1.0
