@@ -306,17 +306,23 @@ class _FakeEngine:
         PRTRenderEngine.view_update(self, context, depsgraph)
 
 
-def test_view_draw_path_draws_the_same_frame_as_f12():
+@pytest.mark.parametrize("method", ["REFERENCE", "SSDF_SG"])
+def test_view_draw_path_draws_the_same_frame_as_f12(method):
     """The viewport's drawing code (everything but Blender's display shader) runs
-    headless: a fake region/view from the scene camera gives the F12 pixels."""
+    headless: a fake region/view from the scene camera gives the F12 pixels.  SSDF_SG
+    draws per pixel, and runs its ground's pair pass (an offscreen of its own) inside the
+    viewport's bound framebuffer."""
     import types
 
     import gpu
     from prt_relight.addon import drawing
     from prt_relight.addon.engine import PRTRenderEngine, render_pixels
+    from prt_relight.addon.methods import ssdf_sg
 
     _small_scene()
+    bpy.context.scene.prt.method = method
     bpy.ops.prt.precompute()
+    ssdf_sg._PAIR_TABLES.clear()
     scene = bpy.context.scene
     scene.render.engine = "BLENDER_WORKBENCH"
     bpy.ops.render.render()                      # gives the gpu module a context in -b
@@ -343,6 +349,7 @@ def test_view_draw_path_draws_the_same_frame_as_f12():
                            scene.render.film_transparent, True)
     np.testing.assert_array_equal(shown, direct)
     assert np.isfinite(shown).all() and shown[..., :3].max() > 0.05
+    assert bool(ssdf_sg._PAIR_TABLES) == (method == "SSDF_SG")
 
 
 def test_modal_precompute_esc_cancels_and_timer_finishes():
