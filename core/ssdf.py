@@ -54,7 +54,7 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -496,16 +496,19 @@ def ssdf_pca(bits, normals, cube, grid: SSDFGrid, budget: float, max_terms: int 
 
     dim = grid.texels
     mean, ev, vec, count = _covariance_eigen(first_pass(), dim)
-    mean = mean.astype(np.float32)
     k0 = choose_terms(ev, dim, budget, max_terms)
     cap = max(k0, term_cap(dim, max_terms)) if occlusion_target > 0.0 else k0
-    eigen = _leading_rows(vec, cap, dim)
+    # every candidate term; the basis returned keeps the first K of them
+    widest = SSDFBasis(grid.resolution, mean.astype(np.float32), _leading_rows(vec, cap, dim),
+                       ev, count, float(budget), _tail_rms(ev, cap, dim),
+                       occlusion_target=float(occlusion_target))
+    mean, eigen = widest.mean, widest.eigen
     steps = [k0] + list(range(k0 + 4, cap + 1, 4))
     coeffs = np.empty((P, cap), np.float32)
     blocked, kept = 0, np.zeros(len(steps), np.int64)
     for i, (a, b) in enumerate(spans):
         r = np.asarray(cache[i] if keep else rows(a, b), np.float32)
-        c = ((r - mean) @ eigen.T).astype(np.float32)
+        c = widest.project(r)
         coeffs[a:b] = c
         rec = mean + c[:, :steps[0]] @ eigen[:steps[0]]
         b_now, k_now = occlusion_counts(r, rec)
@@ -520,9 +523,8 @@ def ssdf_pca(bits, normals, cube, grid: SSDFGrid, budget: float, max_terms: int 
         meets = np.flatnonzero(share >= occlusion_target)
         pick = int(meets[0]) if len(meets) else len(steps) - 1
     K = steps[pick]
-    basis = SSDFBasis(grid.resolution, mean, np.ascontiguousarray(eigen[:K]), ev, count,
-                      float(budget), _tail_rms(ev, K, dim), occlusion_kept=float(share[pick]),
-                      occlusion_target=float(occlusion_target))
+    basis = replace(widest, eigen=np.ascontiguousarray(eigen[:K]), rms_error=_tail_rms(ev, K, dim),
+                    occlusion_kept=float(share[pick]))
     return basis, np.ascontiguousarray(coeffs[:, :K])
 
 
