@@ -100,8 +100,8 @@ _SCENE_CACHE: dict = {}
 # seconds}, held with the objects' visibility arrays); a new camera picks among the same
 # options, so it times only assignments not timed before.
 _TIMED: dict = {}
-# Embree scene of the frame's triangles for the camera weights (held with the objects'
-# mesh arrays: made again for other geometry).
+# Embree scene of the frame's triangles for the camera weights, per the objects' mesh
+# fingerprints (made again for other geometry).
 _OCCLUDERS: dict = {}
 #: The newest per-object choices (what the panel and the report show).
 LAST_CHOICES: list = []
@@ -426,8 +426,10 @@ class AutoMethod(Method):
         if camera is None or not measured:
             return measured, False
         arrays = [st.arrays for st in state.objects]
+        # keyed on the geometry's fingerprints, not the arrays: every sync (each F12, each
+        # viewport update) exports new arrays of the same meshes
         occluders = runtime.held(
-            _OCCLUDERS, "frame", arrays,
+            _OCCLUDERS, tuple((st.name, st.fingerprint) for st in state.objects), (),
             lambda: (visibility.build_occluder_scene(
                 np.concatenate([a.triangle_positions for a in arrays]))
                 if visibility.have_embree() else None), limit=1)
