@@ -494,7 +494,7 @@ MAX_COEFF_TEXELS = 16
 LAST_TERMS: list = []
 #: below this share of blocked directions kept by the PCA (core.ssdf.SSDFBasis.occlusion_kept)
 #: the user is told that small occluders' shadows fade (the report scenes' grounds keep
-#: 57-58 % at the default budget's 8 terms, ~80 % at 20-24, ~90 % at 48)
+#: 57-58 % at the RMS budget's 8 terms alone, ~80 % at 20-24, ~90 % at 48)
 OCCLUSION_KEPT_WARNING = 0.75
 
 
@@ -871,6 +871,8 @@ def pair_table(st, field, flat_points, light_tex, param_tex, light_count, cosine
     finally:
         offscreen.free()
     buf.dimensions = 4096 * rows * 4
+    # read back and uploaded again (once per lighting change): a plain texture outlives the
+    # offscreen and may be drawn from the viewport's and the F12 render's GPU contexts
     return _texture(np.array(buf, dtype=np.float32).reshape(rows, 4096, 4))
 
 
