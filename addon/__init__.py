@@ -2,20 +2,31 @@
 
 import atexit
 
-from . import drawing, engine, operators, panels, properties, report, sg_material
+import bpy
+
+from . import drawing, engine, operators, panels, properties, report, runtime, sg_material
 
 _MODULES = (properties, sg_material, operators, report, engine, panels)
+
+
+@bpy.app.handlers.persistent
+def _on_load(*_args):
+    """File > New / Open: the previous file's messages are no longer true."""
+    runtime.LAST_MESSAGES.clear()
 
 
 def register():
     for m in _MODULES:
         m.register()
+    bpy.app.handlers.load_post.append(_on_load)
     # runs before the exit handler Blender registered when it was imported (LIFO)
     atexit.unregister(drawing.free_gpu_resources)
     atexit.register(drawing.free_gpu_resources)
 
 
 def unregister():
+    if _on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_on_load)
     for m in reversed(_MODULES):
         m.unregister()
     drawing.free_gpu_resources()

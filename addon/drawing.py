@@ -86,11 +86,14 @@ def float_texture(rgba: np.ndarray):
     return gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
 
 
-def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles: np.ndarray):
-    """Batch of one object's corners: positions (C, 3), radiance (C, 3), triangles (T, 3)."""
+def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles: np.ndarray,
+                  closed_side: int = 0):
+    """Batch of one object's corners: positions (C, 3), radiance (C, 3), triangles (T, 3).
+    ``closed_side`` (core.mesh.closed_side) rides in the radiance's alpha: the shader
+    draws a closed mesh's inner side black."""
     rgba = np.empty((len(radiance), 4), dtype=np.float32)
     rgba[:, :3] = radiance
-    rgba[:, 3] = 1.0
+    rgba[:, 3] = float(closed_side)
     return batch_for_shader(surface_shader(), "TRIS",
                             {"pos": np.ascontiguousarray(positions, dtype=np.float32),
                              "radiance": rgba},

@@ -37,16 +37,23 @@ def _background(state: FrameState):
 
 def _batches(state: FrameState, radiance_per_object):
     return [drawing.surface_batch(st.arrays.positions[st.arrays.corner_verts], rad,
-                                  st.arrays.triangles)
+                                  st.arrays.triangles, st.closed_side)
             for st, rad in zip(state.objects, radiance_per_object)]
 
 
-def _eye(view_matrix: Matrix, is_perspective: bool):
-    inv = view_matrix.inverted()
+def _eye(view_matrix, is_perspective: bool):
+    """(eye, None) for a perspective view, (None, unit direction toward the viewer) for
+    an orthographic one: the view's +Z axis in world space."""
+    inv = np.linalg.inv(np.array(view_matrix, dtype=np.float64))
     if is_perspective:
-        return np.array(inv.translation), None
-    forward = inv.to_3x3() @ np.array([0.0, 0.0, 1.0])      # toward the viewer
-    return None, np.asarray(forward, dtype=np.float64) / max(np.linalg.norm(forward), 1e-30)
+        return inv[:3, 3].copy(), None
+    forward = inv[:3, 2]
+    return None, forward / max(float(np.linalg.norm(forward)), 1e-30)
+
+
+def _panoramic(camera) -> bool:
+    """Whether a scene camera is a panoramic one (not drawn: no rasterised projection)."""
+    return camera.type == "CAMERA" and camera.data.type == "PANO"
 
 
 def frame_camera(view: Matrix, projection: Matrix, width: int, height: int, eye,
@@ -168,6 +175,11 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         if camera is None:
             self.report({"ERROR"}, "PRT Relight: the scene has no camera")
             return
+        if _panoramic(camera):
+            self.report({"ERROR"}, f"PRT Relight: camera '{camera.name}' is panoramic; only "
+                        "perspective and orthographic cameras are drawn: switch its Type in "
+                        "the camera properties")
+            return
         state = FrameState()
         state.sync(depsgraph)
         if state.error:
@@ -178,7 +190,7 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         projection = cam_eval.calc_matrix_camera(depsgraph, x=width, y=height,
                                                  scale_x=r.pixel_aspect_x, scale_y=r.pixel_aspect_y)
         view = cam_eval.matrix_world.inverted()
-        persp = cam_eval.data.type != "ORTHO"
+        persp = not (cam_eval.type == "CAMERA" and cam_eval.data.type == "ORTHO")
         pixels = render_pixels(state, view, projection, width, height, r.film_transparent, persp,
                                scene.prt.supersampling, r.filter_size)
         result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
@@ -193,6 +205,12 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         state.sync(depsgraph)
         self._state = state
         self._view_key = None
+        rv3d = getattr(context, "region_data", None)
+        camera = depsgraph.scene.camera
+        if (rv3d is not None and getattr(rv3d, "view_perspective", "") == "CAMERA"
+                and camera is not None and _panoramic(camera)):
+            state.warnings.append(f"Camera '{camera.name}' is panoramic: the viewport draws it "
+                                  "as a perspective view and F12 refuses it")
         messages = ([self._state.error] if self._state.error else []) + self._state.warnings
         self.update_stats("PRT Relight", " | ".join(messages) if messages else "")
 

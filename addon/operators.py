@@ -139,19 +139,7 @@ class PRT_OT_clear(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        count = 0
-        for ob in bpy.data.objects:
-            data = getattr(ob, "prt", None)
-            if data is None or data.visibility is None:
-                continue
-            img = data.visibility
-            data.visibility = None
-            data.point_count = 0
-            data.fingerprint = ""
-            img.use_fake_user = False
-            storage.remove_image(img)
-            count += 1
-        context.scene.prt.precomputed_resolution = 0
+        count = storage.clear_all()
         self.report({"INFO"}, f"Cleared PRT data of {count} object(s)")
         return {"FINISHED"}
 

@@ -105,6 +105,10 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     tri_blocks = []
     empty = []
     skipped = []
+    hidden = scene_export.hidden_in_viewport(depsgraph.view_layer, depsgraph)
+    if hidden:
+        warnings.append("Hidden in the viewport but shown in renders, so not traced (their "
+                        "shadows are missing; unhide them to precompute): " + ", ".join(hidden))
     for ob in scene_export.visible_mesh_objects(depsgraph, skipped):
         arrays = scene_export.mesh_arrays(ob)
         if not np.isfinite(arrays.positions).all():
@@ -168,8 +172,9 @@ def commit(scene, job: PrecomputeJob):
         new_images[o.name].name = storage.IMAGE_PREFIX + o.name
     methods.get(job.method).store(scene, job, job.derived)
     scene.prt.precomputed_resolution = job.resolution
-    scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(
-        (o.name, o.fingerprint) for o in job.objects)
+    scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(o.fingerprint for o in job.objects)
+    scene.prt.precompute_id = run_id
+    scene.prt.precomputed_objects = len(job.objects)
     job.timings["storage"] = time.perf_counter() - t0
     t = job.timings
     scene.prt.last_report = (f"{job.point_count} points, {t.get('ray_count', 0) / 1e6:.1f} M rays "

@@ -33,6 +33,11 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
     last_report: StringProperty(name="Last Precompute", default="")
     scene_fingerprint: StringProperty(name="Scene Fingerprint", default="",
                                       description="Geometry of every object at the precompute")
+    precompute_id: StringProperty(name="Precompute ID", default="",
+                                  description="The last precompute's run (each object it "
+                                              "traced carries the same ID)")
+    precomputed_objects: IntProperty(name="Precomputed Objects", default=0,
+                                     description="How many objects the last precompute traced")
 
 
 class PRTObjectData(bpy.types.PropertyGroup):

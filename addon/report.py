@@ -890,7 +890,20 @@ class PRT_OT_report(bpy.types.Operator):
                          cycles_samples=self.cycles_samples, stability=self.stability,
                          method_ids=ids)
 
+    def _unknown_methods(self) -> list:
+        ids = [x.strip() for x in self.methods.split(",") if x.strip()]
+        return [x for x in ids if x not in methods.REGISTRY]
+
+    def _refuse_unknown(self) -> bool:
+        unknown = self._unknown_methods()
+        if unknown:
+            self.report({"ERROR"}, "PRT report: unknown method(s) " + ", ".join(unknown)
+                        + "; known: " + ", ".join(methods.REGISTRY))
+        return bool(unknown)
+
     def execute(self, context):
+        if self._refuse_unknown():
+            return {"CANCELLED"}
         run = self._make_run(context)
         try:
             index = run.run()
@@ -903,6 +916,8 @@ class PRT_OT_report(bpy.types.Operator):
     def invoke(self, context, event):
         if bpy.app.background or context.window is None:
             return self.execute(context)
+        if self._refuse_unknown():
+            return {"CANCELLED"}
         self._run = self._make_run(context)
         self._gen = self._run.steps()
         wm = context.window_manager

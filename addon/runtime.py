@@ -120,9 +120,31 @@ def open_visibility(normals: np.ndarray, cube) -> np.ndarray:
     return np.packbits(visibility.hemisphere_mask(normals, cube), axis=1)
 
 
+def _traced_objects(scene, run: str) -> int:
+    """How many of the scene's objects that renders show carry the precompute ``run``
+    (objects hidden in the viewport count: they still render)."""
+    return sum(1 for ob in scene.objects
+               if ob.type in scene_export.GEOMETRY_TYPES and not ob.hide_render
+               and ob.prt.precompute_id == run)
+
+
+# core.mesh.closed_side per geometry fingerprint (a cheap key: every sync exports anew)
+_CLOSED_SIDE: dict = {}
+
+
+def closed_side(arrays, fingerprint: str) -> int:
+    side = _CLOSED_SIDE.get(fingerprint)
+    if side is None:
+        side = core_mesh.closed_side(arrays)
+        if len(_CLOSED_SIDE) >= 256:
+            _CLOSED_SIDE.pop(next(iter(_CLOSED_SIDE)))
+        _CLOSED_SIDE[fingerprint] = side
+    return side
+
+
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "data",
-                 "fingerprint")
+                 "fingerprint", "closed_side")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -133,8 +155,12 @@ class ObjectState:
         self.points = points
         self.materials = materials
         self.bits = bits
+        #: "ok", "stale" (changed since its precompute), "missing" (never precomputed) or
+        #: "unshadowed" (hidden from renders, drawn in the viewport only, never traced)
         self.status = status
         self.data = {}               # per-method data loaded in Method.sync
+        #: core.mesh.closed_side: which side of a closed mesh is its (black) inside
+        self.closed_side = closed_side(arrays, fingerprint) if fingerprint else 0
 
 
 class FrameState:
@@ -171,34 +197,39 @@ class FrameState:
         cube = directions.cubemap(self.resolution)
         nbytes = cube.size // 8
         objects = []
-        missing, stale = [], []
-        fingerprints = []
+        missing, stale, earlier, unshadowed = [], [], [], []
         skipped = []
-        for ob in scene_export.visible_mesh_objects(depsgraph, skipped):
+        shown_only = [] if depsgraph.mode != "RENDER" else None
+        found = scene_export.visible_mesh_objects(depsgraph, skipped, shown_only)
+        run = scene.prt.precompute_id
+        for ob in found + (shown_only or []):
             arrays = scene_export.mesh_arrays(ob)
             if len(arrays.triangles) == 0:
                 continue
             core_mesh.repair_normals(arrays)
             points = core_mesh.shading_points(arrays)
             fingerprint = core_mesh.fingerprint(arrays)
-            fingerprints.append((ob.original.name, fingerprint))
             mats = scene_export.object_materials(ob, self.warnings)
             orig = ob.original
             data = orig.prt
             bits = None
             status = "ok"
-            if data.visibility is not None and data.resolution == self.resolution:
+            if orig.hide_render:
+                status = "unshadowed"          # viewport only: never traced, casts nothing
+            elif data.visibility is not None and data.resolution == self.resolution:
                 bits = stored_visibility(orig, points.count, nbytes)
                 if bits is None:
                     status = "stale"
                 elif data.fingerprint != fingerprint:
                     status = "stale"   # same topology: old data, correctly indexed
+                elif run and data.precompute_id != run:
+                    earlier.append(orig.name)
             else:
                 status = "missing"
             if bits is None:
                 bits = open_visibility(points.normals, cube)
-            (stale if status == "stale" else missing if status == "missing" else []).append(
-                orig.name)
+            {"stale": stale, "missing": missing, "unshadowed": unshadowed}.get(
+                status, []).append(orig.name)
             if data.coarse_warning and status == "ok":
                 self.warnings.append(data.coarse_warning)
             st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
@@ -210,13 +241,19 @@ class FrameState:
         self.warnings += scene_export.instance_warning(skipped)
         if missing:
             self.warnings.append("Not precomputed (drawn without shadows): " + ", ".join(missing))
+        if unshadowed:
+            self.warnings.append("Hidden from renders (drawn without shadows, cast none): "
+                                 + ", ".join(unshadowed))
         if stale:
             self.warnings.append("Changed since precompute (stale, press Precompute): "
                                  + ", ".join(stale))
-        elif (scene.prt.scene_fingerprint and not missing
-              and core_mesh.scene_fingerprint(fingerprints) != scene.prt.scene_fingerprint):
-            self.warnings.append("Scene geometry changed since precompute (objects added, "
-                                 "removed or moved): shadows are stale, press Precompute")
+        elif earlier:
+            self.warnings.append("Precomputed in an earlier run than the others (their shadows "
+                                 "on each other may be stale, press Precompute): "
+                                 + ", ".join(earlier))
+        elif run and _traced_objects(scene, run) < scene.prt.precomputed_objects:
+            self.warnings.append("Objects were removed or hidden from renders since the "
+                                 "precompute: their shadows are stale, press Precompute")
         self.objects = objects
         from . import sg_material
         lamp_warnings = []

@@ -48,11 +48,18 @@ class ExportError(RuntimeError):
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 
 
-def visible_mesh_objects(depsgraph, skipped: list | None = None):
-    """Evaluated geometry objects visible in the render, in a stable (name) order.
+def visible_mesh_objects(depsgraph, skipped: list | None = None,
+                         hidden_from_render: list | None = None):
+    """Evaluated geometry objects the render shows, in a stable (name) order.
 
-    Instances (collection instances, particles, geometry-node instances) are not
-    supported yet: their names are appended to ``skipped`` when it is given.
+    A render depsgraph holds what the render shows; a viewport depsgraph what the
+    viewport shows, less the objects hidden from renders (``hide_render``): those are
+    never traced, so the precompute and F12 agree on which objects cast shadows.  When
+    ``hidden_from_render`` is given (the viewport, which shows them), they are appended
+    to it instead of being dropped.  Curves, text, surfaces and
+    metaballs come as their own object plus a mesh instance of themselves; the object is
+    used.  Other instances (collection instances, particles, geometry-node instances) are
+    not supported yet: their names are appended to ``skipped`` when it is given.
     """
     found = []
     for inst in depsgraph.object_instances:
@@ -60,14 +67,33 @@ def visible_mesh_objects(depsgraph, skipped: list | None = None):
         if ob.type not in GEOMETRY_TYPES:
             continue
         if inst.is_instance:
+            parent = inst.parent
+            if parent is not None and parent.original == ob.original:
+                continue                 # a curve/text object's own evaluated geometry
             if skipped is not None and ob.original.name not in skipped:
                 skipped.append(ob.original.name)
             continue
-        if depsgraph.mode == "RENDER" and ob.original.hide_render:
+        if ob.original.hide_render:
+            if hidden_from_render is not None:
+                hidden_from_render.append(ob)
             continue
         found.append(ob)
     found.sort(key=lambda o: o.name)
     return found
+
+
+def hidden_in_viewport(view_layer, depsgraph) -> list:
+    """Names of the view layer's geometry objects that renders show but a viewport
+    depsgraph does not evaluate (``hide_viewport`` or hidden with the eye): they cannot
+    be traced from the viewport, so the precompute reports them."""
+    if depsgraph.mode == "RENDER":
+        return []
+    evaluated = {inst.object.original.name for inst in depsgraph.object_instances
+                 if not inst.is_instance}
+    return sorted(ob.name for ob in view_layer.objects
+                  if ob.type in GEOMETRY_TYPES and not ob.hide_render
+                  and ob.name not in evaluated
+                  and (ob.hide_viewport or ob.hide_get(view_layer=view_layer)))
 
 
 def instance_warning(skipped: list) -> list:
@@ -324,6 +350,9 @@ def export_world(scene, warnings: list) -> envmap.WorldLighting:
     if strength_sock.is_linked:
         warnings.append("World: Background strength is linked; using its default value")
     strength = float(strength_sock.default_value)
+    if strength < 0.0:
+        warnings.append(f"World: Background Strength is negative ({strength:g}): negative light "
+                        "is not drawn (the frame is clamped at zero); use a positive Strength")
     color_sock = bg.inputs["Color"]
     if not color_sock.is_linked:
         return envmap.WorldLighting(color=tuple(color_sock.default_value)[:3], strength=strength)

@@ -14,6 +14,10 @@ from ..core.visibility import bytes_to_float24, float24_to_bytes
 
 MAX_WIDTH = 4096
 IMAGE_PREFIX = "PRT Visibility "
+#: ID property marking every image this add-on wrote (what prt.clear removes)
+OWNER_TAG = "prt_relight"
+#: names of images written before OWNER_TAG existed
+_OLD_PREFIXES = ("PRT Visibility ", "PRT Blocks ", "PRT RSL ", "PRT SSDF ")
 
 
 def _layout(point_count: int, floats_per_point: int):
@@ -39,6 +43,7 @@ def write_float_image(name: str, flat: np.ndarray, width: int = MAX_WIDTH, image
     if img is None:
         img = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True,
                                   is_data=True)
+    img[OWNER_TAG] = True
     img.colorspace_settings.name = "Non-Color"
     img.alpha_mode = "CHANNEL_PACKED"
     img.use_fake_user = True
@@ -83,3 +88,36 @@ def read_visibility_image(image, point_count: int, nbytes: int) -> np.ndarray:
 def remove_image(image):
     if image is not None and image.users <= 1:
         bpy.data.images.remove(image)
+
+
+def clear_all() -> int:
+    """Remove everything the add-on stored in the .blend: its images (also those of
+    deleted objects), the per-object links and ``prt_*`` ID properties, the scene's
+    precompute record.  Returns how many objects had data."""
+    count = 0
+    for ob in bpy.data.objects:
+        data = getattr(ob, "prt", None)
+        had = data is not None and (data.visibility is not None or data.point_count)
+        for key in [k for k in ob.keys() if k.startswith("prt_")]:
+            del ob[key]
+            had = True
+        if data is not None:
+            data.visibility = None
+            data.point_count = 0
+            data.resolution = 0
+            data.fingerprint = ""
+            data.precompute_id = ""
+            data.coarse_warning = ""
+        count += bool(had)
+    for img in [i for i in bpy.data.images
+                if i.get(OWNER_TAG) or i.name.startswith(_OLD_PREFIXES)]:
+        bpy.data.images.remove(img)
+    for scene in bpy.data.scenes:
+        prt = getattr(scene, "prt", None)
+        if prt is not None:
+            prt.precomputed_resolution = 0
+            prt.scene_fingerprint = ""
+            prt.precompute_id = ""
+            prt.precomputed_objects = 0
+            prt.last_report = ""
+    return count

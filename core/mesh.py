@@ -81,6 +81,33 @@ def point_areas(mesh: MeshArrays, points: "ShadingPoints") -> np.ndarray:
                        minlength=points.count)
 
 
+def closed_side(mesh: MeshArrays) -> int:
+    """How back faces are seen: 0 for an open mesh; for a closed one (every edge shared
+    by exactly two triangles that traverse it in opposite directions) +1 when its
+    triangles wind outward (signed volume > 0), -1 when inward (e.g. a negative scale).
+    Seen from inside a closed mesh every direction is blocked by it, so the renderer
+    draws its inner side black, as Cycles' direct light is there."""
+    if len(mesh.triangles) == 0:
+        return 0
+    # vertices welded by position, so meshes split at seams (imports) count as closed
+    scale = max(bounding_diagonal(mesh.positions), 1e-30)
+    q = np.round(np.nan_to_num(mesh.positions) / (scale * 1e-7)).astype(np.int64)
+    _, weld = np.unique(q, axis=0, return_inverse=True)
+    v = weld.reshape(-1)[mesh.corner_verts[mesh.triangles]]      # (T, 3) welded ids
+    v = v[(v[:, 0] != v[:, 1]) & (v[:, 1] != v[:, 2]) & (v[:, 2] != v[:, 0])]
+    a = np.concatenate([v[:, 0], v[:, 1], v[:, 2]])
+    b = np.concatenate([v[:, 1], v[:, 2], v[:, 0]])
+    n = int(max(a.max(initial=0), b.max(initial=0))) + 1
+    directed = a * n + b
+    if len(np.unique(directed)) != len(directed):
+        return 0                        # an edge traversed twice the same way
+    if not np.isin(b * n + a, directed).all():
+        return 0                        # an edge without its opposite: a boundary
+    p = mesh.positions[mesh.corner_verts[mesh.triangles]]
+    volume = float(np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum())
+    return 1 if volume > 0.0 else -1 if volume < 0.0 else 0
+
+
 def bounding_diagonal(positions: np.ndarray) -> float:
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     p = p[np.isfinite(p).all(axis=1)]
@@ -171,11 +198,12 @@ def fingerprint(mesh: MeshArrays) -> str:
     return h.hexdigest()
 
 
-def scene_fingerprint(named_fingerprints) -> str:
-    """One hash of several objects' (name, fingerprint) pairs, order independent."""
+def scene_fingerprint(fingerprints) -> str:
+    """One hash of several objects' geometry fingerprints, independent of their order
+    and of the objects' names (renaming changes no shadow)."""
     h = hashlib.sha1()
-    for name, fp in sorted(named_fingerprints):
-        h.update(name.encode("utf-8") + b"\0" + fp.encode("ascii") + b"\0")
+    for fp in sorted(fingerprints):
+        h.update(fp.encode("ascii") + b"\0")
     return h.hexdigest()
 
 

@@ -1,7 +1,8 @@
 /* The world as Cycles shows it: an equirectangular Environment Texture read at
  *   u = 0.5 - atan2(t.y, t.x) / (2 pi),  v = acos(t.z) / pi  (v = 0 is the top row),
  * with t = texRotation * d the Mapping node's rotation applied to the view ray d.
- * The texture is uploaded top row first, so v is used as the texture's t. */
+ * The texture is uploaded top row first, so v is used as the texture's t.
+ * Negative light (a negative Strength) is drawn as zero; the export warns. */
 void main()
 {
   const float PI = 3.14159265358979;
@@ -11,5 +12,5 @@ void main()
   vec3 t = texRotation * d;
   float u = fract(0.5 - atan(t.y, t.x) / (2.0 * PI));
   float v = acos(clamp(t.z, -1.0, 1.0)) / PI;
-  fragColor = vec4(texture(envMap, vec2(u, v)).rgb * strength, 1.0);
+  fragColor = vec4(max(texture(envMap, vec2(u, v)).rgb * strength, vec3(0.0)), 1.0);
 }

@@ -89,5 +89,8 @@ void main()
       color += scale * mu * gamma;
     }
   }
-  fragColor = vec4(color, 1.0);
+  /* a closed mesh's inner side (core.mesh.closed_side) sees only itself: black, as in
+   * Cycles; SG products can ring slightly below zero: clamped */
+  bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
+  fragColor = vec4(inner ? vec3(0.0) : max(color, vec3(0.0)), 1.0);
 }

@@ -277,46 +277,13 @@ def test_sh_method_renders_near_reference_for_low_frequency_light(tmp_path):
     assert errors[1] > 0.01              # the sun's sharp shadows are beyond order 5
 
 
-class _FakeEngine:
-    """Stands in for the RenderEngine instance Blender passes to ``view_draw``."""
-
-    def __init__(self):
-        self._state = None
-        self._view_texture = None
-        self._view_key = None
-        self._shading = None
-        self.bound = 0
-        self.stats = None
-        self.workers = []
-
-    def _redraw_when_done(self, worker):
-        self.workers.append(worker)           # Blender's timer would poll it
-
-    def bind_display_space_shader(self, scene):
-        self.bound += 1
-
-    def unbind_display_space_shader(self):
-        self.bound -= 1
-
-    def update_stats(self, a, b):
-        self.stats = (a, b)
-
-    def view_update(self, context, depsgraph):
-        from prt_relight.addon.engine import PRTRenderEngine
-        PRTRenderEngine.view_update(self, context, depsgraph)
-
-
 @pytest.mark.parametrize("method", ["REFERENCE", "SSDF_SG"])
 def test_view_draw_path_draws_the_same_frame_as_f12(method):
     """The viewport's drawing code (everything but Blender's display shader) runs
     headless: a fake region/view from the scene camera gives the F12 pixels.  SSDF_SG
     draws per pixel, and runs its ground's pair pass (an offscreen of its own) inside the
     viewport's bound framebuffer."""
-    import types
-
-    import gpu
-    from prt_relight.addon import drawing
-    from prt_relight.addon.engine import PRTRenderEngine, render_pixels
+    from prt_relight.addon.engine import render_pixels
     from prt_relight.addon.methods import ssdf_sg
 
     _small_scene()
@@ -329,23 +296,11 @@ def test_view_draw_path_draws_the_same_frame_as_f12(method):
     depsgraph = bpy.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(depsgraph)
     w, h = 64, 48
-    rv3d = types.SimpleNamespace(
-        view_matrix=cam.matrix_world.inverted(),
-        window_matrix=cam.calc_matrix_camera(depsgraph, x=w, y=h),
-        is_perspective=True)
-    ctx = types.SimpleNamespace(region=types.SimpleNamespace(width=w, height=h),
-                                region_data=rv3d)
-    engine = _FakeEngine()
-    offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
-    with offscreen.bind():
-        PRTRenderEngine.view_draw(engine, ctx, depsgraph)
-    offscreen.free()
+    view, window = cam.matrix_world.inverted(), cam.calc_matrix_camera(depsgraph, x=w, y=h)
+    engine, shown = bs.view_draw(depsgraph, view, window, w, h)
     assert engine.bound == 0 and engine._view_texture is not None
     assert engine.stats is not None
-    buf = engine._view_texture.read()
-    buf.dimensions = h * w * 4                   # flat first: np.array of a 3D Buffer is wrong
-    shown = np.array(buf, dtype=np.float32).reshape(h, w, 4)
-    direct = render_pixels(engine._state, rv3d.view_matrix, rv3d.window_matrix, w, h,
+    direct = render_pixels(engine._state, view, window, w, h,
                            scene.render.film_transparent, True)
     np.testing.assert_array_equal(shown, direct)
     assert np.isfinite(shown).all() and shown[..., :3].max() > 0.05
@@ -424,10 +379,7 @@ def test_viewport_shades_view_dependent_materials_off_the_main_thread():
     """REFERENCE with a glossy layer: after a camera move the viewport redraws at once
     with the previous radiance and a worker computes the new one; the next draw shows
     exactly what F12 computes for that view."""
-    import types
-
-    import gpu
-    from prt_relight.addon.engine import PRTRenderEngine, render_pixels
+    from prt_relight.addon.engine import render_pixels
 
     _small_scene()                               # no materials: Principled, view dependent
     bpy.ops.prt.precompute()
@@ -437,32 +389,22 @@ def test_viewport_shades_view_dependent_materials_off_the_main_thread():
     depsgraph = bpy.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(depsgraph)
     w, h = 48, 36
+    window = cam.calc_matrix_camera(depsgraph, x=w, y=h)
 
     def draw(view):
-        rv3d = types.SimpleNamespace(view_matrix=view,
-                                     window_matrix=cam.calc_matrix_camera(depsgraph, x=w, y=h),
-                                     is_perspective=True)
-        ctx = types.SimpleNamespace(region=types.SimpleNamespace(width=w, height=h),
-                                    region_data=rv3d)
-        offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
-        with offscreen.bind():
-            PRTRenderEngine.view_draw(engine, ctx, depsgraph)
-        offscreen.free()
-        buf = engine._view_texture.read()
-        buf.dimensions = w * h * 4
-        return np.array(buf, dtype=np.float32).reshape(h, w, 4), rv3d
+        return bs.view_draw(depsgraph, view, window, w, h, engine=engine)[1]
 
-    engine = _FakeEngine()
+    engine = bs.FakeViewEngine()
     view_a = cam.matrix_world.inverted()
-    first, _ = draw(view_a)
+    first = draw(view_a)
     assert engine._state.view_dependent and not engine.workers     # first frame: synchronous
     from mathutils import Matrix
     view_b = view_a @ Matrix.Rotation(0.15, 4, "Z")
-    interim, rv3d = draw(view_b)
+    interim = draw(view_b)
     assert len(engine.workers) == 1                                 # shading went to a worker
     engine.workers[0].join(60)
-    final, _ = draw(view_b)
-    expected = render_pixels(engine._state, rv3d.view_matrix, rv3d.window_matrix, w, h,
+    final = draw(view_b)
+    expected = render_pixels(engine._state, view_b, window, w, h,
                              scene.render.film_transparent, True)
     np.testing.assert_array_equal(final, expected)
     assert not np.array_equal(interim, final)                       # highlights caught up

@@ -548,3 +548,33 @@ def test_bounding_diagonal():
     assert mesh.bounding_diagonal(np.array([[np.nan, 0, 0], [1, 1, 1], [0, 0, 0]])) == \
         pytest.approx(np.sqrt(3))
     assert mesh.bounding_diagonal(np.zeros((0, 3))) == 0.0
+
+
+# --------------------------------------------------------------------------- #
+# mesh.closed_side: which side of a closed mesh is its inside
+# --------------------------------------------------------------------------- #
+
+def _box_mesh(sign=1.0, split=False):
+    tris = box_triangles() * np.array([1.0, 1.0, sign])
+    if split:                                # every triangle its own vertices (an import)
+        pos = tris.reshape(-1, 3)
+        return mesh.MeshArrays(pos, np.arange(len(pos)), np.tile([0.0, 0.0, 1.0], (len(pos), 1)),
+                               np.arange(len(pos)).reshape(-1, 3))
+    pos, verts = np.unique(tris.reshape(-1, 3), axis=0, return_inverse=True)
+    return mesh.MeshArrays(pos, verts.reshape(-1), np.tile([0.0, 0.0, 1.0], (verts.size, 1)),
+                           np.arange(verts.size).reshape(-1, 3))
+
+
+def test_closed_side_of_open_closed_and_mirrored_meshes():
+    outward = _box_mesh()
+    tp = outward.triangle_positions
+    centre_to_face = tp.mean(axis=1)
+    geo = np.cross(tp[:, 1] - tp[:, 0], tp[:, 2] - tp[:, 0])
+    side = 1 if (np.einsum("ij,ij->i", geo, centre_to_face) > 0).all() else -1
+    assert mesh.closed_side(outward) == side                 # the winding's own sign
+    assert mesh.closed_side(_box_mesh(-1.0)) == -side        # mirrored: winds the other way
+    assert mesh.closed_side(_box_mesh(split=True)) == side   # welded by position
+    open_box = _box_mesh()
+    open_box.triangles = open_box.triangles[2:]              # one face missing
+    assert mesh.closed_side(open_box) == 0
+    assert mesh.closed_side(mesh.grid()) == 0

@@ -401,7 +401,7 @@ class SSDFSGMethod(Method):
                                 max_terms, occlusion)
             if loaded is not None and st.status == "ok":
                 field = loaded
-            elif st.status == "missing":
+            elif st.status in ("missing", "unshadowed"):
                 field = open_field(st.points.count, res)        # no shadows: exact, instant
             else:
                 key = (st.name, id(st.bits), res, budget, max_terms, occlusion,
@@ -630,7 +630,8 @@ def _gpu_shader(flat: bool = False):
         info = gpu.types.GPUShaderCreateInfo()
         if flat:
             info.define("FLAT_PAIRS", "1")
-        for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot")):
+        for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
+                            ("FLOAT", "closedSide")):
             info.push_constant(kind, ident)
         for slot, (kind, ident) in enumerate(_SAMPLERS + ((("FLOAT_2D", "pairTex"),) if flat
                                                          else ())):
@@ -915,7 +916,7 @@ def gpu_draws(state, fields, fit, pre, eye, view_dir):
                 limit=8)
 
         def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
-                 eigen_tex=eigen_tex, pair_tex=pair_tex):
+                 eigen_tex=eigen_tex, pair_tex=pair_tex, side=float(st.closed_side)):
             import mathutils
             for flat in (False, True):
                 todo = [(slot, batch) for slot, f, batch in batches.draws if f == flat]
@@ -925,6 +926,7 @@ def gpu_draws(state, fields, fit, pre, eye, view_dir):
                 sh.bind()
                 sh.uniform_float("viewProjection", view_projection)
                 sh.uniform_float("envRot", mathutils.Matrix(rot))
+                sh.uniform_float("closedSide", side)
                 sh.uniform_sampler("coeffTex", coeff_tex)
                 sh.uniform_sampler("eigenTex", eigen_tex)
                 sh.uniform_sampler("envTex", env_tex)
