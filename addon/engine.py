@@ -45,7 +45,8 @@ def _eye(view_matrix: Matrix, is_perspective: bool):
     inv = view_matrix.inverted()
     if is_perspective:
         return np.array(inv.translation), None
-    forward = inv.to_3x3() @ np.array([0.0, 0.0, 1.0])      # toward the viewer
+    # toward the viewer (a mathutils Matrix does not multiply numpy arrays)
+    forward = np.array(inv.to_3x3(), dtype=np.float64) @ np.array([0.0, 0.0, 1.0])
     return None, np.asarray(forward, dtype=np.float64) / max(np.linalg.norm(forward), 1e-30)
 
 
