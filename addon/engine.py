@@ -65,6 +65,32 @@ def frame_camera(view: Matrix, projection: Matrix, width: int, height: int, eye,
                 height=int(height), eye=eye, view_dir=view_dir)
 
 
+def render_view(scene, depsgraph):
+    """F12's view of ``scene``: (view, projection, width, height, perspective) of its camera
+    at the render size, or None when it has no camera."""
+    camera = scene.camera
+    if camera is None:
+        return None
+    r = scene.render
+    width = max(1, int(r.resolution_x * r.resolution_percentage / 100))
+    height = max(1, int(r.resolution_y * r.resolution_percentage / 100))
+    cam_eval = camera.evaluated_get(depsgraph)
+    projection = cam_eval.calc_matrix_camera(depsgraph, x=width, y=height,
+                                             scale_x=r.pixel_aspect_x, scale_y=r.pixel_aspect_y)
+    persp = not (cam_eval.type == "CAMERA" and cam_eval.data.type == "ORTHO")
+    return cam_eval.matrix_world.inverted(), projection, width, height, persp
+
+
+def render_camera(scene, depsgraph) -> dict | None:
+    """:func:`frame_camera` of F12's view (None without a camera): what AUTO's stored
+    choice is weighed by."""
+    got = render_view(scene, depsgraph)
+    if got is None:
+        return None
+    view, projection, width, height, persp = got
+    return frame_camera(view, projection, width, height, *_eye(view, persp))
+
+
 def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, width: int,
                 height: int, transparent: bool, supersampling: int = 1,
                 object_draws=None, filter_width: float = 0.0) -> np.ndarray:
@@ -169,16 +195,15 @@ class PRTRenderEngine(bpy.types.RenderEngine):
     def render(self, depsgraph):
         scene = depsgraph.scene
         r = scene.render
-        width = max(1, int(r.resolution_x * r.resolution_percentage / 100))
-        height = max(1, int(r.resolution_y * r.resolution_percentage / 100))
-        camera = scene.camera
-        if camera is None:
+        got = render_view(scene, depsgraph)
+        if got is None:
             self.report({"ERROR"}, "PRT Relight: the scene has no camera")
             return
-        if _panoramic(camera):
-            self.report({"ERROR"}, f"PRT Relight: camera '{camera.name}' is panoramic; only "
-                        "perspective and orthographic cameras are drawn: switch its Type in "
-                        "the camera properties")
+        view, projection, width, height, persp = got
+        if _panoramic(scene.camera):
+            self.report({"ERROR"}, f"PRT Relight: camera '{scene.camera.name}' is panoramic; "
+                        "only perspective and orthographic cameras are drawn: switch its Type "
+                        "in the camera properties")
             return
         state = FrameState()
         state.sync(depsgraph)
@@ -186,11 +211,6 @@ class PRTRenderEngine(bpy.types.RenderEngine):
             self.report({"ERROR"}, "PRT Relight: " + state.error)
         for w in state.warnings:
             self.report({"WARNING"}, "PRT Relight: " + w)
-        cam_eval = camera.evaluated_get(depsgraph)
-        projection = cam_eval.calc_matrix_camera(depsgraph, x=width, y=height,
-                                                 scale_x=r.pixel_aspect_x, scale_y=r.pixel_aspect_y)
-        view = cam_eval.matrix_world.inverted()
-        persp = not (cam_eval.type == "CAMERA" and cam_eval.data.type == "ORTHO")
         pixels = render_pixels(state, view, projection, width, height, r.film_transparent, persp,
                                scene.prt.supersampling, r.filter_size)
         result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)

@@ -1,5 +1,5 @@
-"""Operators: ``prt.precompute`` (modal with progress/ESC in the UI, synchronous in -b)
-and ``prt.clear``."""
+"""Operators: ``prt.precompute`` (modal with progress/ESC in the UI, synchronous in -b),
+``prt.clear`` and ``prt.auto_choose`` (AUTO's stored choice made again)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import bpy
 
 from ..core import visibility
 from ..core.visibility import Cancelled
-from . import precompute, scene_export, storage
+from . import methods, precompute, scene_export, storage
 
 #: Modal precomputes in progress (kept out of the .blend, unlike a scene property).
 RUNNING: set = set()
@@ -144,7 +144,34 @@ class PRT_OT_clear(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (PRT_OT_precompute, PRT_OT_clear)
+class PRT_OT_auto_choose(bpy.types.Operator):
+    """Choose AUTO's method and budget per object again for the scene as it is now, weighed
+    by the scene camera's image, and store the choice with the scene"""
+
+    bl_idname = "prt.auto_choose"
+    bl_label = "Choose"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return not RUNNING            # a running precompute replaces what it measures
+
+    def execute(self, context):
+        try:
+            record = methods.REGISTRY["AUTO"].choose(context.scene,
+                                                     context.evaluated_depsgraph_get())
+        except RuntimeError as exc:
+            self.report({"ERROR"}, f"PRT AUTO: {exc}")
+            return {"CANCELLED"}
+        where = (f"camera '{record['camera']}'" if record["camera"] else "the probe views")
+        self.report({"INFO"}, f"PRT AUTO chose for {where}: " + ", ".join(
+            f"{c['object']} → {c['choice']}" for c in record["objects"]))
+        for area in getattr(context.screen, "areas", []):
+            area.tag_redraw()
+        return {"FINISHED"}
+
+
+CLASSES = (PRT_OT_precompute, PRT_OT_clear, PRT_OT_auto_choose)
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

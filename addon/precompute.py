@@ -170,11 +170,12 @@ def commit(scene, job: PrecomputeJob):
             old.use_fake_user = False
             storage.remove_image(old)
         new_images[o.name].name = storage.IMAGE_PREFIX + o.name
-    methods.get(job.method).store(scene, job, job.derived)
     scene.prt.precomputed_resolution = job.resolution
     scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(o.fingerprint for o in job.objects)
     scene.prt.precompute_id = run_id
     scene.prt.precomputed_objects = len(job.objects)
+    # last: a method's store sees the committed scene (AUTO draws on it to choose)
+    methods.get(job.method).store(scene, job, job.derived)
     job.timings["storage"] = time.perf_counter() - t0
     t = job.timings
     scene.prt.last_report = (f"{job.point_count} points, {t.get('ray_count', 0) / 1e6:.1f} M rays "

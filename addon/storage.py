@@ -120,4 +120,5 @@ def clear_all() -> int:
             prt.precompute_id = ""
             prt.precomputed_objects = 0
             prt.last_report = ""
+            prt.auto_choice = ""
     return count

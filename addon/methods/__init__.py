@@ -25,8 +25,9 @@ The contract of a method:
 * ``derive(job)`` (optional, no bpy, runs in the precompute worker after the
   visibility is traced; may raise ``core.visibility.Cancelled`` when
   ``job.cancel_requested``) returns method data for ``job.objects``;
-  ``store(scene, job, derived)`` (main thread, in the commit) writes it to the
-  .blend.  Both run for the active method only.  ``sync(state)`` (optional)
+  ``store(scene, job, derived)`` (main thread, last in the commit: the new
+  visibility is stored by then) writes it to the .blend.  Both run for the active
+  method only.  ``sync(state)`` (optional)
   loads stored data into ``state.objects[i].data`` each time a frame state is
   built.
 """

@@ -55,11 +55,26 @@ Shortcuts that make the measurement cheap:
 Per-pixel methods (``draw_objects``) cannot be mixed per object and are left out of the
 candidates.  The choice per object is shown as a note in the panels/status bar, in the
 AUTO box of the settings and in the report (:meth:`AutoMethod.last_choices`).
+
+Stored choice: the measurement times shading, so two processes choose differently.  The
+choice is therefore made by an explicit step on the main thread -- the precompute's commit
+when the method is AUTO (:meth:`AutoMethod.store`) and the *Choose* operator
+(``prt.auto_choose``) -- with the scene camera's image at the render size (the probes when
+the scene has none), and stored in ``scene.prt.auto_choice`` (JSON) with the key of what it
+depends on (:func:`choice_key`: geometry, directions, materials, lighting content without
+its rotation, target, the candidates' other settings; not the camera, so a stored choice
+does not flip as the view moves).  A frame whose key matches shades the stored assignment
+and times nothing, so it is a function of the file; otherwise it falls back to the live
+choice above, noted as out of date, and nothing is written (frames may be drawn off the
+main thread).
 """
 
 from __future__ import annotations
 
 import copy
+import hashlib
+import json
+import math
 import time
 
 import numpy as np
@@ -107,6 +122,13 @@ _OCCLUDERS: dict = {}
 LAST_CHOICES: list = []
 #: Number of selections run (tests check that unchanged objects are not re-selected).
 SELECTIONS = [0]
+#: Layout of the stored choice (a record of another version is out of date).
+CHOICE_VERSION = 1
+# Stored choices parsed per JSON text (frames read the scene property each time).
+_PARSED: dict = {}
+#: (stored JSON, why it is not used or "") as the newest AUTO frame found it: the panel
+#: shows whether the scene's stored choice is current.
+STORED_STATUS: list = ["", ""]
 
 
 def _is_view_independent(st) -> bool:
@@ -176,6 +198,99 @@ def _weighted_norm2(x, w) -> float:
     return float(np.einsum("c,c->", w, np.sum(np.square(np.asarray(x, np.float64)), axis=-1)))
 
 
+def _digest(*parts) -> str:
+    return hashlib.sha1(repr(parts).encode("utf-8")).hexdigest()[:16]
+
+
+# Names of the candidates' settings other than their budgets, per tuple of candidate ids.
+_SETTING_NAMES: dict = {}
+
+
+def _candidate_settings(state, candidates):
+    """``(name, value)`` of the candidates' settings other than their budget properties
+    (the assignment sets those), as the frame reads them."""
+    ids = tuple(sorted({m.id for m, _, _ in candidates}))
+    names = _SETTING_NAMES.get(ids)
+    if names is None:
+        budgets = {m.budget[0] for m, _, _ in candidates if m.budget}
+        names = _SETTING_NAMES[ids] = sorted(
+            {n for m, _, _ in candidates for n in m.scene_properties()} - budgets)
+    return [(n, state.settings.get(n)) for n in names]
+
+
+def choice_key(state) -> dict:
+    """What a stored choice depends on, per part: the objects' names and geometry, the
+    directions of their visibility, their materials, the lighting's content and strength,
+    the error target, the candidates' other settings.  The world's rotation is left out
+    (the same environment turned keeps the choice, as the measurement cache does) and so
+    is the camera (a stored choice does not flip as the view moves; Choose re-chooses)."""
+    env = runtime.env_key(state.world, state.resolution)
+    return dict(
+        geometry=core_mesh.scene_fingerprint(
+            (st.name, st.fingerprint) for st in state.objects)[:16],
+        directions=int(state.resolution),
+        materials=_digest(sorted((st.name, _materials_key(st)) for st in state.objects)),
+        lighting=_digest(env[0], env[1]),
+        target=float(state.settings.get("auto_error_target", 0.02)),
+        settings=_digest(_candidate_settings(state, AutoMethod.candidates())))
+
+
+#: Fields of a stored per-object choice (those of :meth:`AutoMethod.last_choices`).
+CHOICE_FIELDS = ("object", "method", "setting", "value", "choice", "error", "seconds",
+                 "reason")
+
+
+def _plain(x):
+    """A JSON value: numpy scalars as Python ones, non-finite numbers as None."""
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def parse_choice(text: str):
+    """The stored choice in ``text`` (``scene.prt.auto_choice``) as a dict, or None when
+    there is none, it is unreadable or of another :data:`CHOICE_VERSION`.  Shared between
+    callers: not to be modified."""
+    if not text:
+        return None
+    if text not in _PARSED:
+        try:
+            rec = json.loads(text)
+            ok = (isinstance(rec, dict) and rec.get("version") == CHOICE_VERSION
+                  and isinstance(rec.get("key"), dict) and isinstance(rec.get("objects"), list)
+                  and all(isinstance(c, dict) and set(CHOICE_FIELDS) <= set(c)
+                          for c in rec["objects"]))
+        except ValueError:
+            ok = False
+        if len(_PARSED) >= 8:
+            _PARSED.pop(next(iter(_PARSED)))
+        _PARSED[text] = rec if ok else None
+    return _PARSED[text]
+
+
+def stored_status(prt) -> str:
+    """Why ``prt``'s stored choice is out of date ("" when it is not known to be): the
+    target is compared here, the rest as the newest AUTO frame found it."""
+    record = parse_choice(prt.auto_choice)
+    if record is None:
+        return ""
+    if record["key"].get("target") != float(prt.auto_error_target):
+        return "AUTO choice is out of date (target changed)"
+    return STORED_STATUS[1] if STORED_STATUS[0] == prt.auto_choice else ""
+
+
+def _depsgraph(scene):
+    """The evaluated depsgraph of ``scene`` (the context's when it is the context scene)."""
+    import bpy
+    ctx = bpy.context
+    if ctx.scene == scene:
+        return ctx.evaluated_depsgraph_get()
+    with ctx.temp_override(scene=scene, view_layer=scene.view_layers[0]):
+        return ctx.evaluated_depsgraph_get()
+
+
 def _rel(err2: float, ref2: float) -> float:
     """rel-L2 from squared norms (the error itself against a black reference)."""
     if not np.isfinite(err2):
@@ -187,24 +302,51 @@ class AutoMethod(Method):
     id = "AUTO"
     label = "Auto"
     description = ("Per object, the cheapest method and budget that meets the error target "
-                   "against REFERENCE (measured per object, cached per lighting)")
+                   "against REFERENCE (chosen at Precompute or Choose, stored with the scene)")
     budget = None
 
     def scene_properties(self):
-        from bpy.props import FloatProperty
-        return {"auto_error_target": FloatProperty(
-            name="Error Target", default=0.02, min=0.0, max=1.0, precision=3,
-            subtype="FACTOR", update=runtime.redraw_viewports,
-            description="AUTO: largest rel-L2 error against REFERENCE allowed per object "
-                        "(0.02 = 2 %)")}
+        from bpy.props import FloatProperty, StringProperty
+        return {
+            "auto_error_target": FloatProperty(
+                name="Error Target", default=0.02, min=0.0, max=1.0, precision=3,
+                subtype="FACTOR", update=runtime.redraw_viewports,
+                description="AUTO: largest rel-L2 error against REFERENCE allowed per object "
+                            "(0.02 = 2 %)"),
+            "auto_choice": StringProperty(
+                name="Stored Choice", default="", options={"HIDDEN"},
+                update=runtime.redraw_viewports,
+                description="AUTO: the method and budget per object chosen by Precompute or "
+                            "Choose (JSON), with the key of what it depends on")}
 
     def draw_settings(self, layout, prt):
         layout.prop(prt, "auto_error_target")
-        if LAST_CHOICES:
-            box = layout.box()
-            for c in LAST_CHOICES[:8]:
-                err = "" if c["error"] is None else f" ({100 * c['error']:.2f} %)"
-                box.label(text=f"{c['object']}: {c['choice']}{err}", icon="OBJECT_DATA")
+        box = layout.box()
+        record = parse_choice(prt.auto_choice)
+        why = stored_status(prt)
+        if record is None:
+            box.label(text="No stored choice: press Choose (or Precompute)", icon="INFO")
+        else:
+            if why:
+                box.label(text=f"{why}: press Choose (or Precompute)", icon="ERROR")
+            else:
+                current = STORED_STATUS[0] == prt.auto_choice
+                box.label(text="Stored choice" + (", current" if current else ""),
+                          icon="CHECKMARK" if current else "INFO")
+            box.label(text=f"Chosen for camera '{record['camera']}' at "
+                           f"{record['size'][0]}×{record['size'][1]}" if record.get("camera")
+                      else "Chosen at probe views (the scene had no camera)", icon="CAMERA_DATA")
+            self._draw_choices(box, record["objects"])
+        if LAST_CHOICES and (record is None or why):
+            box.label(text="Drawn now with a live choice (not saved):")
+            self._draw_choices(box, LAST_CHOICES)
+        box.operator("prt.auto_choose", icon="FILE_REFRESH")
+
+    @staticmethod
+    def _draw_choices(layout, choices):
+        for c in choices[:8]:
+            err = "" if c["error"] is None else f" ({100 * c['error']:.2f} %)"
+            layout.label(text=f"{c['object']}: {c['choice']}{err}", icon="OBJECT_DATA")
 
     # ------------------------------------------------------------ candidates
     @staticmethod
@@ -231,9 +373,42 @@ class AutoMethod(Method):
         return out
 
     def store(self, scene, job, derived):
+        """The candidates' data, then the choice made on it (:meth:`choose`)."""
         for m, _, _ in self.candidates():
             if derived and m.id in derived:
                 m.store(scene, job, derived.pop(m.id))
+        try:
+            self.choose(scene)
+        except RuntimeError as exc:
+            job.warnings.append(f"AUTO could not choose: {exc}")
+
+    def choose(self, scene, depsgraph=None) -> dict:
+        """Choose per object for the scene as it is now and store the choice in
+        ``scene.prt.auto_choice`` with its :func:`choice_key` (main thread: an operator or
+        the precompute's commit).  Errors are weighed in the image of the scene camera at
+        the render size, the view F12 draws (at the probes when there is no camera).
+        Returns the stored record; raises RuntimeError when the scene cannot be drawn."""
+        from ..engine import render_camera
+        from ..report import ensure_gpu
+        if depsgraph is None:
+            depsgraph = _depsgraph(scene)
+        ensure_gpu(scene)           # in -b: candidates' GPU passes are timed as frames run them
+        state = runtime.FrameState()
+        state.sync(depsgraph)
+        if state.error:
+            raise RuntimeError(state.error)
+        if state.method != self.id:
+            state.method = self.id
+            self.sync(state)        # the candidates' stored data (sync loaded the scene method's)
+        state.camera = render_camera(scene, depsgraph)
+        choices = self._selection(state)[0]
+        record = dict(version=CHOICE_VERSION, key=choice_key(state),
+                      camera=scene.camera.name if state.camera is not None else None,
+                      size=None if state.camera is None else [state.camera["width"],
+                                                              state.camera["height"]],
+                      objects=[{f: _plain(c[f]) for f in CHOICE_FIELDS} for c in choices])
+        scene.prt.auto_choice = json.dumps(record, sort_keys=True)
+        return record
 
     def sync(self, state):
         done = set()
@@ -553,11 +728,48 @@ class AutoMethod(Method):
                 out[i] = rad
         return out
 
-    def shade(self, state, eye, view_dir):
+    def _stored(self, state):
+        """``(assignment, choices)`` of the scene's stored choice when it holds for
+        ``state``, else ``(None, why not)``."""
+        record = parse_choice(state.settings.get("auto_choice", ""))
+        if record is None:
+            return None, "AUTO has no stored choice"
+        changed = [part for part, value in choice_key(state).items()
+                   if record["key"].get(part) != value]
+        if changed:
+            return None, f"AUTO choice is out of date ({', '.join(changed)} changed)"
+        by_name = {c["object"]: c for c in record["objects"]}
+        chosen = [by_name.get(st.name) for st in state.objects]
+        for c in chosen:
+            m = REGISTRY.get(c["method"]) if c is not None else None
+            if m is None or m is self or type(m).draw_objects is not Method.draw_objects or \
+                    (c["setting"] is not None and c["setting"] not in state.settings):
+                return None, ("AUTO choice is out of date (it names an object or method no "
+                              "longer present)")
+        return [(c["method"], c["setting"], c["value"]) for c in chosen], chosen
+
+    def _frame_assignment(self, state):
+        """The frame's assignment and notes: the stored choice when it holds (nothing is
+        timed), else the live one, noted as out of date (nothing is written here: frames
+        may be drawn off the main thread)."""
+        text = state.settings.get("auto_choice", "")
+        assignment, got = self._stored(state)
+        if assignment is not None:
+            STORED_STATUS[:] = [text, ""]
+            LAST_CHOICES[:] = got
+            return assignment, ["AUTO (stored choice): " + ", ".join(
+                f"{c['object']} → {c['choice']}" for c in got)]
+        STORED_STATUS[:] = [text, got]
         _, assignment, note = self._selection(state)
+        return assignment, [f"{got}: press Choose (or Precompute); this frame is chosen live",
+                            note]
+
+    def shade(self, state, eye, view_dir):
+        assignment, notes = self._frame_assignment(state)
         out = self._shade_assigned(state, assignment, eye, view_dir)
-        if note:
-            state.note(note)
+        for note in notes:
+            if note:
+                state.note(note)
         return out
 
 
