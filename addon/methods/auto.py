@@ -226,8 +226,7 @@ def choice_key(state) -> dict:
     is the camera (a stored choice does not flip as the view moves; Choose re-chooses)."""
     env = runtime.env_key(state.world, state.resolution)
     return dict(
-        geometry=core_mesh.scene_fingerprint(
-            (st.name, st.fingerprint) for st in state.objects)[:16],
+        geometry=_digest(sorted((st.name, st.fingerprint) for st in state.objects)),
         directions=int(state.resolution),
         materials=_digest(sorted((st.name, _materials_key(st)) for st in state.objects)),
         lighting=_digest(env[0], env[1]),
