@@ -274,6 +274,21 @@ def _find_world_output(tree):
 _PIXEL_CACHE = {}
 
 
+def ocio_config_path() -> str:
+    """The OpenColorIO config Blender uses: ``$OCIO`` if set to a file, else its own."""
+    env = os.environ.get("OCIO", "")
+    if env and os.path.isfile(env):
+        return env
+    folder = bpy.utils.system_resource("DATAFILES", path="colormanagement")
+    return os.path.join(folder, "config.ocio") if folder else ""
+
+
+def working_space() -> str:
+    """The blend file's scene-linear working space (configurable from Blender 5.0)."""
+    cs = getattr(bpy.data, "colorspace", None)
+    return getattr(cs, "working_space", "") or envmap.LINEAR_REC709
+
+
 def _image_pixels(image) -> np.ndarray:
     """(H, W, 3) float32 of a Blender image, top row first, scene-linear (cached)."""
     path = bpy.path.abspath(image.filepath_raw or image.filepath, library=image.library)
@@ -281,7 +296,8 @@ def _image_pixels(image) -> np.ndarray:
                  and path and os.path.isfile(path))
     if not from_file:          # packed/generated/edited pixels: no cheap way to tell a change
         return _read_image_pixels(image, path)
-    key = (image.name_full, path, os.path.getmtime(path), os.path.getsize(path))
+    key = (image.name_full, path, os.path.getmtime(path), os.path.getsize(path),
+           image.colorspace_settings.name, working_space(), ocio_config_path())
     cached = _PIXEL_CACHE.get(key)
     if cached is None:
         cached = _read_image_pixels(image, path)
@@ -290,23 +306,29 @@ def _image_pixels(image) -> np.ndarray:
     return cached
 
 
+def _to_working_space(image, pixels) -> np.ndarray:
+    cs = image.colorspace_settings
+    return envmap.to_working_space(pixels, cs.name, working_space(), ocio_config_path(),
+                                   is_data=cs.is_data)
+
+
 def _read_image_pixels(image, path) -> np.ndarray:
+    """Pixels converted once from the image's colour space to the working space."""
     if image.packed_file is None and image.source == "FILE":
         if not path or not os.path.isfile(path):
             raise ExportError(f"Environment image '{image.name}' is missing: {path or '(no path)'}")
         if envmap.have_openimageio():
-            return envmap.load_equirect(path)
+            return _to_working_space(image, envmap.load_equirect(path))   # raw file values
     # Packed, generated or no OpenImageIO: Blender's own pixels (bottom row first).
     w, h = image.size
     if w == 0 or h == 0 or not image.has_data and not _try_load(image):
         raise ExportError(f"Environment image '{image.name}' has no pixels")
     buf = np.empty(w * h * image.channels, dtype=np.float32)
     image.pixels.foreach_get(buf)
-    buf = buf.reshape(h, w, image.channels)[::-1]
-    if not image.is_float:
-        raise ExportError(f"Environment image '{image.name}' is 8-bit and packed; "
-                          "use an HDR/EXR file for lighting")
-    return envmap.as_rgb(buf)
+    buf = envmap.as_rgb(buf.reshape(h, w, image.channels)[::-1])
+    # Blender converts float buffers to the working space on load; byte buffers read
+    # back as the stored bytes / 255, still in the image's colour space.
+    return buf if image.is_float else _to_working_space(image, buf)
 
 
 def _try_load(image):

@@ -44,6 +44,12 @@ def have_openimageio() -> bool:
     return _oiio is not None
 
 
+def have_opencolorio() -> bool:
+    """OpenImageIO built with OpenColorIO (colour conversion by a config file)."""
+    flag = getattr(_oiio, "supportsOpenColorIO", False)
+    return bool(flag() if callable(flag) else flag)
+
+
 def load_equirect(path: str) -> np.ndarray:
     """Read an equirectangular image as float32 (H, W, 3), top row first."""
     if _oiio is None:
@@ -61,6 +67,51 @@ def load_equirect(path: str) -> np.ndarray:
         raise EnvironmentError_(f"cannot read pixels of {path!r}")
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
     return as_rgb(pixels)
+
+
+#: Blender's default working (scene-linear) colour space and its role name.
+LINEAR_REC709 = "Linear Rec.709"
+SCENE_LINEAR = "scene_linear"
+#: Blender's colour space for data: read as stored, whatever the working space.
+NON_COLOR = "Non-Color"
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """The exact piecewise sRGB EOTF (Cycles' ``color_srgb_to_linear``: negatives to 0)."""
+    c = np.asarray(c, dtype=np.float32)
+    return np.where(c < 0.04045, np.maximum(c, 0.0) / np.float32(12.92),
+                    ((np.maximum(c, 0.04045) + np.float32(0.055)) / np.float32(1.055))
+                    ** np.float32(2.4)).astype(np.float32)
+
+
+def to_working_space(pixels: np.ndarray, colorspace: str, working_space: str = LINEAR_REC709,
+                     config_path: str | None = None, is_data: bool = False) -> np.ndarray:
+    """(H, W, 3) pixels stored in ``colorspace`` -> scene-linear ``working_space``.
+
+    This is what Cycles does to a texture: Non-Color data and the working space itself
+    pass unchanged; sRGB into Linear Rec.709 is the exact sRGB curve; anything else goes
+    through OpenColorIO with the config at ``config_path`` (Blender's).  A display
+    view transform (Filmic/AgX) is never involved.  Without OpenColorIO only those
+    first cases work; others raise :class:`EnvironmentError_` naming the colour space.
+    """
+    px = as_rgb(pixels)
+    if is_data or colorspace in (NON_COLOR, working_space, SCENE_LINEAR):
+        return px
+    if colorspace == "sRGB" and working_space == LINEAR_REC709:
+        return srgb_to_linear(px)
+    if not have_opencolorio() or not config_path:
+        usable = f"Non-Color or {working_space}"
+        if working_space == LINEAR_REC709:
+            usable = "sRGB, " + usable
+        raise EnvironmentError_(
+            f"colour space '{colorspace}' needs OpenColorIO and Blender's colour config, "
+            f"which this Blender lacks; set it to {usable}")
+    out = _oiio.ImageBufAlgo.colorconvert(_oiio.ImageBuf(px), colorspace, working_space,
+                                          unpremult=False, colorconfig=str(config_path))
+    if out.has_error:
+        raise EnvironmentError_(f"cannot convert colour space '{colorspace}' to "
+                                f"'{working_space}': {out.geterror()}")
+    return np.ascontiguousarray(out.get_pixels(_oiio.FLOAT), dtype=np.float32).reshape(px.shape)
 
 
 def as_rgb(pixels: np.ndarray) -> np.ndarray:
