@@ -112,9 +112,12 @@ def _quad_batch():
     return _QUAD
 
 
-def draw_frame(batches, background, view_projection, transparent: bool, object_draws=()):
+def draw_frame(batches, background, view_projection, transparent: bool, object_draws=(),
+               added_draws=()):
     """Draw into the bound framebuffer.  ``background`` = (texture, rotation 4x4, strength);
-    ``object_draws``: callables ``draw(view_projection)`` of a per-pixel method."""
+    ``object_draws``: callables ``draw(view_projection)`` of a per-pixel method;
+    ``added_draws``: callables whose output is added onto the surfaces already drawn
+    (depth test equal, no depth writes: the per-pixel sharp lobes)."""
     fb = gpu.state.active_framebuffer_get()
     fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
     gpu.state.blend_set("NONE")
@@ -139,17 +142,24 @@ def draw_frame(batches, background, view_projection, transparent: bool, object_d
         batch.draw(sh)
     for draw in object_draws:
         draw(view_projection)
+    if added_draws:
+        gpu.state.depth_mask_set(False)
+        gpu.state.blend_set("ADDITIVE_PREMULT")
+        for draw in added_draws:
+            draw(view_projection)
+        gpu.state.blend_set("NONE")
     gpu.state.depth_test_set("NONE")
     gpu.state.depth_mask_set(False)
 
 
 def render_offscreen(batches, background, view_projection, width, height, transparent,
-                     object_draws=()):
+                     object_draws=(), added_draws=()):
     """Draw a frame offscreen; return linear RGBA (height, width, 4), bottom row first."""
     offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
     try:
         with offscreen.bind():
-            draw_frame(batches, background, view_projection, transparent, object_draws)
+            draw_frame(batches, background, view_projection, transparent, object_draws,
+                       added_draws)
             fb = gpu.state.active_framebuffer_get()
             buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
         buf.dimensions = width * height * 4

@@ -11,7 +11,7 @@ from gpu_extras.presets import draw_texture_2d
 from mathutils import Matrix
 
 from ..core import pixel_filter
-from . import drawing
+from . import drawing, sharp
 from .runtime import FrameState
 
 
@@ -93,18 +93,24 @@ def render_camera(scene, depsgraph) -> dict | None:
 
 def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, width: int,
                 height: int, transparent: bool, supersampling: int = 1,
-                object_draws=None, filter_width: float = 0.0) -> np.ndarray:
+                object_draws=None, filter_width: float = 0.0, eye=None,
+                view_dir=None) -> np.ndarray:
     """Draw per-corner ``radiance`` (or a per-pixel method's ``object_draws``) offscreen:
     linear RGBA (height, width, 4), bottom row first.
 
     With ``supersampling`` > 1 the samples are resolved with Cycles' Blackman-Harris pixel
     filter of ``filter_width`` pixels (the scene's Film *Filter Size*; 0 = each pixel's
-    own samples averaged), so an F12 frame is filtered as Cycles filters its samples."""
+    own samples averaged), so an F12 frame is filtered as Cycles filters its samples.
+    ``eye`` / ``view_dir`` (as :func:`_eye` gives them) let the per-pixel sharp lobes
+    (:mod:`.sharp`) be added; without either they are not drawn."""
     batches = [] if object_draws is not None else _batches(state, radiance)
     s = max(1, int(supersampling))
-    big = drawing.render_offscreen(batches, _background(state), projection @ view,
+    background = _background(state)
+    added = sharp.draws(state, eye, view_dir, background) \
+        if eye is not None or view_dir is not None else []
+    big = drawing.render_offscreen(batches, background, projection @ view,
                                    width * s, height * s, transparent,
-                                   object_draws=object_draws or ())
+                                   object_draws=object_draws or (), added_draws=added)
     if s > 1:
         big = pixel_filter.resolve(big, s, filter_width)
     return big
@@ -119,7 +125,8 @@ def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: in
     object_draws = state.draw_objects(eye, view_dir)
     radiance = None if object_draws is not None else state.shade(eye, view_dirs_for=view_dir)
     return draw_pixels(state, radiance, view, projection, width, height, transparent,
-                       supersampling, object_draws=object_draws, filter_width=filter_width)
+                       supersampling, object_draws=object_draws, filter_width=filter_width,
+                       eye=eye, view_dir=view_dir)
 
 
 class ViewportShading:
@@ -256,7 +263,7 @@ class PRTRenderEngine(bpy.types.RenderEngine):
         if key != self._view_key or self._view_texture is None:
             pixels = draw_pixels(state, radiance, rv3d.view_matrix, rv3d.window_matrix, width,
                                  height, scene.render.film_transparent,
-                                 object_draws=object_draws)
+                                 object_draws=object_draws, eye=eye, view_dir=view_dir)
             self._view_texture = drawing.float_texture(pixels)
             self._view_key = key
         gpu.state.blend_set("ALPHA_PREMULT")

@@ -13,7 +13,7 @@ import hashlib
 
 import numpy as np
 
-from ..core import directions, envmap, mesh as core_mesh, visibility
+from ..core import brdf as core_brdf, directions, envmap, mesh as core_mesh, visibility
 from . import scene_export, storage
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
@@ -31,7 +31,7 @@ _ENV_CACHE: dict = {}
 _CONTENT_KEYS: dict = {}
 
 
-def _image_key(img: np.ndarray):
+def image_key(img: np.ndarray):
     return held(_CONTENT_KEYS, id(img), (img,), lambda: (
         img.shape, hashlib.sha1(np.ascontiguousarray(img).view(np.uint8)).hexdigest()), limit=4)
 
@@ -41,7 +41,7 @@ def env_key(world: envmap.WorldLighting, resolution: int):
     strength, rotation and the cubemap resolution."""
     img = world.image
     ident = (("color",) + tuple(float(c) for c in world.color) if img is None
-             else _image_key(img))
+             else image_key(img))
     return (ident, float(world.strength), world.rotation.round(9).tobytes(), resolution)
 
 
@@ -209,7 +209,9 @@ class FrameState:
             core_mesh.repair_normals(arrays)
             points = core_mesh.shading_points(arrays)
             fingerprint = core_mesh.fingerprint(arrays)
-            mats = scene_export.object_materials(ob, self.warnings)
+            # lobes too narrow for the cubemap are drawn per pixel (addon/sharp.py)
+            mats = [core_brdf.with_sharp_lobe(m, self.resolution)
+                    for m in scene_export.object_materials(ob, self.warnings)]
             orig = ob.original
             data = orig.prt
             bits = None

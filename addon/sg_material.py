@@ -115,11 +115,17 @@ class PRT_PT_sg_material(bpy.types.Panel):
         col.prop(s, "specular_color")
 
 
+def uses_blender_material(blender_material) -> bool:
+    """Whether SSDF_SG draws the material's node tree (not its own SG model)."""
+    s = getattr(blender_material, "prt_sg", None) if blender_material is not None else None
+    return s is None or s.use_blender_material
+
+
 def export_sg_material(blender_material, warnings: list | None = None) -> sg_brdf.SGMaterial:
     """The material's SG reflectance (``None``: Cycles' default surface)."""
     warnings = [] if warnings is None else warnings
     s = getattr(blender_material, "prt_sg", None) if blender_material is not None else None
-    if s is None or s.use_blender_material:
+    if uses_blender_material(blender_material):
         return sg_brdf.sg_material_from_brdf(scene_export.export_material(blender_material, warnings))
     a = max(float(s.roughness) ** 2, sg_brdf.ALPHA_MIN)
     return sg_brdf.SGMaterial(model=s.model, diffuse=tuple(s.diffuse_color),

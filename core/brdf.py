@@ -179,7 +179,7 @@ Differences from Cycles that callers should know about
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -208,6 +208,10 @@ __all__ = [
     "multiscatter_factor",
     "specular_albedo_estimate",
     "principled_material",
+    "sharp_alpha_limit",
+    "is_sharp",
+    "with_sharp_lobe",
+    "sharp_lobes",
 ]
 
 #: Smallest microfacet alpha used anywhere (roughness ~ 0.0316).
@@ -267,6 +271,11 @@ class Material:
         ``"DIELECTRIC"`` only: weight of the F82 metal lobe (``F0`` =
         ``clamp(diffuse_albedo, 0, 1)``); the dielectric lobe and the base are
         scaled by ``1 - metallic``.
+    per_pixel_lobe:
+        The glossy lobes are narrower than the cubemap resolves (:func:`is_sharp`) and
+        drawn per pixel from :func:`sharp_lobes` instead: every per-vertex evaluation
+        here skips them (:attr:`is_diffuse_only` is True), the Lambert base keeps its
+        Principled layering weight.
     """
 
     diffuse_albedo: tuple[float, float, float] = (0.8, 0.8, 0.8)
@@ -277,6 +286,7 @@ class Material:
     ior: float = 1.5
     f82_tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
     metallic: float = 0.0
+    per_pixel_lobe: bool = False
 
     def __post_init__(self):
         dist = str(self.distribution).upper()
@@ -305,8 +315,11 @@ class Material:
 
         ``"NONE"``/``"SCHLICK"``: ``specular_color`` all zero.  ``"F82"``: never.
         ``"DIELECTRIC"``: ``metallic == 0`` and no dielectric layer
-        (``ior == 1``, as Cycles skips the layer for ``eta == 1``).
+        (``ior == 1``, as Cycles skips the layer for ``eta == 1``).  Also True when
+        the lobes are drawn per pixel (:attr:`per_pixel_lobe`).
         """
+        if self.per_pixel_lobe:
+            return True
         if self.fresnel == "F82":
             return False
         if self.fresnel == "DIELECTRIC":
@@ -339,6 +352,66 @@ class Material:
     def lobe_distribution(self) -> str:
         """NDF of the lobe: ``"GGX"`` for ``"MULTI_GGX"``."""
         return "GGX" if self.distribution == "MULTI_GGX" else self.distribution
+
+
+# --------------------------------------------------------------------------- #
+# Lobes too narrow for the cubemap: drawn per pixel
+# --------------------------------------------------------------------------- #
+
+#: a glossy lobe is resolved by a 6 N^2 cubemap when its solid angle (~4 pi alpha^2 for
+#: the reflected GGX/Beckmann lobe) spans at least this many texels (~4 pi / (6 N^2) each)
+SHARP_LOBE_TEXELS = 8.0
+
+
+def sharp_alpha_limit(resolution: int) -> float:
+    """Microfacet alpha below which a lobe is narrower than :data:`SHARP_LOBE_TEXELS`
+    texels of the 6 N^2 cubemap: 0.036 at N = 32, 0.018 at 64, 0.009 at 128."""
+    return float(np.sqrt(SHARP_LOBE_TEXELS / 6.0) / max(int(resolution), 1))
+
+
+def is_sharp(material: Material, resolution: int) -> bool:
+    """Whether ``material`` has a glossy lobe the cubemap's texels cannot integrate
+    (sampled at texel centres it renders black with a few bright blobs)."""
+    probe = replace(material, per_pixel_lobe=False)
+    r = material.table_roughness
+    return not probe.is_diffuse_only and r * r < sharp_alpha_limit(resolution)
+
+
+def with_sharp_lobe(material: Material, resolution: int) -> Material:
+    """``material`` with :attr:`Material.per_pixel_lobe` set when :func:`is_sharp`."""
+    if material.per_pixel_lobe or not is_sharp(material, resolution):
+        return material
+    return replace(material, per_pixel_lobe=True)
+
+
+#: Fresnel kinds of :func:`sharp_lobes` (the GLSL of ``shaders/sharp_lobe_frag.glsl``)
+SHARP_CONSTANT, SHARP_SCHLICK, SHARP_DIELECTRIC, SHARP_F82 = 0, 1, 2, 3
+
+
+def sharp_lobes(material: Material) -> list:
+    """The glossy lobes of ``material`` for per-pixel drawing, as in
+    :func:`specular_terms`: ``[(kind, weight, f0 (3,), B (3,), eta), ...]``, each lobe
+    ``weight * F(h.wi) * D G2 / (4 cos_o)`` with ``F`` = ``f0`` (``SHARP_CONSTANT``),
+    Schlick to 1, the Principled dielectric remap of ``eta`` or F82-tint (``B``).
+    The microfacet alpha is the unclamped ``clamp(r, 0, 1)^2`` (0: a mirror)."""
+    m = material
+    zero = (0.0, 0.0, 0.0)
+    col = tuple(float(c) for c in m.specular_color)
+    if m.fresnel == "NONE":
+        return [(SHARP_CONSTANT, 1.0, tuple(max(c, 0.0) for c in col), zero, 1.0)]
+    if m.fresnel == "SCHLICK":
+        return [(SHARP_SCHLICK, 1.0, col, zero, 1.0)]
+    if m.fresnel == "F82":
+        f0 = np.clip(col, 0.0, 1.0)
+        return [(SHARP_F82, 1.0, tuple(f0), tuple(_metal_B(f0, m.f82_tint)), 1.0)]
+    lobes = []
+    if m.metallic > 0.0:
+        f0 = np.clip(np.asarray(m.diffuse_albedo, dtype=np.float64), 0.0, 1.0)
+        lobes.append((SHARP_F82, m.metallic, tuple(f0), tuple(_metal_B(f0, m.f82_tint)), 1.0))
+    if m._has_dielectric_lobe:
+        lobes.append((SHARP_DIELECTRIC, 1.0 - m.metallic, tuple(np.clip(col, 0.0, 1.0)), zero,
+                      m.ior))
+    return lobes
 
 
 def roughness_to_alpha(roughness: float) -> float:

@@ -312,6 +312,47 @@ def resample_equirect_to_cubemap(image: np.ndarray, cube: Cubemap, rotation=None
     return CubeLighting((energy / cube.solid_angles[:, None]).astype(np.float32), dirs)
 
 
+def equirect_mip_sizes(height: int, width: int, min_width: int = 4) -> list:
+    """``(H_l, W_l)`` of the levels below an equirect of ``height`` x ``width`` pixels,
+    each half its parent's size rounded up, down to ``min_width`` columns."""
+    sizes = []
+    h, w = int(height), int(width)
+    while w > min_width and h > 1:
+        h, w = (h + 1) // 2, (w + 1) // 2
+        sizes.append((h, w))
+    return sizes
+
+
+def equirect_mip_atlas(image: np.ndarray, min_width: int = 4) -> np.ndarray:
+    """The levels 1, 2, ... below an equirect image (H, W, 3), stacked top to bottom in
+    one RGBA float32 array of ``W_1`` columns (level ``l`` in its first ``W_l``
+    columns; sizes from :func:`equirect_mip_sizes`).  A child pixel is the
+    solid-angle-weighted mean of its (up to) 2 x 2 parents, so every level keeps the
+    image's energy and a lobe-sized lookup (filtered importance sampling) averages the
+    radiance over the lobe's footprint.  An image too small for a level gives 1 x 1."""
+    level = np.asarray(image, dtype=np.float64)
+    sizes = equirect_mip_sizes(level.shape[0], level.shape[1], min_width)
+    if not sizes:
+        return np.zeros((1, 1, 4), np.float32)
+    out = np.zeros((sum(h for h, _ in sizes), sizes[0][1], 4), np.float32)
+    out[..., 3] = 1.0
+    row = 0
+    for h, w in sizes:
+        H, W = level.shape[:2]
+        edges = np.cos(np.linspace(0.0, np.pi, H + 1))
+        band = (edges[:-1] - edges[1:])                            # row solid angle / dphi
+        padded = np.zeros((2 * h, 2 * w, 3))
+        weight = np.zeros((2 * h, 2 * w))
+        padded[:H, :W] = level * band[:, None, None]
+        weight[:H, :W] = band[:, None]
+        num = padded.reshape(h, 2, w, 2, 3).sum(axis=(1, 3))
+        den = weight.reshape(h, 2, w, 2).sum(axis=(1, 3))
+        level = num / np.maximum(den, 1e-300)[..., None]
+        out[row:row + h, :w, :3] = level
+        row += h
+    return out
+
+
 def _band_directions(h, w, s, r0, r1):
     theta_edges = np.linspace(r0 * np.pi / h, r1 * np.pi / h, (r1 - r0) * s + 1)
     theta = 0.5 * (theta_edges[:-1] + theta_edges[1:])

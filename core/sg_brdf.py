@@ -826,6 +826,14 @@ def sg_material_from_brdf(material: core_brdf.Material) -> SGMaterial:
                       metallic=material.metallic, **common)
 
 
+def without_glossy(material: SGMaterial) -> SGMaterial:
+    """The Lambert part of ``material`` alone, with the albedo it has there
+    (:func:`diffuse_albedo`: a Principled base keeps its layering weight): for slots
+    whose glossy lobes are drawn elsewhere (per pixel, :func:`.brdf.is_sharp`)."""
+    return SGMaterial(model="COOK_TORRANCE", diffuse=diffuse_albedo(material),
+                      specular=(0.0, 0.0, 0.0), roughness=material.roughness, fresnel="NONE")
+
+
 # --------------------------------------------------------------------------- textures
 
 def sample_texture(pixels, uv):

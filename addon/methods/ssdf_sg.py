@@ -27,6 +27,8 @@ least squares against the exact shadowed irradiance at <= 1024 points, ~0.1 s).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ...core import directions, envmap, reference, sg_brdf, sg_lighting, ssdf, ssdf_sg
@@ -387,9 +389,18 @@ class SSDFSGMethod(Method):
         for st in state.objects:
             names = st.data.get("material_names")
             if names is not None:
-                st.data["sg_materials"] = [
-                    sg_material.export_sg_material(bpy.data.materials.get(n) if n else None,
-                                                   state.warnings) for n in names]
+                sgm = []
+                for slot, n in enumerate(names):
+                    mat = bpy.data.materials.get(n) if n else None
+                    m = sg_material.export_sg_material(mat, state.warnings)
+                    if slot < len(st.materials) and st.materials[slot].per_pixel_lobe:
+                        if sg_material.uses_blender_material(mat):
+                            m = sg_brdf.without_glossy(m)     # its lobes: addon/sharp.py
+                        else:                                 # its own SG model draws them
+                            st.materials[slot] = replace(st.materials[slot],
+                                                         per_pixel_lobe=False)
+                    sgm.append(m)
+                st.data["sg_materials"] = sgm
         cube = directions.cubemap(state.resolution)
         res, budget, max_terms, occlusion = pca_settings(state.settings)
         derived_now = []
