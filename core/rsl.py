@@ -737,13 +737,32 @@ def _spread(X: np.ndarray, chunk: int = 4096) -> float:
     return spread if spread > 1e-12 * total else total
 
 
+def _residual_energy(X: np.ndarray, model: ClusteredPCA, chunk: int = 4096) -> float:
+    """``sum |x - reconstruction|²`` over the rows, in float64 from the model's float32
+    parameters, cluster by cluster: the residual itself, never a difference of two
+    large energies (that cancels to rounding noise when the residual is small)."""
+    order = np.argsort(model.labels, kind="stable")
+    bounds = np.searchsorted(model.labels[order], np.arange(len(model.means) + 1))
+    energy = 0.0
+    for c in range(len(model.means)):
+        mean = model.means[c].astype(np.float64)
+        basis = model.bases[c].astype(np.float64)
+        for a in range(bounds[c], bounds[c + 1], chunk):
+            idx = order[a:min(a + chunk, bounds[c + 1])]
+            r = np.asarray(X[idx], np.float64) - mean
+            r -= model.coeffs[idx].astype(np.float64) @ basis
+            energy += float(np.einsum("pd,pd->", r, r))
+    return energy
+
+
+def _relative_error(X: np.ndarray, model: ClusteredPCA, spread: float, chunk: int = 4096) -> float:
+    """:func:`relative_error` with the spread (:func:`_spread`) given."""
+    return float(np.sqrt(_residual_energy(X, model, chunk) / max(spread, 1e-300)))
+
+
 def relative_error(vectors: np.ndarray, model: ClusteredPCA, chunk: int = 4096) -> float:
     """RMS reconstruction error relative to the vectors' RMS spread about their mean."""
-    num = 0.0
-    for a in range(0, len(vectors), chunk):
-        x = np.asarray(vectors[a:a + chunk], np.float64)
-        num += float(((x - model.reconstruct(a, a + chunk)) ** 2).sum())
-    return float(np.sqrt(num / max(_spread(vectors, chunk), 1e-300)))
+    return _relative_error(vectors, model, _spread(vectors, chunk), chunk)
 
 
 #: cluster counts and eigenvector counts tried by :func:`compress_by_budget`
@@ -766,21 +785,15 @@ def compress_by_budget(vectors: np.ndarray, budget: float, seed: int = 0):
                    key=lambda t: t[0])
     pairs = [p for p in pairs if 2 * p[0] <= X.size] or pairs[:1]
     fulls, best = {}, None
-    total = _spread(X)
+    spread = _spread(X)
     for _, C, E in pairs:
         if C not in fulls:
-            full = clustered_pca(X, C, max(e for _, c, e in pairs if c == C), seed=seed)
-            centred = sum(float(((X[a:a + 4096] - full.means[full.labels[a:a + 4096]]) ** 2)
-                                .sum(dtype=np.float64)) for a in range(0, P, 4096))
-            fulls[C] = (full, centred, np.cumsum((full.coeffs.astype(np.float64) ** 2).sum(0)))
-        full, centred, captured = fulls[C]
-        # orthonormal bases: residual = centred energy - energy of the kept coefficients
-        err = float(np.sqrt(max(centred - (captured[E - 1] if E else 0.0), 0.0)
-                            / max(total, 1e-300)))
-        if best is None or err < best[1]:
-            best = (truncated(full, E), err)
+            fulls[C] = clustered_pca(X, C, max(e for _, c, e in pairs if c == C), seed=seed)
+        model = truncated(fulls[C], E)
+        err = _relative_error(X, model, spread)
+        if best is None or err < best[1] or err <= budget:
+            best = (model, err)
         if err <= budget:
-            best = (truncated(full, E), err)
             break
     model, err = best
     return model, err, X.size / model.stored_floats

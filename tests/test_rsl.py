@@ -379,7 +379,8 @@ def test_clustered_pca_is_exact_with_full_rank_and_meets_its_budget():
     exact = rsl.clustered_pca(X, 4, 3)
     assert rsl.relative_error(X, exact) < 1e-5
     model, err, ratio = rsl.compress_by_budget(X, 0.05)
-    assert err <= 0.05 and err == pytest.approx(rsl.relative_error(X, model), abs=1e-6)
+    # the reported error is relative_error's figure (the float32 model's residual is ~1e-7)
+    assert err < 1e-5 and err == pytest.approx(rsl.relative_error(X, model), rel=1e-3, abs=1e-9)
     assert ratio > 1.0
     np.testing.assert_allclose(model.reconstruct(), X, atol=0.2 * np.abs(X).max())
 
@@ -396,7 +397,7 @@ def test_cpca_budget_ignores_a_constant_offset():
     shifted, err_s, _ = rsl.compress_by_budget(X + 50.0, 0.05)
     assert shifted.bases.shape == base.bases.shape
     assert err_s <= 0.05 and err_s == pytest.approx(err, abs=1e-3)
-    assert rsl.relative_error(X + 50.0, shifted) == pytest.approx(err_s, abs=1e-4)
+    assert rsl.relative_error(X + 50.0, shifted) == pytest.approx(err_s, rel=1e-3, abs=1e-9)
 
 
 def test_offset_sat_keeps_float32_precision():

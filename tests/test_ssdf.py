@@ -193,7 +193,10 @@ def test_pca_reports_the_share_of_blocked_directions_it_keeps(cube):
         rec = basis.reconstruct(coeffs)
         blocked = full < 0
         expect = np.sum(blocked & (rec < 0)) / np.sum(blocked)
-        assert basis.occlusion_kept == pytest.approx(expect, abs=1e-12)
+        # ssdf_pca reconstructs chunk by chunk (other float32 matrix products): a texel
+        # within rounding of 0 may land on the other side
+        near = np.sum(blocked & (np.abs(rec) < 1e-4)) / np.sum(blocked)
+        assert basis.occlusion_kept == pytest.approx(expect, abs=near + 1e-12)
         kept.append(basis.occlusion_kept)
     assert kept[0] < kept[1] <= kept[2]
     assert kept[2] > 0.98                  # 64 terms of 64 texels: (almost) exact
