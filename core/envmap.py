@@ -328,8 +328,9 @@ def equirect_mip_atlas(image: np.ndarray, min_width: int = 4) -> np.ndarray:
     one RGBA float32 array of ``W_1`` columns (level ``l`` in its first ``W_l``
     columns; sizes from :func:`equirect_mip_sizes`).  A child pixel is the
     solid-angle-weighted mean of its (up to) 2 x 2 parents, so every level keeps the
-    image's energy and a lobe-sized lookup (filtered importance sampling) averages the
-    radiance over the lobe's footprint.  An image too small for a level gives 1 x 1."""
+    image's energy (exactly for even sizes; an odd size stretches its level by half a
+    pixel) and a lookup at a sample's footprint averages the radiance over it (filtered
+    importance sampling).  An image too small for a level gives 1 x 1."""
     level = np.asarray(image, dtype=np.float64)
     sizes = equirect_mip_sizes(level.shape[0], level.shape[1], min_width)
     if not sizes:

@@ -17,7 +17,7 @@
 
 #define PI 3.14159265358979
 #define COS_VIEW_MIN 1e-4
-#define LOD_BIAS -0.5
+#define LOD_BIAS -2.0
 
 
 vec4 param(int i)
