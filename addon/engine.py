@@ -184,6 +184,34 @@ class ViewportShading:
                 self.version += 1
 
 
+#: a function to run inside the next render() instead of drawing (:func:`in_render`)
+_RENDER_TASK: list = []
+
+
+def in_render(scene, task):
+    """``task(depsgraph)`` run where the gpu module has a context: in ``-b`` inside a render
+    of our engine (the render draws nothing then; ``scene`` needs a camera), elsewhere
+    (the UI's main thread, or already inside a render) directly.  Returns its result."""
+    if not bpy.app.background or _RENDER_TASK:
+        with bpy.context.temp_override(scene=scene):
+            return task(bpy.context.evaluated_depsgraph_get())
+    box = {}
+    _RENDER_TASK.append((task, box))
+    saved = scene.render.engine
+    try:
+        scene.render.engine = PRTRenderEngine.bl_idname
+        with bpy.context.temp_override(scene=scene):
+            bpy.ops.render.render()
+    finally:
+        scene.render.engine = saved
+        _RENDER_TASK.clear()
+    if "error" in box:
+        raise box["error"]
+    if "result" not in box:
+        raise RuntimeError("the render that was to run it did not start")
+    return box["result"]
+
+
 class PRTRenderEngine(bpy.types.RenderEngine):
     bl_idname = "PRT_RELIGHT"
     bl_label = "PRT Relight"
@@ -200,6 +228,14 @@ class PRTRenderEngine(bpy.types.RenderEngine):
 
     # ------------------------------------------------------------- final render
     def render(self, depsgraph):
+        if _RENDER_TASK and "started" not in _RENDER_TASK[-1][1]:
+            task, box = _RENDER_TASK[-1]
+            box["started"] = True
+            try:
+                box["result"] = task(depsgraph)
+            except Exception as exc:             # handed back to in_render's caller
+                box["error"] = exc
+            return
         scene = depsgraph.scene
         r = scene.render
         got = render_view(scene, depsgraph)

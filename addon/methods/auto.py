@@ -386,12 +386,23 @@ class AutoMethod(Method):
         ``scene.prt.auto_choice`` with its :func:`choice_key` (main thread: an operator or
         the precompute's commit).  Errors are weighed in the image of the scene camera at
         the render size, the view F12 draws (at the probes when there is no camera).
-        Returns the stored record; raises RuntimeError when the scene cannot be drawn."""
+        Returns the stored record; raises RuntimeError when the scene cannot be drawn.
+        In ``-b`` the candidates run inside a render of our engine (:func:`.engine.in_render`):
+        only there does the gpu module have a context of its own for their GPU passes."""
+        from ..engine import in_render
+        if scene.camera is not None:
+            record = in_render(scene, lambda dg: self._record(scene, dg))
+        else:
+            record = self._record(scene, depsgraph or _depsgraph(scene))
+        scene.prt.auto_choice = json.dumps(record, sort_keys=True)
+        return record
+
+    def _record(self, scene, depsgraph) -> dict:
+        """The choice for ``scene`` as :meth:`choose` stores it (writes nothing)."""
         from ..engine import render_camera
         from ..report import ensure_gpu
-        if depsgraph is None:
-            depsgraph = _depsgraph(scene)
-        ensure_gpu(scene)           # in -b: candidates' GPU passes are timed as frames run them
+        if scene.camera is None:
+            ensure_gpu(scene)       # in -b: candidates' GPU passes are timed as frames run them
         state = runtime.FrameState()
         state.sync(depsgraph)
         if state.error:
@@ -401,13 +412,11 @@ class AutoMethod(Method):
             self.sync(state)        # the candidates' stored data (sync loaded the scene method's)
         state.camera = render_camera(scene, depsgraph)
         choices = self._selection(state)[0]
-        record = dict(version=CHOICE_VERSION, key=choice_key(state),
-                      camera=scene.camera.name if state.camera is not None else None,
-                      size=None if state.camera is None else [state.camera["width"],
-                                                              state.camera["height"]],
-                      objects=[{f: _plain(c[f]) for f in CHOICE_FIELDS} for c in choices])
-        scene.prt.auto_choice = json.dumps(record, sort_keys=True)
-        return record
+        return dict(version=CHOICE_VERSION, key=choice_key(state),
+                    camera=scene.camera.name if state.camera is not None else None,
+                    size=None if state.camera is None else [state.camera["width"],
+                                                            state.camera["height"]],
+                    objects=[{f: _plain(c[f]) for f in CHOICE_FIELDS} for c in choices])
 
     def sync(self, state):
         done = set()
