@@ -22,8 +22,10 @@ float sat_at(sampler2D tex, ivec2 origin, int n, float x, float y)
   /* bilinear sample of an (n+1) x (n+1) corner table at grid coordinates (x, y) */
   x = clamp(x, 0.0, float(n));
   y = clamp(y, 0.0, float(n));
-  int x0 = min(int(x), n - 1);
-  int y0 = min(int(y), n - 1);
+  /* integer indices clamped too: a NaN coordinate converts to any int, and a fetch
+   * outside the texture is undefined (llvmpipe reads out of bounds) */
+  int x0 = clamp(int(x), 0, n - 1);
+  int y0 = clamp(int(y), 0, n - 1);
   float fx = x - float(x0);
   float fy = y - float(y0);
   float a = texelFetch(tex, origin + ivec2(x0, y0), 0).r;
@@ -73,8 +75,8 @@ float visibility(ivec2 tile, vec2 p, float h)
     float k = 0.5 * float(n);
     float x = clamp((p.x + 1.0) * k - 0.5, 0.0, float(n - 1));
     float y = clamp((p.y + 1.0) * k - 0.5, 0.0, float(n - 1));
-    int x0 = min(int(x), n - 2);
-    int y0 = min(int(y), n - 2);
+    int x0 = clamp(int(x), 0, n - 2);
+    int y0 = clamp(int(y), 0, n - 2);
     float fx = x - float(x0), fy = y - float(y0);
     float a = texelFetch(visTable, tile + ivec2(x0, y0), 0).r;
     float b = texelFetch(visTable, tile + ivec2(x0 + 1, y0), 0).r;

@@ -300,8 +300,8 @@ vec3 sg_atlas_bilinear(sampler2D atlas, int N, int level, int face, float s, flo
 {
   float x = clamp((s + 1.0) * 0.5 * float(N) - 0.5, 0.0, float(N) - 1.0);
   float y = clamp((t + 1.0) * 0.5 * float(N) - 0.5, 0.0, float(N) - 1.0);
-  int x0 = min(int(floor(x)), N - 1);
-  int y0 = min(int(floor(y)), N - 1);
+  int x0 = clamp(int(floor(x)), 0, N - 1);     /* NaN-safe: no fetch outside the atlas */
+  int y0 = clamp(int(floor(y)), 0, N - 1);
   int x1 = min(x0 + 1, N - 1);
   int y1 = min(y0 + 1, N - 1);
   float fx = x - float(x0);

@@ -114,12 +114,14 @@ vec3 env_level(int l, vec2 uv)
   level_size(l, w, h, row);
   float x = uv.x * float(w) - 0.5;
   float y = clamp(uv.y * float(h) - 0.5, 0.0, float(h) - 1.0);
-  int x0 = int(floor(x));
-  int y0 = int(floor(y));
+  /* indices clamped into the level (a NaN direction converts to any int; a fetch outside
+   * the texture is undefined) */
+  int x0 = clamp(int(floor(x)), -1, w - 1);
+  int y0 = clamp(int(floor(y)), 0, h - 1);
   float fx = x - float(x0);
   float fy = y - float(y0);
   int y1 = min(y0 + 1, h - 1);
-  int xa = x0 < 0 ? x0 + w : (x0 >= w ? x0 - w : x0);     /* x0 is in [-1, w - 1] */
+  int xa = x0 < 0 ? x0 + w : x0;
   int xb = xa + 1 < w ? xa + 1 : 0;
   vec3 a = env_fetch(l, xa, y0, row) * (1.0 - fx) + env_fetch(l, xb, y0, row) * fx;
   vec3 b = env_fetch(l, xa, y1, row) * (1.0 - fx) + env_fetch(l, xb, y1, row) * fx;

@@ -135,8 +135,8 @@ float ssdf_value(vec3 local, vec4 W[16])
   float n = float(ssdfRes);
   float x = clamp(uv.x * n - 0.5, 0.0, n - 1.0);
   float y = clamp(uv.y * n - 0.5, 0.0, n - 1.0);
-  int x0 = min(int(floor(x)), max(ssdfRes - 2, 0));
-  int y0 = min(int(floor(y)), max(ssdfRes - 2, 0));
+  int x0 = clamp(int(floor(x)), 0, max(ssdfRes - 2, 0));   /* NaN-safe: no fetch outside */
+  int y0 = clamp(int(floor(y)), 0, max(ssdfRes - 2, 0));
   float fx = x - float(x0), fy = y - float(y0);
   int x1 = min(x0 + 1, ssdfRes - 1);
   int y1 = min(y0 + 1, ssdfRes - 1);

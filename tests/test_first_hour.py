@@ -45,7 +45,7 @@ def _sync():
 def test_orthographic_camera_renders_every_method_in_f12_and_the_viewport(tmp_path):
     """An orthographic camera (and Blender's numpad views) crashed every method in
     ``_eye``; the viewport path draws exactly the F12 pixels of the same view."""
-    from prt_relight.addon.engine import render_pixels
+    from prt_relight.addon.engine import in_render, render_pixels
 
     cam = _ball_scene()
     _ortho(cam)
@@ -60,13 +60,15 @@ def test_orthographic_camera_renders_every_method_in_f12_and_the_viewport(tmp_pa
         assert np.isfinite(frame).all(), method
         lit = frame[..., 3] > 0.5
         assert lit.mean() > 0.3 and frame[lit][:, :3].mean() > 0.05, method
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        cam_eval = cam.evaluated_get(depsgraph)
-        view = cam_eval.matrix_world.inverted()
-        window = cam_eval.calc_matrix_camera(depsgraph, x=w, y=h)
-        engine, shown = bs.view_draw(depsgraph, view, window, w, h, perspective=False)
-        direct = render_pixels(engine._state, view, window, w, h,
-                               scene.render.film_transparent, False)
+        def viewport(depsgraph):
+            cam_eval = cam.evaluated_get(depsgraph)
+            view = cam_eval.matrix_world.inverted()
+            window = cam_eval.calc_matrix_camera(depsgraph, x=w, y=h)
+            engine, shown = bs.view_draw(depsgraph, view, window, w, h, perspective=False)
+            return shown, render_pixels(engine._state, view, window, w, h,
+                                        scene.render.film_transparent, False)
+
+        shown, direct = in_render(scene, viewport)      # a GPU context of its own in -b
         np.testing.assert_array_equal(shown, direct)
         assert shown[..., :3].max() > 0.05, method
 
