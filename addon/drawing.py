@@ -46,6 +46,11 @@ def _source(name):
     return (SHADER_DIR / name).read_text()
 
 
+def glsl_source(*names) -> str:
+    """Shader files of ``shaders/`` joined in order (libraries of functions first)."""
+    return "".join(_source(n) for n in names)
+
+
 def _shader(name, push_constants, vertex_inputs, varyings, samplers=()):
     """Build (once) the shader ``shaders/<name>_vert.glsl`` + ``<name>_frag.glsl``."""
     if name not in _SHADERS:

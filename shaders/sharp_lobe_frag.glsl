@@ -15,7 +15,6 @@
  * (kind, weight, eta, -), (f0 rgb, -), (B rgb, -); kinds: 0 F = f0, 1 Schlick,
  * 2 Principled dielectric, 3 F82-tint (core.brdf.sharp_lobes). */
 
-#define PI 3.14159265358979
 #define COS_VIEW_MIN 1e-4
 #define LOD_BIAS -2.0
 
@@ -23,65 +22,6 @@
 vec4 param(int i)
 {
   return texelFetch(paramTex, ivec2(i, 0), 0);
-}
-
-/* ---------------------------------------------------------------- microfacet terms */
-
-float ndf(int dist, float a, float c)
-{
-  float c2 = c * c;
-  float a2 = max(a * a, 1e-14);
-  if (dist == 0) {
-    return exp(-(1.0 - c2) / (max(c2, 1e-30) * a2)) / (PI * a2 * c2 * c2);
-  }
-  float d = (1.0 - c2) + a2 * c2;
-  return a2 / (PI * d * d);
-}
-
-float smith_lambda(int dist, float a, float c)
-{
-  float t2 = a * a * max(1.0 / max(c * c, 1e-24) - 1.0, 0.0);
-  if (dist == 0) {
-    if (t2 < 0.39) {        /* a = 1 / sqrt(t2) > 1.6: Walter et al.'s rational fit is 0 */
-      return 0.0;
-    }
-    float b = inversesqrt(t2);
-    return ((0.396 * b - 1.259) * b + 1.0) / ((2.181 * b + 3.535) * b);
-  }
-  return 0.5 * (sqrt(1.0 + t2) - 1.0);
-}
-
-float fresnel_dielectric(float c, float eta)
-{
-  c = abs(c);
-  float g = eta * eta - 1.0 + c * c;
-  if (g <= 0.0) {
-    return 1.0;
-  }
-  g = sqrt(g);
-  float A = (g - c) / (g + c);
-  float B = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
-  return 0.5 * A * A * (1.0 + B * B);
-}
-
-vec3 lobe_fresnel(int kind, vec3 f0, vec3 B, float eta, float c)
-{
-  float s = clamp(1.0 - c, 0.0, 1.0);
-  float s5 = s * s * s * s * s;
-  if (kind == 0) {
-    return f0;
-  }
-  if (kind == 1) {
-    return f0 + (1.0 - f0) * s5;
-  }
-  if (kind == 2) {
-    float F0 = (eta - 1.0) / (eta + 1.0);
-    F0 *= F0;
-    float r = F0 < 1.0 - 1e-12 ? clamp((fresnel_dielectric(c, eta) - F0) / (1.0 - F0), 0.0, 1.0)
-                               : 1.0;
-    return f0 + (1.0 - f0) * r;
-  }
-  return clamp(f0 + (1.0 - f0) * s5 - B * c * s5 * s, 0.0, 1.0);
 }
 
 /* ---------------------------------------------------------------- environment */
@@ -202,17 +142,6 @@ float visibility(vec3 d)
 
 /* ---------------------------------------------------------------- main */
 
-float radical_inverse(int i)
-{
-  uint b = uint(i);
-  b = (b << 16u) | (b >> 16u);
-  b = ((b & 0x55555555u) << 1u) | ((b & 0xAAAAAAAAu) >> 1u);
-  b = ((b & 0x33333333u) << 2u) | ((b & 0xCCCCCCCCu) >> 2u);
-  b = ((b & 0x0F0F0F0Fu) << 4u) | ((b & 0xF0F0F0F0u) >> 4u);
-  b = ((b & 0x00FF00FFu) << 8u) | ((b & 0xFF00FF00u) >> 8u);
-  return float(b) * 2.3283064365386963e-10;
-}
-
 void main()
 {
   bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
@@ -234,12 +163,8 @@ void main()
   int dist = int(lobe.y);
   int lobes = int(lobe.z);
   int K = a > 0.0 ? int(lobe.w) : 1;
-  /* tangent frame (Duff et al. 2017) */
-  float sgn = n.z >= 0.0 ? 1.0 : -1.0;
-  float q = -1.0 / (sgn + n.z);
-  float r = n.x * n.y * q;
-  vec3 tx = vec3(1.0 + sgn * n.x * n.x * q, sgn * r, -sgn * n.x);
-  vec3 ty = vec3(r, sgn + n.y * n.y * q, -n.y);
+  vec3 tx, ty;
+  tangent_frame(n, tx, ty);
   float lam_o = smith_lambda(dist, a, cos_o);
   vec3 color = vec3(0.0);
   /* the sample set turned per pixel (Cranley-Patterson): neighbouring pixels and F12's
@@ -248,13 +173,8 @@ void main()
   for (int s = 0; s < K; s++) {
     vec3 h = n;
     if (a > 0.0) {
-      float u1 = fract((float(s) + 0.5) / float(K) + shift.x);
-      float u2 = fract(radical_inverse(s) + shift.y);
-      float tan2 = dist == 0 ? -a * a * log(1.0 - u1) : a * a * u1 / (1.0 - u1);
-      float ch = inversesqrt(1.0 + tan2);
-      float sh = sqrt(max(1.0 - ch * ch, 0.0));
-      float phi = 2.0 * PI * u2;
-      h = normalize(tx * (sh * cos(phi)) + ty * (sh * sin(phi)) + n * ch);
+      vec2 u = fract(vec2((float(s) + 0.5) / float(K), radical_inverse(s)) + shift);
+      h = sample_ndf(dist, a, u, n, tx, ty);
     }
     float oh = dot(o, h);
     if (oh <= 0.0) {
