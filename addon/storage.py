@@ -64,7 +64,8 @@ def key(ob, name: str):
     entry = _entry(ob, name)
     if entry is None:
         return None
-    if not hasattr(entry, "get") or not isinstance(entry.get("blob"), bytes):
+    # membership only: reading entry["blob"] would copy the whole blob
+    if not hasattr(entry, "keys") or "blob" not in entry or "uid" not in entry:
         return ("unreadable", name)
     if entry.get("run") != ob.prt.precompute_id:
         return None
@@ -116,8 +117,8 @@ def stored_bytes(ob, name: str | None = None) -> int:
     if not hasattr(store, "keys"):
         return 0
     names = [name] if name is not None else list(store.keys())
-    return sum(len(e["blob"]) for e in (store.get(n) for n in names)
-               if hasattr(e, "get") and isinstance(e.get("blob"), bytes))
+    blobs = (e.get("blob") for e in (store.get(n) for n in names) if hasattr(e, "get"))
+    return sum(len(b) for b in blobs if isinstance(b, bytes))
 
 
 def put(ob, name: str, blob: bytes):

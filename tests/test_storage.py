@@ -88,6 +88,29 @@ def _open(path):
     return bpy.data.objects["Suzanne"]
 
 
+def test_put_get_delete_and_a_blob_of_another_run_is_ignored():
+    bs.reset()
+    ob = bpy.data.objects.new("Thing", None)
+    ob.prt.precompute_id = "run-1"
+    bits = np.arange(768 * 3, dtype=np.uint8).reshape(3, 768)
+    storage.put(ob, "probe", storage.pack({"bits": bits}, {"note": "x"}))
+    arrays, meta = storage.get(ob, "probe")
+    np.testing.assert_array_equal(arrays["bits"], bits)
+    assert meta == {"note": "x"} and storage.has(ob, "probe")
+    first = storage.key(ob, "probe")
+    storage.put(ob, "probe", storage.pack({"bits": bits}))
+    assert storage.key(ob, "probe") != first                # a new key per put: caches miss
+    ob.prt.precompute_id = "run-2"                          # the record moved on
+    assert not storage.has(ob, "probe") and storage.get(ob, "probe") is None
+    ob.prt.precompute_id = "run-1"
+    storage.delete(ob, "probe")
+    assert storage.get(ob, "probe") is None and storage.stored_bytes(ob) == 0
+    with pytest.raises(TypeError, match="storage.pack"):
+        storage.put(ob, "probe", bits)
+    with pytest.raises(ValueError, match="6x32"):
+        storage.visibility_blob(bits[:, :700], 32)
+
+
 def test_visibility_takes_at_most_128_bytes_per_point(tmp_path):
     """Blender's Suzanne (subdivided once) on a ground at 6x32^2: the stored visibility
     (768 bytes per point bit-packed) is the lossless blob, at most 128 bytes per point."""
