@@ -58,7 +58,8 @@ class PRT_OT_precompute(bpy.types.Operator):
 
     bl_idname = "prt.precompute"
     bl_label = "Precompute"
-    bl_options = {"REGISTER"}
+    # an undo step: Ctrl+Z brings back the data stored before (it lives on the objects)
+    bl_options = {"REGISTER", "UNDO"}
 
     _timer = None
     _thread = None

@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import methods
+from . import methods, storage
 from .operators import RUNNING
 from .runtime import LAST_MESSAGES
 
@@ -37,7 +37,7 @@ def draw_settings(layout, context):
     if ob is not None and ob.type == "MESH":
         box = layout.box()
         data = ob.prt
-        if data.visibility is None:
+        if not storage.has(ob, storage.VISIBILITY):
             box.label(text=f"'{ob.name}': not precomputed", icon="MESH_DATA")
         else:
             box.label(text=f"'{ob.name}': {data.point_count} shading points", icon="MESH_DATA")

@@ -21,6 +21,8 @@ class ObjectJob:
     points: core_mesh.ShadingPoints
     fingerprint: str
     bits: np.ndarray | None = None
+    #: the visibility as stored (storage.visibility_blob), made with the bits
+    blob: bytes | None = None
     coarse_warning: str = ""
 
 
@@ -69,11 +71,15 @@ class PrecomputeJob:
             start += o.points.count
             o.coarse_warning = coarse_receiver_warning(o, cube)
         t3 = time.perf_counter()
+        # compressed here, off the main thread: the commit only assigns the blobs
+        for o in self.objects:
+            o.blob = storage.visibility_blob(o.bits, self.resolution)
+        t4 = time.perf_counter()
         self.timings.update(build_bvh=t1 - t0, rays=t2 - t1, ray_count=stats["rays"],
                             rays_per_second=stats["rays"] / max(t2 - t1, 1e-9),
-                            tessellation_check=t3 - t2)
+                            tessellation_check=t3 - t2, encode=t4 - t3)
         self.derived = methods.get(self.method).derive(self)
-        self.timings["derive"] = time.perf_counter() - t3
+        self.timings["derive"] = time.perf_counter() - t4
 
 
 def coarse_receiver_warning(job: ObjectJob, cube) -> str:
@@ -147,29 +153,20 @@ def commit(scene, job: PrecomputeJob):
     t0 = time.perf_counter()
     # Objects deleted while a modal precompute ran are dropped.
     job.objects = [o for o in job.objects if o.name in bpy.data.objects]
-    # Create every image first; only then swap them in, so a failure leaves old data.
-    new_images = {}
-    try:
-        for o in job.objects:
-            new_images[o.name] = storage.create_visibility_image(o.name, o.bits)
-    except Exception:
-        for img in new_images.values():
-            bpy.data.images.remove(img)
-        raise
+    # Every blob was made in run(): from here on only assignments change the scene.
+    if any(o.blob is None for o in job.objects):
+        raise RuntimeError("precompute commit without run(): nothing was traced")
     run_id = uuid.uuid4().hex
     for o in job.objects:
         ob = bpy.data.objects[o.name]
-        old = ob.prt.visibility
-        ob.prt.visibility = new_images[o.name]
         ob.prt.resolution = job.resolution
         ob.prt.point_count = o.points.count
         ob.prt.fingerprint = o.fingerprint
         ob.prt.precompute_id = run_id
         ob.prt.coarse_warning = o.coarse_warning
-        if old is not None and old != new_images[o.name]:
-            old.use_fake_user = False
-            storage.remove_image(old)
-        new_images[o.name].name = storage.IMAGE_PREFIX + o.name
+        # what earlier runs stored (other methods' data too) is dropped with them
+        storage.replace_all(ob, {storage.VISIBILITY: o.blob})
+    storage.remove_legacy()
     scene.prt.precomputed_resolution = job.resolution
     scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(o.fingerprint for o in job.objects)
     scene.prt.precompute_id = run_id

@@ -41,10 +41,8 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
 
 
 class PRTObjectData(bpy.types.PropertyGroup):
-    """Per-object link to the stored transfer (an image in the .blend)."""
+    """Per-object record of the last precompute (its data: ``addon.storage``)."""
 
-    visibility: PointerProperty(name="Visibility", type=bpy.types.Image,
-                                description="Packed float image holding bit-packed visibility")
     resolution: IntProperty(name="Directions", default=0)
     point_count: IntProperty(name="Shading Points", default=0)
     fingerprint: StringProperty(name="Geometry Fingerprint", default="")

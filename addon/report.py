@@ -32,7 +32,7 @@ from bpy.props import BoolProperty, IntProperty, StringProperty
 
 from ..core import report as core_report
 from ..core import visibility
-from . import methods, precompute, scene_build, scene_export
+from . import methods, precompute, scene_build, scene_export, storage
 from .operators import RUNNING, end_modal
 from .runtime import FrameState, rotated_world
 
@@ -326,13 +326,13 @@ class ReportRun:
             yield "precompute (visibility)"
             scene.prt.method = "REFERENCE"
             job = precompute.gather(depsgraph, scene.prt)
-            had_data = all(bpy.data.objects[o.name].prt.visibility is not None
+            had_data = all(storage.has(bpy.data.objects[o.name], storage.VISIBILITY)
                            for o in job.objects)
             t0 = time.perf_counter()
             job.run()
             trace_seconds = time.perf_counter() - t0
             precompute.commit(scene, job)
-            vis_bytes = sum(int(o.bits.nbytes) for o in job.objects)
+            vis_bytes = sum(len(o.blob) for o in job.objects)
             self.warnings += job.warnings
             self.steps_done += 1
 
@@ -510,17 +510,10 @@ def _gpu_name() -> str:
 
 def _clear_objects(job):
     """Remove the data the report's precompute stored on objects that had none."""
-    from . import storage
     for o in job.objects:
         ob = bpy.data.objects.get(o.name)
-        if ob is None or ob.prt.visibility is None:
-            continue
-        img = ob.prt.visibility
-        ob.prt.visibility = None
-        ob.prt.point_count = 0
-        ob.prt.fingerprint = ""
-        img.use_fake_user = False
-        storage.remove_image(img)
+        if ob is not None:
+            storage.clear_object(ob)
 
 
 # ---------------------------------------------------------------------------- stability

@@ -18,7 +18,7 @@ from . import scene_export, storage
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
 LAST_MESSAGES: list = []
-# Decoded visibility per (image name, precompute id, point count); small LRU.
+# Decoded visibility per stored blob (storage.key); small LRU.
 _VIS_CACHE: dict = {}
 _VIS_CACHE_MAX = 16
 # Area-resampled environment per (world key, resolution).
@@ -96,22 +96,16 @@ def per_visibility(cache: dict, key, bits, compute, limit: int = 64):
     return held(cache, key, (bits,), compute, limit)
 
 
-def stored_visibility(ob_orig, points: int, nbytes: int):
-    """Decoded visibility bits of an object, or None if missing/unusable."""
-    data = ob_orig.prt
-    img = data.visibility
-    if img is None or data.point_count != points:
+def stored_visibility(ob_orig, points: int, nbytes: int, note=None):
+    """Decoded visibility bits of an object, or None if missing/unusable (``note`` is
+    told why a stored blob cannot be read)."""
+    if ob_orig.prt.point_count != points:
         return None
-    key = (img.name_full, data.precompute_id, points, nbytes)
-    bits = _VIS_CACHE.get(key)
-    if bits is None:
-        try:
-            bits = storage.read_visibility_image(img, points, nbytes)
-        except (ValueError, RuntimeError):
-            return None
-        if len(_VIS_CACHE) >= _VIS_CACHE_MAX:
-            _VIS_CACHE.pop(next(iter(_VIS_CACHE)))
-        _VIS_CACHE[key] = bits
+    stored = storage.load(ob_orig, storage.VISIBILITY, _VIS_CACHE, note=note,
+                          limit=_VIS_CACHE_MAX)
+    bits = None if stored is None else stored[0].get("bits")
+    if bits is None or bits.shape != (points, nbytes):
+        return None
     return bits
 
 
@@ -197,7 +191,7 @@ class FrameState:
         cube = directions.cubemap(self.resolution)
         nbytes = cube.size // 8
         objects = []
-        missing, stale, earlier, unshadowed = [], [], [], []
+        missing, stale, earlier, unshadowed, older, unreadable = [], [], [], [], [], []
         skipped = []
         shown_only = [] if depsgraph.mode != "RENDER" else None
         found = scene_export.visible_mesh_objects(depsgraph, skipped, shown_only)
@@ -218,9 +212,13 @@ class FrameState:
             status = "ok"
             if orig.hide_render:
                 status = "unshadowed"          # viewport only: never traced, casts nothing
-            elif data.visibility is not None and data.resolution == self.resolution:
-                bits = stored_visibility(orig, points.count, nbytes)
-                if bits is None:
+            elif storage.has(orig, storage.VISIBILITY) and data.resolution == self.resolution:
+                why = []
+                bits = stored_visibility(orig, points.count, nbytes, why.append)
+                if why:
+                    status = "unreadable"
+                    unreadable += [w + " (drawn without shadows)" for w in why]
+                elif bits is None:
                     status = "stale"
                 elif data.fingerprint != fingerprint:
                     status = "stale"   # same topology: old data, correctly indexed
@@ -230,8 +228,13 @@ class FrameState:
                 status = "missing"
             if bits is None:
                 bits = open_visibility(points.normals, cube)
-            {"stale": stale, "missing": missing, "unshadowed": unshadowed}.get(
-                status, []).append(orig.name)
+            if status == "missing" and storage.legacy(orig):
+                older.append(orig.name)
+            else:
+                {"stale": stale, "missing": missing, "unshadowed": unshadowed}.get(
+                    status, []).append(orig.name)
+            if status == "unreadable":
+                status = "missing"             # drawn like an object without data
             if data.coarse_warning and status == "ok":
                 self.warnings.append(data.coarse_warning)
             st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
@@ -243,6 +246,11 @@ class FrameState:
         self.warnings += scene_export.instance_warning(skipped)
         if missing:
             self.warnings.append("Not precomputed (drawn without shadows): " + ", ".join(missing))
+        if older:
+            self.warnings.append("Stored by an earlier prt_relight, which this version does not "
+                                 "read (drawn without shadows, press Precompute): "
+                                 + ", ".join(older))
+        self.warnings += unreadable
         if unshadowed:
             self.warnings.append("Hidden from renders (drawn without shadows, cast none): "
                                  + ", ".join(unshadowed))

@@ -1,120 +1,192 @@
-"""Precompute results stored in the .blend as packed float images.
+"""Precompute results stored in the .blend, on the objects that own them.
 
-Visibility is bit-packed per shading point (``core.visibility``), three bytes
-per float32 (exact integers below 2**24), four floats per RGBA pixel.  Each
-point owns a run of pixels; several points share an image row.  The image is
-a packed, fake-user, Non-Color float buffer, so it round-trips exactly
-through save/reload.
+Every result is a named blob (:mod:`..core.codec`: versioned, zlib-compressed typed
+arrays and JSON meta) in the Object datablock's ID property group ``prt_store``::
+
+    ob["prt_store"][name] = {"blob": bytes, "uid": str, "run": str}
+
+``uid`` is new for every put (the key decoded data is cached under), ``run`` the
+precompute the blob belongs to (``ob.prt.precompute_id``; a blob of another run is
+ignored).  The blobs live on the datablock, so Blender's own rename, duplicate (linked
+or full), delete, undo, save, append and link carry or drop them; nothing is looked up
+by object name.  ``ob.prt`` stays the record of the precompute (resolution, point
+count, geometry fingerprint, run, tessellation note).
+
+Results of the earlier layout (packed float images, ``prt_rsl_*`` properties) are not
+read: such objects are reported as needing a precompute, and a precompute or Clear
+removes that data.
 """
+
+import uuid
 
 import bpy
 import numpy as np
 
-from ..core.visibility import bytes_to_float24, float24_to_bytes
+from ..core import codec
 
-MAX_WIDTH = 4096
-IMAGE_PREFIX = "PRT Visibility "
-#: ID property marking every image this add-on wrote (what prt.clear removes)
-OWNER_TAG = "prt_relight"
-#: names of images written before OWNER_TAG existed
-_OLD_PREFIXES = ("PRT Visibility ", "PRT Blocks ", "PRT RSL ", "PRT SSDF ")
-
-
-def _layout(point_count: int, floats_per_point: int):
-    ppp = floats_per_point // 4
-    per_row = max(1, MAX_WIDTH // ppp)
-    width = ppp * per_row
-    height = max(1, -(-point_count // per_row))
-    return width, height
+STORE = "prt_store"
+#: the bit-packed visibility of every precomputed object (what all methods start from)
+VISIBILITY = "visibility"
+#: blob that cannot be read (damaged, or written by a newer prt_relight)
+Unreadable = codec.FormatError
+#: images of the earlier layout: tagged with this ID property, or named with a prefix
+LEGACY_TAG = "prt_relight"
+LEGACY_PREFIXES = ("PRT Visibility ", "PRT Blocks ", "PRT RSL ", "PRT SSDF ")
 
 
-def write_float_image(name: str, flat: np.ndarray, width: int = MAX_WIDTH, image=None):
-    """Store ``flat`` float32 values (zero-padded to whole rows of ``width`` RGBA pixels)
-    in a packed, fake-user, Non-Color, full-precision float image: exact round trip
-    through save/reload.  ``image`` is reused when its size fits, else a new one is made."""
-    flat = np.asarray(flat, dtype=np.float32).reshape(-1)
-    height = max(1, -(-flat.size // (4 * width)))
-    data = np.zeros(width * height * 4, dtype=np.float32)
-    data[:flat.size] = flat
-    img = image
-    if img is not None and tuple(img.size) != (width, height):
+# ------------------------------------------------------------------ blobs (no bpy)
+
+def pack(arrays: dict, meta: dict | None = None) -> bytes:
+    """A blob of typed arrays and meta (any thread): :func:`core.codec.pack`."""
+    return codec.pack(arrays, meta)
+
+
+def visibility_blob(bits: np.ndarray, resolution: int) -> bytes:
+    """The blob of (P, 6N^2/8) bit-packed visibility traced at 6xNxN (any thread)."""
+    bits = np.asarray(bits)
+    if bits.dtype != np.uint8 or bits.ndim != 2 or bits.shape[1] * 8 != 6 * resolution ** 2:
+        raise ValueError(f"visibility must be (points, {6 * resolution ** 2 // 8}) uint8 at "
+                         f"6x{resolution}^2, got {bits.dtype} {bits.shape}")
+    return codec.pack({"bits": bits}, {"resolution": int(resolution)})
+
+
+# ------------------------------------------------------------------ per object
+
+def _entry(ob, name):
+    store = ob.get(STORE) if ob is not None else None
+    return store.get(name) if hasattr(store, "get") else None
+
+
+def key(ob, name: str):
+    """Cheap identity of ``ob``'s blob ``name`` (a new one per put), None when it has
+    none of its current precompute.  An entry this version cannot make sense of gets a
+    key too, so that :func:`get` reports it."""
+    entry = _entry(ob, name)
+    if entry is None:
+        return None
+    # membership only: reading entry["blob"] would copy the whole blob
+    if not hasattr(entry, "keys") or "blob" not in entry or "uid" not in entry:
+        return ("unreadable", name)
+    if entry.get("run") != ob.prt.precompute_id:
+        return None
+    return entry.get("uid")
+
+
+def has(ob, name: str) -> bool:
+    return key(ob, name) is not None
+
+
+def get(ob, name: str):
+    """``(arrays, meta)`` of ``ob``'s blob ``name`` of its current precompute, or None;
+    :data:`Unreadable` (its message says why) when it cannot be read."""
+    if key(ob, name) is None:
+        return None
+    entry = _entry(ob, name)
+    blob = entry.get("blob") if hasattr(entry, "get") else None
+    if not isinstance(blob, bytes):
+        raise codec.NewerFormatError("stored in a layout this prt_relight does not know")
+    return codec.unpack(blob)
+
+
+def load(ob, name: str, cache: dict, convert=None, note=None, limit: int = 16):
+    """``convert(arrays, meta)`` of ``ob``'s blob ``name`` (``(arrays, meta)`` without
+    ``convert``), made once per blob and kept in ``cache`` (oldest dropped past
+    ``limit``).  None when there is no blob of the current precompute, or when it is
+    unreadable: then ``note`` (a callable) is told why."""
+    k = key(ob, name)
+    if k is None:
+        return None
+    if k in cache:
+        return cache[k]
+    try:
+        arrays, meta = get(ob, name)
+        value = (arrays, meta) if convert is None else convert(arrays, meta)
+    except Unreadable as exc:
+        if note is not None:
+            note(f"'{ob.name}': {exc}: precompute again")
+        return None
+    if len(cache) >= limit:
+        cache.pop(next(iter(cache)))
+    cache[k] = value
+    return value
+
+
+def stored_bytes(ob, name: str | None = None) -> int:
+    """Bytes of ``ob``'s blob ``name`` (of every blob without ``name``)."""
+    store = ob.get(STORE)
+    if not hasattr(store, "keys"):
+        return 0
+    names = [name] if name is not None else list(store.keys())
+    blobs = (e.get("blob") for e in (store.get(n) for n in names) if hasattr(e, "get"))
+    return sum(len(b) for b in blobs if isinstance(b, bytes))
+
+
+def put(ob, name: str, blob: bytes):
+    """Store ``blob`` as ``name`` of ``ob``'s current precompute (main thread)."""
+    if not isinstance(blob, bytes):
+        raise TypeError("put() takes a blob made by storage.pack()")
+    if not hasattr(ob.get(STORE), "keys"):
+        ob[STORE] = {}
+    ob[STORE][name] = {"blob": blob, "uid": uuid.uuid4().hex, "run": ob.prt.precompute_id}
+
+
+def replace_all(ob, blobs: dict):
+    """``ob``'s blobs become ``blobs`` (name -> blob) of its current precompute: what an
+    earlier precompute stored for it (any method, any layout) goes."""
+    run = ob.prt.precompute_id
+    ob[STORE] = {name: {"blob": blob, "uid": uuid.uuid4().hex, "run": run}
+                 for name, blob in blobs.items()}
+    for k in [k for k in ob.keys() if k.startswith("prt_") and k != STORE]:
+        del ob[k]
+
+
+def delete(ob, name: str):
+    store = ob.get(STORE)
+    if hasattr(store, "keys") and name in store:
+        del store[name]
+
+
+def clear_object(ob) -> bool:
+    """Remove everything stored on ``ob`` (blobs, ``prt_*`` properties, the precompute
+    record); True when it had any."""
+    keys = [k for k in ob.keys() if k.startswith("prt_")]
+    had = bool(keys) or bool(ob.prt.point_count) or bool(ob.prt.precompute_id)
+    for k in keys:
+        del ob[k]
+    ob.property_unset("prt")            # the record, and an earlier layout's image link
+    return had
+
+
+def legacy(ob) -> bool:
+    """True when ``ob`` was precomputed but holds no visibility in this layout (stored
+    by an earlier prt_relight)."""
+    return bool(ob.prt.point_count) and _entry(ob, VISIBILITY) is None
+
+
+def remove_legacy() -> int:
+    """Remove the earlier layout's images and object properties (this version does not
+    read them); returns how many images went."""
+    images = [i for i in bpy.data.images
+              if i.library is None and (i.get(LEGACY_TAG) or i.name.startswith(LEGACY_PREFIXES))]
+    for img in images:
         bpy.data.images.remove(img)
-        img = None
-    if img is None:
-        img = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True,
-                                  is_data=True)
-    img[OWNER_TAG] = True
-    img.colorspace_settings.name = "Non-Color"
-    img.alpha_mode = "CHANNEL_PACKED"
-    img.use_fake_user = True
-    img.use_half_precision = False
-    img.pixels.foreach_set(data)
-    img.update()
-    img.pack()
-    return img
-
-
-def read_float_image(image) -> np.ndarray:
-    """Every float of an image written by :func:`write_float_image` (with its padding)."""
-    w, h = image.size
-    flat = np.empty(w * h * 4, dtype=np.float32)
-    image.pixels.foreach_get(flat)
-    return flat
-
-
-def create_visibility_image(name: str, bits: np.ndarray):
-    """A new packed image holding ``bits`` (P, nbytes); the caller assigns it."""
-    floats = bytes_to_float24(bits)                         # (P, F)
-    P, F = floats.shape
-    if F % 4:
-        raise ValueError("floats per point must be a multiple of 4")
-    width, height = _layout(P, F)
-    flat = np.zeros(width * height * 4, dtype=np.float32)
-    flat[: P * F] = floats.reshape(-1)
-    return write_float_image(IMAGE_PREFIX + name, flat, width)
-
-
-def read_visibility_image(image, point_count: int, nbytes: int) -> np.ndarray:
-    """(P, nbytes) uint8 from an image made by :func:`create_visibility_image`."""
-    F = nbytes // 3
-    width, height = _layout(point_count, F)
-    if tuple(image.size) != (width, height):
-        raise ValueError(f"image '{image.name}' has size {tuple(image.size)}, "
-                         f"expected {(width, height)}")
-    flat = read_float_image(image)
-    return float24_to_bytes(flat[: point_count * F].reshape(point_count, F))
-
-
-def remove_image(image):
-    if image is not None and image.users <= 1:
-        bpy.data.images.remove(image)
+    for ob in bpy.data.objects:
+        if ob.library is None:
+            for k in [k for k in ob.keys() if k.startswith("prt_rsl_")]:
+                del ob[k]
+    return len(images)
 
 
 def clear_all() -> int:
-    """Remove everything the add-on stored in the .blend: its images (also those of
-    deleted objects), the per-object links and ``prt_*`` ID properties, the scene's
-    precompute record.  Returns how many objects had data."""
-    count = 0
-    for ob in bpy.data.objects:
-        data = getattr(ob, "prt", None)
-        had = data is not None and (data.visibility is not None or data.point_count)
-        for key in [k for k in ob.keys() if k.startswith("prt_")]:
-            del ob[key]
-            had = True
-        if data is not None:
-            data.visibility = None
-            data.point_count = 0
-            data.resolution = 0
-            data.fingerprint = ""
-            data.precompute_id = ""
-            data.coarse_warning = ""
-        count += bool(had)
-    for img in [i for i in bpy.data.images
-                if i.get(OWNER_TAG) or i.name.startswith(_OLD_PREFIXES)]:
-        bpy.data.images.remove(img)
+    """Remove everything the add-on stored in the .blend: every object's blobs, ``prt_*``
+    properties and record (also of objects no scene shows), the earlier layout's images,
+    the scenes' precompute record.  Objects linked from a library keep theirs (that
+    file holds it).  Returns how many objects had data."""
+    count = sum(clear_object(ob) for ob in bpy.data.objects if ob.library is None)
+    remove_legacy()
     for scene in bpy.data.scenes:
         prt = getattr(scene, "prt", None)
-        if prt is not None:
+        if prt is not None and scene.library is None:
             prt.precomputed_resolution = 0
             prt.scene_fingerprint = ""
             prt.precompute_id = ""

@@ -259,8 +259,7 @@ def main(argv=None):
     say(f"  {'object':16s} {'points':>7s} {'coeffs/block':>12s} {'bit-packed':>11s} "
         f"{'varint':>10s} {'ratio':>6s} {'zero/one/mixed blocks %':>24s}")
     for st, dv, pairs, stats, _ in per_object:
-        img = bpy.data.images.get(method.IMAGE_PREFIX + st.name)
-        stream = int(img["prt_nbytes"]) if img is not None else B.serialize_visibility(dv).size
+        stream = B.serialize_visibility(dv).size
         kinds = np.bincount(dv.kind.reshape(-1), minlength=3) / dv.kind.size * 100
         mixed = max(int((dv.kind == B.MIXED).sum()), 1)
         say(f"  {st.name:16s} {dv.count:7d} {dv.indices.size / mixed:12.1f} "

@@ -6,7 +6,7 @@
 
 Prints (and writes to out/bench/precompute.txt):
 
-1. the add-on's precompute time split (export, BVH build, rays, storage) and
+1. the add-on's precompute time split (export, BVH build, rays, encode, storage) and
    its rays/s on the whole scene;
 2. ray throughput of ``core.visibility.trace_visibility`` (default threads)
    against ONE bare single-threaded embreex ``scene.run(..., query='OCCLUDED')``
@@ -79,7 +79,8 @@ def main(argv=None):
 
     # 1. the add-on's precompute on the whole scene
     t = scenes.precompute(resolution=32)
-    accounted = t["export"] + t["build_bvh"] + t["rays"] + t["tessellation_check"] + t["storage"]
+    accounted = (t["export"] + t["build_bvh"] + t["rays"] + t["tessellation_check"]
+                 + t["encode"] + t["storage"])
 
     # 2. the same rays, ours vs one bare single-threaded Embree call (fixed subset)
     job = pc.gather(bpy.context.evaluated_depsgraph_get(), bpy.context.scene.prt)
@@ -128,6 +129,7 @@ def main(argv=None):
         ("precompute: BVH build", f"{t['build_bvh']:.2f} s"),
         ("precompute: rays", f"{t['rays']:.2f} s"),
         ("precompute: tessellation check", f"{t['tessellation_check']:.2f} s"),
+        ("precompute: visibility encode (zlib, worker)", f"{t['encode']:.2f} s"),
         ("precompute: storage", f"{t['storage']:.2f} s"),
         ("precompute: other", f"{t['total'] - accounted:.2f} s"),
         ("precompute: total", f"{t['total']:.2f} s"),

@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import precompute, runtime
+from prt_relight.addon import precompute, runtime, storage
 from prt_relight.core.visibility import Cancelled
 
 from . import blender_scene as bs
@@ -14,8 +14,14 @@ from . import blender_scene as bs
 pytestmark = pytest.mark.usefixtures("registered_addon")
 
 
-def _prt_images():
-    return sorted(i.name for i in bpy.data.images if i.name.startswith("PRT Visibility"))
+def _stored():
+    """(object, blob key) of every object's stored visibility: equal lists, same data."""
+    return sorted((o.name, storage.key(o, storage.VISIBILITY)) for o in bpy.data.objects
+                  if storage.has(o, storage.VISIBILITY))
+
+
+def _has_data(ob):
+    return storage.has(ob, storage.VISIBILITY)
 
 
 def _small_scene(hdri="sunset", cuts=16, subdiv=1):
@@ -38,7 +44,7 @@ def test_precompute_render_save_reopen_same_pixels(tmp_path):
     _small_scene()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     suzanne = bpy.data.objects["Suzanne"]
-    assert suzanne.prt.visibility is not None and suzanne.prt.visibility.packed_file is not None
+    assert _has_data(suzanne)
     before = bs.render_exr(tmp_path / "a.exr")
     assert np.isfinite(before).all()
     assert before[..., 3].max() == 1.0 and before[..., :3].max() > 0.05
@@ -58,7 +64,7 @@ def test_shadows_differ_from_unshadowed(tmp_path):
     bpy.ops.prt.precompute()
     shadowed = bs.render_exr(tmp_path / "s.exr")
     bpy.ops.prt.clear()
-    assert _prt_images() == []
+    assert _stored() == []
     state = _frame_warnings()
     assert any("Not precomputed" in w for w in state.warnings)
     open_sky = bs.render_exr(tmp_path / "o.exr")
@@ -84,11 +90,11 @@ def test_mesh_edited_after_precompute_is_stale_not_broken(tmp_path):
 
 
 def _assert_precompute_error(match):
-    images = _prt_images()
+    images = _stored()
     with pytest.raises(RuntimeError, match=match):
         bpy.ops.prt.precompute()
-    assert _prt_images() == images
-    assert all(o.prt.visibility is None for o in bpy.data.objects)
+    assert _stored() == images
+    assert not any(_has_data(o) for o in bpy.data.objects)
 
 
 def test_no_world_is_a_clear_error():
@@ -145,7 +151,7 @@ def test_empty_mesh_is_skipped_and_only_empty_is_an_error():
     ob = bpy.data.objects.new("Empty Mesh", bpy.data.meshes.new("nothing"))
     bpy.context.scene.collection.objects.link(ob)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
-    assert ob.prt.visibility is None
+    assert not _has_data(ob)
     bs.reset()
     bs.add_world(path=bs.hdri_path("forest"))
     ob = bpy.data.objects.new("Empty Mesh", bpy.data.meshes.new("nothing"))
@@ -160,15 +166,15 @@ def test_cancel_leaves_scene_unchanged():
     job.cancel_requested = True
     with pytest.raises(Cancelled):
         job.run()
-    assert _prt_images() == []
-    assert all(o.prt.visibility is None for o in bpy.data.objects)
+    assert _stored() == []
+    assert not any(_has_data(o) for o in bpy.data.objects)
 
 
 def test_world_rotation_redraws_without_recompute(tmp_path):
     _small_scene()
     bpy.ops.prt.precompute()
     a = bs.render_exr(tmp_path / "a.exr")
-    images = _prt_images()
+    images = _stored()
     world = bpy.context.scene.world
     nt = world.node_tree
     coord = nt.nodes.new("ShaderNodeTexCoord")
@@ -177,7 +183,7 @@ def test_world_rotation_redraws_without_recompute(tmp_path):
     nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
     nt.links.new(mapping.outputs["Vector"], nt.nodes["Environment Texture"].inputs["Vector"])
     b = bs.render_exr(tmp_path / "b.exr")
-    assert _prt_images() == images
+    assert _stored() == images
     assert np.abs(a - b)[..., :3].mean() > 0.01 * a[..., :3].mean()
 
 
@@ -231,7 +237,7 @@ def test_text_objects_render_and_instances_are_reported(tmp_path):
     empty.instance_collection = coll
     bpy.context.scene.collection.objects.link(empty)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
-    assert bpy.data.objects["Text"].prt.visibility is not None
+    assert _has_data(bpy.data.objects["Text"])
     state = _frame_warnings()
     assert any("Instanced objects" in w and "Suzanne" in w for w in state.warnings)
     assert np.isfinite(bs.render_exr(tmp_path / "a.exr")).all()
@@ -366,12 +372,12 @@ def test_modal_precompute_esc_cancels_and_timer_finishes():
         result_esc = drive(op, "TIMER")
     assert result_esc == {"CANCELLED"}
     assert any("cancelled" in m for _, m in op.reports)
-    assert _prt_images() == [] and all(o.prt.visibility is None for o in bpy.data.objects)
+    assert _stored() == [] and not any(_has_data(o) for o in bpy.data.objects)
 
     op = Recorder()
     start(op).set()
     assert drive(op, "TIMER") == {"FINISHED"}
-    assert bpy.data.objects["Suzanne"].prt.visibility is not None
+    assert _has_data(bpy.data.objects["Suzanne"])
     assert not operators.RUNNING
 
 

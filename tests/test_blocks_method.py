@@ -217,15 +217,6 @@ def test_level_rule_follows_the_lobe():
     assert f.max() < 1e-6 * brdf.specular_cosine(mat, nrm, view, mirror[None]).max()
 
 
-def test_stream_floats_round_trip():
-    from prt_relight.addon.methods.blocks import bytes_to_floats, floats_to_bytes
-    rng = np.random.default_rng(3)
-    for size in (0, 1, 2, 3, 1000, 1001):
-        data = rng.integers(0, 256, size, dtype=np.uint8)
-        back = floats_to_bytes(bytes_to_floats(data), size)
-        assert np.array_equal(back, data)
-
-
 # ---------------------------------------------------------------------------- add-on
 
 def _blocks_scene(resolution):
@@ -261,8 +252,8 @@ def test_addon_blocks_f12_matches_reference_and_survives_reload(tmp_path):
     from . import blender_scene as bs
     scene = _blocks_scene(64)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
-    img = bpy.data.images.get(method.IMAGE_PREFIX + "Suzanne")
-    assert img is not None and img.packed_file is not None
+    from prt_relight.addon import storage
+    assert storage.has(bpy.data.objects["Suzanne"], method.BLOB)
     ours = bs.render_exr(tmp_path / "blocks.exr")
     assert method.LAST_STATS["sources"] == ["stored", "stored"]
     stats = method.LAST_STATS["stats"]
@@ -281,7 +272,7 @@ def test_addon_blocks_f12_matches_reference_and_survives_reload(tmp_path):
     by_name = {st.name: st for st in state.objects}
     for name in ("Suzanne", "Grid"):
         st = by_name[name]
-        stored = method.read_stream_image(bpy.data.images[method.IMAGE_PREFIX + name])
+        stored = storage.get(bpy.data.objects[name], method.BLOB)[0]["stream"]
         dv = B.deserialize_visibility(stored.tobytes())
         assert np.array_equal(B.decode_visibility(dv), st.bits)
         assert stored.size < st.bits.nbytes / 2          # compressed

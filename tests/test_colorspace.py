@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import scene_export
+from prt_relight.addon import scene_export, storage
 from prt_relight.core import envmap
 
 from . import blender_scene as bs
@@ -160,7 +160,7 @@ def test_unconvertible_colour_space_is_a_clear_error_and_leaves_the_scene(tmp_pa
     with pytest.raises(RuntimeError, match="Filmic sRGB"):
         bpy.ops.prt.precompute()
     assert sorted(i.name for i in bpy.data.images) == before
-    assert all(o.prt.visibility is None for o in bpy.data.objects)
+    assert not any(storage.has(o, storage.VISIBILITY) for o in bpy.data.objects)
     img.colorspace_settings.name = "sRGB"             # sRGB needs no OpenColorIO
     np.testing.assert_allclose(scene_export.export_world(bpy.context.scene, []).image,
                                GREY_LINEAR, rtol=1e-6)

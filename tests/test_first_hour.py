@@ -136,7 +136,7 @@ def test_objects_hidden_from_renders_cast_no_ghost_shadow(tmp_path):
     cube = bpy.context.object
     cube.hide_render = True
     bpy.ops.prt.precompute()
-    assert cube.prt.visibility is None
+    assert not storage.has(cube, storage.VISIBILITY)
     with_hidden = bs.render_exr(tmp_path / "hidden.exr")
     state = _sync()                                         # the viewport's depsgraph
     statuses = {st.name: st.status for st in state.objects}
@@ -204,12 +204,11 @@ def test_clear_removes_what_deleted_objects_stored():
     _ball_scene()
     bpy.context.scene.prt.method = "SSDF_SG"
     bpy.ops.prt.precompute()
-    assert any(img.name.startswith("PRT SSDF") for img in bpy.data.images)
-    bpy.data.objects.remove(bpy.data.objects["Sphere"])
+    sphere = bpy.data.objects["Sphere"]
+    assert storage.has(sphere, "ssdf_sg")
+    bpy.data.objects.remove(sphere)
     bpy.ops.prt.clear()
-    left = [img.name for img in bpy.data.images if img.name.startswith("PRT")
-            or img.get(storage.OWNER_TAG)]
-    assert left == []
+    assert not [img.name for img in bpy.data.images if img.name.startswith("PRT")]
     assert not [k for ob in bpy.data.objects for k in ob.keys() if k.startswith("prt_")]
 
 

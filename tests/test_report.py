@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import methods
+from prt_relight.addon import methods, storage
 from prt_relight.core import report as core_report
 
 from . import blender_scene as bs
@@ -203,7 +203,7 @@ def test_report_measures_each_method_and_restores_the_scene(tmp_path):
     assert img.shape == (30, 40, 3) and img.max() > 50
     # the scene is as it was: method, budgets, no stored data (it had none)
     assert scene.prt.method == "SH" and scene.prt.sh_order == 3
-    assert all(ob.prt.visibility is None for ob in bpy.data.objects if ob.type == "MESH")
+    assert not any(storage.has(ob, storage.VISIBILITY) for ob in bpy.data.objects)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
@@ -228,7 +228,8 @@ def test_report_cancel_leaves_no_half_report(tmp_path):
     assert list(tmp_path.iterdir()) == []
     assert scene.prt.method == "SH" and scene.prt.sh_order == 2
     assert sorted(i.name for i in bpy.data.images) == images
-    assert all(ob.prt.visibility is not None for ob in bpy.data.objects if ob.type == "MESH")
+    assert all(storage.has(ob, storage.VISIBILITY) for ob in bpy.data.objects
+               if ob.type == "MESH")
 
 
 @pytest.mark.usefixtures("registered_addon")

@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import drawing, runtime
+from prt_relight.addon import drawing, runtime, storage
 from prt_relight.addon.methods import ssdf_sg as method
 
 from . import blender_scene as bs
@@ -168,8 +168,7 @@ def test_f12_close_to_reference_and_sliders_need_no_recompute(tmp_path):
     scene = _scene()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     ids = {ob.name: ob.prt.precompute_id for ob in bpy.data.objects if ob.type == "MESH"}
-    img = bpy.data.images["PRT SSDF Suzanne"]
-    assert img["prt_precompute_id"] == ids["Suzanne"] and img["prt_terms"] >= 4
+    assert len(storage.get(bpy.data.objects["Suzanne"], method.BLOB)[0]["eigen"]) >= 4
     ours = bs.render_exr(tmp_path / "ssdf.exr")
     scene.prt.method = "REFERENCE"
     ref = bs.render_exr(tmp_path / "ref.exr")
@@ -321,8 +320,7 @@ def test_pca_tells_how_much_occlusion_it_keeps():
     for budget in (0.05, 0.005):
         scene.prt.ssdf_error_budget = budget
         assert bpy.ops.prt.precompute() == {"FINISHED"}
-        img = bpy.data.images[method.IMAGE_PREFIX + "Grid"]
-        kept[budget] = float(img["prt_occlusion_kept"])
+        kept[budget] = storage.get(bpy.data.objects["Grid"], method.BLOB)[1]["occlusion_kept"]
         state = _state()
         grid = next(st for st in state.objects if st.name == "Grid")
         field = state.method_impl._field(state, grid)
@@ -340,10 +338,11 @@ def test_pca_tells_how_much_occlusion_it_keeps():
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     state = _state()
     field = state.method_impl._field(state, next(st for st in state.objects if st.name == "Grid"))
-    img = bpy.data.images[method.IMAGE_PREFIX + "Grid"]
     assert field.occlusion_kept >= 0.9 or field.terms == scene.prt.ssdf_max_terms
-    assert float(img["prt_occlusion_target"]) == pytest.approx(0.9)
+    meta = storage.get(bpy.data.objects["Grid"], method.BLOB)[1]
+    assert meta["occlusion_target"] == pytest.approx(0.9)
     assert not any("blocked directions: shadows" in w for w in state.warnings)
     # a stored field made for another target is not used: the setting needs a precompute
     scene.prt.ssdf_occlusion_target = 0.0
-    assert method.read_image("Grid", field.coefficients.shape[0], 32, 32, 0.05, 48, 0.0) is None
+    assert method.read_field(bpy.data.objects["Grid"], field.coefficients.shape[0], 32, 32, 0.05,
+                             48, 0.0) is None

@@ -2,10 +2,11 @@
 
 The stored visibility is re-encoded per 16x16 cubemap block as differential
 change indices (eq. 5), serialized as base-128 varints and stored in the .blend
-next to the bit-packed form (``derive``/``store`` at precompute; ``sync`` loads
-it).  Each frame runs Algorithm 1 for every (vertex, block) pair with the BRDF
-sampled per vertex for the current view (:mod:`...core.blocks`).  Lighting block
-forms (§4.3) and the view-independent line-9 products are cached per world.
+next to the bit-packed form (blob ``blocks`` of :mod:`..storage`: ``derive``/``store``
+at precompute; ``sync`` loads it).  Each frame runs Algorithm 1 for every (vertex,
+block) pair with the BRDF sampled per vertex for the current view
+(:mod:`...core.blocks`).  Lighting block forms (§4.3) and the view-independent line-9
+products are cached per world.
 """
 
 from __future__ import annotations
@@ -16,13 +17,14 @@ from ...core import blocks as core_blocks, visibility
 from .. import runtime, storage
 from . import Method, register
 
-IMAGE_PREFIX = "PRT Blocks "
+#: name of the stored blob (addon.storage)
+BLOB = "blocks"
 #: recommended minimum cubemap resolution (the paper uses 6x64^2 and 6x128^2)
 MIN_RESOLUTION = 64
 
 # Lighting tables per env key (one world at a time).
 _TABLES: dict = {}
-# Differential visibility read from the .blend per (image, precompute id, points).
+# Differential visibility read from the .blend per stored blob (storage.key).
 _STORED: dict = {}
 # Encoded from the bit-packed visibility when nothing compressed is stored.
 _ENCODED: dict = {}
@@ -39,42 +41,15 @@ def thresholds_for(tolerance: float):
     return (t, t * 1e-1, t * 1e-2, t * 1e-7)
 
 
-def bytes_to_floats(data: np.ndarray) -> np.ndarray:
-    """uint8 stream -> float32 values holding 3 bytes each (exact below 2**24), padded."""
-    b = np.asarray(data, dtype=np.uint8).reshape(-1)
-    pad = (-b.size) % 3
-    b = np.concatenate([b, np.zeros(pad, np.uint8)]) if pad else b
-    return visibility.bytes_to_float24(b.reshape(1, -1))[0]
-
-
-def floats_to_bytes(values: np.ndarray, nbytes: int) -> np.ndarray:
-    f = np.asarray(values, dtype=np.float32).reshape(1, -1)
-    return visibility.float24_to_bytes(f)[0][:nbytes]
-
-
-def _image_size(nfloats: int):
-    pixels = max(1, -(-nfloats // 4))
-    width = min(4096, pixels)
-    return width, -(-pixels // width)
-
-
-def write_stream_image(name: str, data: np.ndarray):
-    """A packed, fake-user, Non-Color float image holding the byte stream ``data``."""
-    floats = bytes_to_floats(data)
-    img = storage.write_float_image(name, floats, _image_size(floats.size)[0])
-    img["prt_nbytes"] = int(np.asarray(data).size)
-    return img
-
-
-def read_stream_image(img) -> np.ndarray:
-    nbytes = int(img.get("prt_nbytes", -1))
-    if nbytes < 0:
-        raise ValueError(f"image '{img.name}' holds no BLOCKS stream")
-    flat = storage.read_float_image(img)
-    nfloats = -(-nbytes // 3)
-    if nfloats > flat.size:
-        raise ValueError(f"image '{img.name}' is too small for its stream")
-    return floats_to_bytes(flat[:nfloats], nbytes)
+def _stored_visibility(arrays, meta):
+    """(differential visibility, stream bytes) of a stored ``blocks`` blob."""
+    stream = arrays.get("stream")
+    if stream is None:
+        raise storage.Unreadable("no BLOCKS stream in the stored data")
+    try:
+        return core_blocks.deserialize_visibility(stream.tobytes()), int(stream.size)
+    except ValueError as exc:
+        raise storage.Unreadable(f"BLOCKS stream unreadable ({exc})") from None
 
 
 class BlocksMethod(Method):
@@ -117,15 +92,8 @@ class BlocksMethod(Method):
             data = derived.get(o.name)
             if data is None:
                 continue
-            name = IMAGE_PREFIX + o.name
-            old = bpy.data.images.get(name)
-            img = write_stream_image(name, data)
-            img["prt_precompute_id"] = bpy.data.objects[o.name].prt.precompute_id
-            img["prt_points"] = int(o.points.count)
-            if old is not None:
-                old.use_fake_user = False
-                bpy.data.images.remove(old)
-            img.name = name
+            stream = np.asarray(data, dtype=np.uint8).reshape(-1)
+            storage.put(bpy.data.objects[o.name], BLOB, storage.pack({"stream": stream}))
 
     # ------------------------------------------------------------ frames
     def sync(self, state):
@@ -133,26 +101,16 @@ class BlocksMethod(Method):
         for st in state.objects:
             st.data.pop("blocks_dv", None)
             ob = bpy.data.objects.get(st.name)
-            img = bpy.data.images.get(IMAGE_PREFIX + st.name)
-            if st.status != "ok" or ob is None or img is None:
+            if st.status != "ok" or ob is None:
                 continue
-            pid = ob.prt.precompute_id
-            if img.get("prt_precompute_id") != pid or img.get("prt_points") != st.points.count:
+            got = storage.load(ob, BLOB, _STORED, _stored_visibility, state.note)
+            if got is None:
                 continue
-            key = (img.name_full, pid, st.points.count)
-            dv = _STORED.get(key)
-            if dv is None:
-                try:
-                    dv = core_blocks.deserialize_visibility(read_stream_image(img).tobytes())
-                except ValueError:
-                    continue
-                if dv.count != st.points.count or dv.resolution != state.resolution:
-                    continue
-                if len(_STORED) >= 16:
-                    _STORED.pop(next(iter(_STORED)))
-                _STORED[key] = dv
+            dv, nbytes = got
+            if dv.count != st.points.count or dv.resolution != state.resolution:
+                continue
             st.data["blocks_dv"] = dv
-            st.data["blocks_stream_bytes"] = int(img["prt_nbytes"])
+            st.data["blocks_stream_bytes"] = nbytes
 
     def visibility_of(self, st, resolution):
         """The object's differential visibility: stored, else encoded from its bits."""

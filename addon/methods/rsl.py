@@ -26,7 +26,7 @@ _LIGHTS: dict = {}          # SquareLights per (lighting key, K / budget)
 _TABLES: dict = {}          # BrdfTables per material
 _VISIBILITY: dict = {}      # per-vertex VDT / SAT per (object, bits)
 _FACTORS: dict = {}         # view-independent (V, C) per (object, bits, lights, rotation)
-_STORED: dict = {}          # VDT reconstructed from the stored CPCA per (image, run, points)
+_STORED: dict = {}          # (VDT, pose) reconstructed per stored blob (storage.key)
 
 
 def _unrotated_lighting(world: envmap.WorldLighting, resolution: int):
@@ -133,13 +133,9 @@ def _precompute_rows(st, turn):
     return rows
 
 
-def _rigid_rotation(ob, st):
+def _rigid_rotation(ob, st, R0, probe):
     """``R1 R0^T`` when the object only moved/turned since precompute (same object-space
-    vertices), else None."""
-    R0 = ob.get("prt_rsl_rotation")
-    probe = ob.get("prt_rsl_probe")
-    if R0 is None or probe is None:
-        return None
+    vertices; ``R0`` and ``probe`` stored then), else None."""
     M = np.array(ob.matrix_world, dtype=np.float64)
     now = _local_probe(st.arrays.positions, M)
     then = np.asarray(probe, dtype=np.float64).reshape(-1, 3)
@@ -151,42 +147,39 @@ def _rigid_rotation(ob, st):
 
 # ------------------------------------------------------------------ storage (§5.1)
 
-IMAGE_PREFIX = "PRT RSL "
-_MAGIC = 5301.0
-_ROW_FLOATS = 4096 * 4
+#: name of the stored blob (addon.storage): the CPCA of the VDTs and the pose then
+BLOB = "rsl"
 
 
-def pack_cpca(model: rsl.ClusteredPCA, resolution: int) -> np.ndarray:
-    """Flat float32: header, means, bases, labels, coefficients (labels exact < 2**24)."""
-    C, E, D = model.bases.shape
-    head = np.array([_MAGIC, len(model.labels), D, C, E, resolution, 0, 0], np.float32)
-    return np.concatenate([head, model.means.ravel(), model.bases.ravel(),
-                           model.labels.astype(np.float32), model.coeffs.ravel()])
+def cpca_blob(model: rsl.ClusteredPCA, resolution: int, rotation, probe) -> bytes:
+    """One object's CPCA (float32 tables, int32 labels) and its pose at precompute
+    (``rotation`` 3x3, ``probe`` object-space vertices) as a stored blob."""
+    return storage.pack({"labels": np.asarray(model.labels, np.int32),
+                         "means": np.asarray(model.means, np.float32),
+                         "bases": np.asarray(model.bases, np.float32),
+                         "coeffs": np.asarray(model.coeffs, np.float32),
+                         "rotation": np.asarray(rotation, np.float64).reshape(3, 3),
+                         "probe": np.asarray(probe, np.float64).reshape(-1, 3)},
+                        {"resolution": int(resolution)})
 
 
-def unpack_cpca(flat: np.ndarray):
-    """Inverse of :func:`pack_cpca`: ``(model, resolution)``; ValueError when malformed."""
-    if len(flat) < 8 or flat[0] != _MAGIC:
-        raise ValueError("not an RSL visibility image")
-    P, D, C, E, res = (int(v) for v in flat[1:6])
-    sizes = [C * D, C * E * D, P, P * E]
-    if len(flat) < 8 + sum(sizes) or res * res != D:
-        raise ValueError("RSL visibility image is truncated")
-    parts, at = [], 8
-    for n in sizes:
-        parts.append(flat[at:at + n])
-        at += n
-    model = rsl.ClusteredPCA(parts[2].astype(np.int64), parts[0].reshape(C, D),
-                             parts[1].reshape(C, E, D), parts[3].reshape(P, E))
-    return model, res
-
-
-def _write_image(name: str, flat: np.ndarray):
-    return storage.write_float_image(IMAGE_PREFIX + name, flat, _ROW_FLOATS // 4)
-
-
-def _read_image(img) -> np.ndarray:
-    return storage.read_float_image(img)
+def _stored_tables(arrays, meta):
+    """(VDT (P, res, res) float32, rotation, probe) of a stored ``rsl`` blob."""
+    try:
+        res = int(meta["resolution"])
+        labels, means, bases, coeffs = (arrays[k] for k in ("labels", "means", "bases",
+                                                             "coeffs"))
+        rotation, probe = arrays["rotation"], arrays["probe"]
+    except (KeyError, TypeError, ValueError):
+        raise storage.Unreadable("RSL data incomplete") from None
+    C, E, D = bases.shape if bases.ndim == 3 else (0, 0, -1)
+    if (res * res != D or means.shape != (C, D) or coeffs.shape != (len(labels), E)
+            or (labels.size and not 0 <= labels.min() <= labels.max() < C)):
+        raise storage.Unreadable("RSL data inconsistent")
+    model = rsl.ClusteredPCA(labels.astype(np.int64), means, bases, coeffs)
+    vdt = np.concatenate([model.reconstruct(a, a + 4096)
+                          for a in range(0, max(len(labels), 1), 4096)])
+    return vdt.reshape(-1, res, res).astype(np.float32), rotation, probe
 
 
 class RSLMethod(Method):
@@ -258,7 +251,7 @@ class RSLMethod(Method):
                 raise Cancelled()
             vdt = derive_visibility(o.bits, o.points.normals, job.resolution)["VDT"]
             model, err, ratio = rsl.compress_by_budget(vdt.reshape(len(vdt), -1), budget)
-            out[o.name] = (pack_cpca(model, DISK_RESOLUTION), err, ratio)
+            out[o.name] = (model, err, ratio)
             C, E, _ = model.bases.shape
             notes.append(f"{o.name}: CPCA {C}x{E} error {err:.3f} ratio 1:{ratio:.0f}")
         job.timings["rsl_cpca"] = "; ".join(notes)
@@ -266,57 +259,33 @@ class RSLMethod(Method):
 
     def store(self, scene, job, derived):
         import bpy
-        for name, (flat, _err, _ratio) in (derived or {}).items():
+        for name, (model, _err, _ratio) in (derived or {}).items():
             ob = bpy.data.objects.get(name)
             if ob is None:
                 continue
-            old = ob.get("prt_rsl_image")
-            img = _write_image(name, flat)
-            ob["prt_rsl_image"] = img
-            ob["prt_rsl_id"] = ob.prt.precompute_id
-            if old is not None and old != img and old.name in bpy.data.images:
-                old.use_fake_user = False
-                if old.users <= 1:
-                    bpy.data.images.remove(old)
-            img.name = IMAGE_PREFIX + name
             # pose at precompute: the VDTs live in vertex frames that turn with the object
             job_ob = next(o for o in job.objects if o.name == name)
             M = np.array(ob.matrix_world, dtype=np.float64)
-            ob["prt_rsl_rotation"] = _rotation_part(M).ravel().tolist()
-            ob["prt_rsl_probe"] = _local_probe(job_ob.arrays.positions, M).ravel().tolist()
+            storage.put(ob, BLOB, cpca_blob(model, DISK_RESOLUTION, _rotation_part(M),
+                                            _local_probe(job_ob.arrays.positions, M)))
 
     def sync(self, state):
         import bpy
         for st in state.objects:
             ob = bpy.data.objects.get(st.name)
-            img = ob.get("prt_rsl_image") if ob is not None else None
-            if img is None or ob.get("prt_rsl_id") != ob.prt.precompute_id:
+            got = storage.load(ob, BLOB, _STORED, _stored_tables, state.note, limit=8)
+            if got is None or len(got[0]) != st.points.count:
                 continue
+            vdt, R0, probe = got
             if st.status != "ok":
-                turn = _rigid_rotation(ob, st)
+                turn = _rigid_rotation(ob, st, R0, probe)
                 if turn is None:
                     continue
                 st.data["rsl_rotation"] = turn
                 st.data["rsl_rows"] = _precompute_rows(st, turn)
                 state.note(f"RSL: {st.name} turned since precompute; its self-shadowing turns "
                            "with it (shadows on other objects are not updated)")
-            key = (img.name_full, ob.get("prt_rsl_id"), st.points.count)
-            got = _STORED.get(key)
-            if got is None:
-                try:
-                    model, res = unpack_cpca(_read_image(img))
-                except ValueError as exc:
-                    state.note(f"RSL data of {st.name} unusable ({exc}); derived at sync")
-                    continue
-                if len(model.labels) != st.points.count:
-                    continue
-                got = np.concatenate([model.reconstruct(a, a + 4096)
-                                      for a in range(0, len(model.labels), 4096)])
-                got = got.reshape(-1, res, res).astype(np.float32)
-                if len(_STORED) > 8:
-                    _STORED.pop(next(iter(_STORED)))
-                _STORED[key] = got
-            st.data["rsl"] = got
+            st.data["rsl"] = vdt
 
     def view_dependent(self, state) -> bool:
         return glossy_or_layered(state)

@@ -3,11 +3,10 @@ visibility (Wang, Ren, Gong, Snyder, Guo 2009, paper 003).
 
 Precompute (``derive``): the SSDF of every shading point (``core.ssdf``, eq. 23)
 compressed by PCA (eq. 24) with as many terms as the error budget needs.
-``store`` writes, per object, one packed float image ``PRT SSDF <object>``
-(mean, eigen-images, per-point coefficients; metadata as the image's custom
-properties, keyed by the object's ``precompute_id``).  ``sync`` loads it, or
-derives it from the stored visibility when it is missing or was made with
-other SSDF settings (noted in the panel).
+``store`` writes, per object, one blob ``ssdf_sg`` (:mod:`..storage`: mean,
+eigen-images, per-point coefficients and the settings they were made with).
+``sync`` loads it, or derives it from the stored visibility when it is missing or
+was made with other SSDF settings (noted in the panel).
 
 Shading: eq. 39 (diffuse: the environment's SG fit times the clamped-cosine
 SG, visibility by eq. 30 at each product lobe's SSDF value) and eq. 41
@@ -37,7 +36,8 @@ from ...core import brdf as core_brdf
 from .. import drawing, runtime, storage
 from . import Method, register
 
-IMAGE_PREFIX = "PRT SSDF "
+#: name of the stored blob (addon.storage): one object's PCA SSDF and how it was made
+BLOB = "ssdf_sg"
 # (ident, resolution) -> (diffuse SGs, PrefilteredEnvironment) of the unrotated image
 _LIGHTING_CACHE: dict = {}
 # SSDF PCA derived at draw time per (object, visibility, settings); a field carries its
@@ -379,8 +379,7 @@ class SSDFSGMethod(Method):
             if o.name not in derived:
                 continue
             basis, coeffs = derived[o.name]
-            ob = bpy.data.objects[o.name]
-            write_image(o.name, basis, coeffs, ob.prt.precompute_id, job.resolution)
+            write_field(bpy.data.objects[o.name], basis, coeffs, job.resolution)
 
     # ------------------------------------------------------------- sync
     def sync(self, state):
@@ -408,8 +407,8 @@ class SSDFSGMethod(Method):
         LAST_TERMS.clear()
         for st in state.objects:
             field = None
-            loaded = read_image(st.name, st.points.count, state.resolution, res, budget,
-                                max_terms, occlusion)
+            loaded = read_field(bpy.data.objects.get(st.name), st.points.count,
+                                state.resolution, res, budget, max_terms, occlusion, state.note)
             if loaded is not None and st.status == "ok":
                 field = loaded
             elif st.status in ("missing", "unshadowed"):
@@ -546,70 +545,56 @@ def _field_from(result):
 
 # ----------------------------------------------------------------- storage
 
-_ROW_FLOATS = 4096
+def write_field(ob, basis, coeffs, cube_resolution):
+    """Store the PCA SSDF of one object (float32, as it is drawn) with its settings."""
+    storage.put(ob, BLOB, storage.pack(
+        {"mean": np.asarray(basis.mean, np.float32).ravel(),
+         "eigen": np.asarray(basis.eigen, np.float32),
+         "coeffs": np.asarray(coeffs, np.float32)},
+        {"ssdf_resolution": int(basis.resolution), "budget": float(basis.budget),
+         "rms": float(basis.rms_error), "occlusion_kept": float(basis.occlusion_kept),
+         "occlusion_target": float(basis.occlusion_target),
+         "cube_resolution": int(cube_resolution)}))
 
 
-def write_image(name, basis, coeffs, precompute_id, cube_resolution):
-    """Store the PCA SSDF of one object in a packed RGBA float image."""
-    import bpy
-    flat = np.concatenate([basis.mean.ravel(), basis.eigen.ravel(),
-                           np.asarray(coeffs, np.float32).ravel()]).astype(np.float32)
-    img = storage.write_float_image(IMAGE_PREFIX + name, flat, _ROW_FLOATS // 4,
-                                    image=bpy.data.images.get(IMAGE_PREFIX + name))
-    img["prt_precompute_id"] = precompute_id
-    img["prt_ssdf_resolution"] = int(basis.resolution)
-    img["prt_terms"] = int(basis.terms)
-    img["prt_points"] = int(len(coeffs))
-    img["prt_budget"] = float(basis.budget)
-    img["prt_max_terms"] = int(-1)
-    img["prt_rms"] = float(basis.rms_error)
-    img["prt_occlusion_kept"] = float(basis.occlusion_kept)
-    img["prt_occlusion_target"] = float(basis.occlusion_target)
-    img["prt_cube_resolution"] = int(cube_resolution)
-    return img
+def _stored_field(arrays, meta):
+    """(meta, StoredField) of a stored ``ssdf_sg`` blob."""
+    try:
+        mean, eigen, coeffs = arrays["mean"], arrays["eigen"], arrays["coeffs"]
+        res = int(meta["ssdf_resolution"])
+        rms, kept = float(meta["rms"]), float(meta["occlusion_kept"])
+    except (KeyError, TypeError, ValueError):
+        raise storage.Unreadable("SSDF data incomplete") from None
+    D = res * res
+    if mean.shape != (D,) or eigen.ndim != 2 or eigen.shape[1] != D or \
+            coeffs.ndim != 2 or coeffs.shape[1] != len(eigen):
+        raise storage.Unreadable("SSDF data inconsistent")
+    if not (np.isfinite(mean).all() and np.isfinite(eigen).all() and np.isfinite(coeffs).all()):
+        raise storage.Unreadable("SSDF data not finite")
+    return meta, StoredField(mean, eigen, coeffs, res, rms, occlusion_kept=kept)
 
 
 _READ_CACHE: dict = drawing.gpu_cache({})    # fields read from the .blend (GPU textures too)
 
 
-def read_image(name, points, cube_resolution, resolution, budget, max_terms,
-               occlusion_target=0.0):
-    """The stored StoredField of an object, or None when missing or made otherwise."""
-    import bpy
-    ob = bpy.data.objects.get(name)
-    img = bpy.data.images.get(IMAGE_PREFIX + name)
-    if ob is None or img is None:
+def read_field(ob, points, cube_resolution, resolution, budget, max_terms,
+               occlusion_target=0.0, note=None):
+    """The stored StoredField of ``ob``, or None when missing or made otherwise (other
+    settings, point count or cube); ``note`` is told why stored data is unreadable."""
+    got = storage.load(ob, BLOB, _READ_CACHE, _stored_field, note)
+    if got is None:
         return None
+    meta, field = got
     try:
-        meta = (img["prt_precompute_id"], int(img["prt_ssdf_resolution"]), int(img["prt_terms"]),
-                int(img["prt_points"]), float(img["prt_budget"]), int(img["prt_cube_resolution"]))
+        made = (int(meta["cube_resolution"]), float(meta["budget"]),
+                float(meta["occlusion_target"]))
     except (KeyError, TypeError, ValueError):
         return None
-    pid, res, K, P, bud, cres = meta
-    if (pid != ob.prt.precompute_id or P != points or res != resolution or cres != cube_resolution
-            or abs(bud - budget) > 1e-9 or K > max(max_terms, 4) + 3
-            or abs(float(img.get("prt_occlusion_target", 0.0)) - occlusion_target) > 1e-9):
+    if (len(field.coefficients) != points or field.resolution != resolution
+            or made[0] != cube_resolution or abs(made[1] - budget) > 1e-9
+            or field.terms > max(max_terms, 4) + 3 or abs(made[2] - occlusion_target) > 1e-9):
         return None
-    key = (img.name_full, pid, P, res, K)
-    hit = _READ_CACHE.get(key)
-    if hit is not None:
-        return hit
-    D = res * res
-    need = D + K * D + P * K
-    w, h = img.size
-    if w * h * 4 < need:
-        return None
-    flat = storage.read_float_image(img)
-    mean = flat[:D]
-    eigen = flat[D:D + K * D].reshape(K, D)
-    coeffs = flat[D + K * D:need].reshape(P, K)
-    if not (np.isfinite(mean).all() and np.isfinite(eigen).all() and np.isfinite(coeffs).all()):
-        return None
-    field = StoredField(mean, eigen, coeffs, res, float(img.get("prt_rms", 0.0)), pid,
-                        float(img.get("prt_occlusion_kept", 1.0)))
-    if len(_READ_CACHE) >= 16:
-        _READ_CACHE.pop(next(iter(_READ_CACHE)))
-    _READ_CACHE[key] = field
+    field.precompute_id = ob.prt.precompute_id          # the run its blob belongs to
     return field
 
 
