@@ -11,15 +11,13 @@ A Mapping node of type POINT/VECTOR between the Texture Coordinate and the
 Environment Texture turns ``d`` into ``R @ d`` before the lookup (TEXTURE type
 applies the inverse), so the world radiance is ``L(d) = strength * E(R @ d)``.
 
-Resampling to a cubemap is *by area*: every equirectangular pixel (split into
-``s x s`` sub-pixels when the cubemap is finer than about 8 pixels per texel)
-deposits ``radiance * solid_angle`` into the texel its centre falls in, and the
-texel's radiance is the deposited energy over its own solid angle.  Total
-energy ``sum L * dw`` is preserved to rounding; a one-pixel sun's energy goes
-to the texel(s) its area overlaps, and every texel keeps the luminance-weighted
-mean direction of the light it received, so the sun keeps its direction.
-Binning by sub-pixel centre aliases: a constant image resamples to a constant
-only within 10–15 % per texel (8 sub-pixels across a texel edge).
+Resampling to a cubemap is *by exact overlap* (:mod:`.resample`): the weight of pixel
+``p`` in texel ``t`` is the solid angle of their intersection (the pixel a latitude-longitude
+rectangle in texture space, the texel a great-circle quadrilateral turned by ``R``), so a
+texel's radiance is ``sum_p w_pt L_p / Omega_t``, a constant image gives a constant cubemap
+and the energy ``sum L dw`` is preserved (both to ~1e-10).  Every texel also keeps the
+luminance-weighted mean direction of its light, ``sum_p Y_p int_{p & t} w dw /
+sum_p Y_p w_pt``, equally exact: a one-pixel sun keeps its direction, split or not.
 """
 
 from __future__ import annotations
@@ -28,7 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .directions import Cubemap, cubemap, texel_of_components
+from .directions import Cubemap, cubemap
+from .resample import LUMINANCE, ImageSums, texel_sums
 
 try:  # OpenImageIO ships inside Blender 4.5/5.0, not 4.2.
     import OpenImageIO as _oiio
@@ -237,78 +236,37 @@ class CubeLighting:
         return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
 
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-
-
-def _supersample_for(height: int, resolution: int) -> int:
-    pixel_angle = np.pi / height
-    texel_angle = (np.pi / 2.0) / resolution
-    return int(max(1, np.ceil(8.0 * pixel_angle / texel_angle)))
-
-
-# Rotation-independent parts of the resampling, for the newest image and cube size:
-# the supersampled pixels' unit directions and energies (float32, 28 bytes a sample).
-# A turned world (Mapping rotation: relit frames) only re-bins them.  Images with more
-# samples than this are prepared again per call, band by band (bounded memory).
+# What the resampling keeps of the newest image (:class:`ImageSums`: per-column sums, at
+# most resample.SUMS_BUDGET bytes): a turned world (Mapping rotation: relit frames) only
+# redoes the geometry.
 _RESAMPLE_CACHE: dict = {}
-RESAMPLE_CACHE_SAMPLES = 2_200_000
 
 
-def _resample_bands(img: np.ndarray, s: int):
-    """Per band of rows: (directions (n, 3), RGB energy (n, 3), luminance energy (n,)),
-    float32, of ``img``'s samples at supersampling ``s``."""
-    h, w, _ = img.shape
-    rows_per_band = max(1, 2_000_000 // (w * s * s))
-    for r0 in range(0, h, rows_per_band):
-        r1 = min(h, r0 + rows_per_band)
-        dirs, sa = _band_directions(h, w, s, r0, r1)
-        px = np.repeat(np.repeat(img[r0:r1], s, axis=0), s, axis=1).reshape(-1, 3)
-        energy = px.astype(np.float64) * sa.reshape(-1)[:, None]
-        yield (dirs.reshape(-1, 3).astype(np.float32), energy.astype(np.float32),
-               (energy @ LUMINANCE).astype(np.float32))
-
-
-def _resample_parts(img: np.ndarray, s: int):
-    """:func:`_resample_bands` of ``img``, kept for the newest small enough image."""
-    if img.shape[0] * img.shape[1] * s * s > RESAMPLE_CACHE_SAMPLES:
-        return _resample_bands(img, s)
-    key = (id(img), img.shape, s)
+def _image_sums(img: np.ndarray) -> ImageSums:
+    """:class:`ImageSums` of ``img``, kept for the newest image."""
+    key = (id(img), img.shape)
     got = _RESAMPLE_CACHE.get(key)
-    if got is not None and got[0] is img:
-        return got[1]
-    bands = list(_resample_bands(img, s))
+    if got is not None and got.image is img:
+        return got
+    sums = ImageSums(img)
     _RESAMPLE_CACHE.clear()
-    _RESAMPLE_CACHE[key] = (img, bands)
-    return bands
+    _RESAMPLE_CACHE[key] = sums
+    return sums
 
 
-def resample_equirect_to_cubemap(image: np.ndarray, cube: Cubemap, rotation=None,
-                                 supersample: int | None = None) -> CubeLighting:
-    """Energy-preserving resampling of an equirect image to ``cube`` texels.
+def resample_equirect_to_cubemap(image: np.ndarray, cube: Cubemap, rotation=None) -> CubeLighting:
+    """Exact area resampling of an equirect image to ``cube`` texels (module docstring).
 
-    Each (super)sampled pixel's energy goes to the texel its centre direction falls in
-    (directions in float32; the image's directions and energies are kept between calls
-    for the same image array, so turning the world only re-bins them).  The image must
-    not be modified in place between calls (a new array is a new image)."""
+    What does not depend on the rotation is kept between calls for the same image array,
+    so turning the world only redoes the geometry.  The image must not be modified in
+    place between calls (a new array is a new image)."""
     img = np.asarray(image, dtype=np.float32)      # the same array when already float32
-    h, w, _ = img.shape
-    s = _supersample_for(h, cube.resolution) if supersample is None else int(supersample)
     R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=np.float64)
-    R32 = R.astype(np.float32)
-    energy = np.zeros((cube.size, 3))
-    moment = np.zeros((cube.size, 3))       # sum of Y * w * dw
-    lum_energy = np.zeros(cube.size)        # sum of Y * dw
-    for dirs, e, yw in _resample_parts(img, s):
-        world = dirs @ R32          # tex = R @ world  <=>  world = R.T @ tex
-        texel = texel_of_components(world[:, 0], world[:, 1], world[:, 2], cube.resolution)
-        for c in range(3):
-            energy[:, c] += np.bincount(texel, weights=e[:, c], minlength=cube.size)
-        lum_energy += np.bincount(texel, weights=yw, minlength=cube.size)
-        for c in range(3):
-            moment[:, c] += np.bincount(texel, weights=yw * world[:, c], minlength=cube.size)
-    lit = lum_energy > 0
+    energy, moment = texel_sums(_image_sums(img), cube.resolution, R)
+    lum = energy @ LUMINANCE
+    lit = lum > 0
     dirs = np.array(cube.mean_directions)
-    dirs[lit] = moment[lit] / lum_energy[lit, None]
+    dirs[lit] = (moment[lit] @ R) / lum[lit, None]     # texture -> world: R.T @ m
     return CubeLighting((energy / cube.solid_angles[:, None]).astype(np.float32), dirs)
 
 

@@ -62,7 +62,7 @@ def test_subregions_are_connected():
 
 def test_one_pixel_sun_becomes_one_tiny_light():
     h, w = 256, 512
-    row, col = 70, 150
+    row, col = 70, 151
     sun_only = np.zeros((h, w, 3), np.float32)
     sun_only[row, col] = 1.0
     # the chosen pixel lies inside one cubemap texel (else "one texel" is not possible)
