@@ -11,13 +11,13 @@ from gpu_extras.presets import draw_texture_2d
 from mathutils import Matrix
 
 from ..core import pixel_filter
-from . import drawing, sharp
+from . import drawing, lights, sharp
 from .runtime import FrameState
 
 
 def _background(state: FrameState):
     """(texture, rotation, strength) for drawing the world, cached on the state."""
-    world = state.world
+    world = state.full_world if state.full_world is not None else state.world
     cached = state.background
     if cached is not None and cached[0] is world:
         tex = cached[1]
@@ -106,8 +106,9 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
     batches = [] if object_draws is not None else _batches(state, radiance)
     s = max(1, int(supersampling))
     background = _background(state)
-    added = sharp.draws(state, eye, view_dir, background) \
-        if eye is not None or view_dir is not None else []
+    added = (sharp.draws(state, eye, view_dir, background)
+             + lights.draws(state, eye, view_dir)) if eye is not None or view_dir is not None \
+        else []
     big = drawing.render_offscreen(batches, background, projection @ view,
                                    width * s, height * s, transparent,
                                    object_draws=object_draws or (), added_draws=added)

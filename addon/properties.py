@@ -28,6 +28,19 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
                                description="Final renders are drawn at this many times the "
                                            "resolution per axis and resolved with the Film's "
                                            "Filter Size (Blackman-Harris, as Cycles)")
+    light_sources: IntProperty(name="Compact Sources", default=8, min=0, max=8,
+                               description="Most bright, compact sources (a sun, softboxes) "
+                                           "taken out of the World and drawn per pixel with "
+                                           "their own shadows; 0 = every method shades the "
+                                           "whole World", update=redraw_viewports)
+    light_threshold: FloatProperty(name="Source Threshold", default=8.0, min=1.0, max=1e4,
+                                   description="A pixel belongs to a source when it is this "
+                                               "many times brighter than the World's mean",
+                                   update=redraw_viewports)
+    light_min_share: FloatProperty(name="Min Source Share", default=0.01, min=0.0, max=1.0,
+                                   subtype="FACTOR",
+                                   description="A source must carry this share of the "
+                                               "World's energy", update=redraw_viewports)
     # Written by the precompute operator (read-only in the UI).
     precomputed_resolution: IntProperty(name="Precomputed Directions", default=0)
     last_report: StringProperty(name="Last Precompute", default="")

@@ -726,6 +726,8 @@ def _run_case(case, method_list, resolution, progress=None):
         eye = setup["eye"]
         view_layer = scene.view_layers[0]
         scene.prt.resolution = "32"
+        # the methods' own numerics under the whole world: no source drawn per pixel instead
+        scene.prt.light_sources = 0
         with bpy.context.temp_override(scene=scene, view_layer=view_layer):
             depsgraph = bpy.context.evaluated_depsgraph_get()
         message = ""

@@ -9,12 +9,12 @@ returns per-corner radiance for each object with the active method.
 from __future__ import annotations
 
 import copy
-import hashlib
 
 import numpy as np
 
 from ..core import brdf as core_brdf, directions, envmap, mesh as core_mesh, visibility
-from . import scene_export, storage
+from . import lights, scene_export, storage
+from .keys import held, image_key, per_visibility  # noqa: F401  (methods use runtime.held)
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
 LAST_MESSAGES: list = []
@@ -23,17 +23,6 @@ _VIS_CACHE: dict = {}
 _VIS_CACHE_MAX = 16
 # Area-resampled environment per (world key, resolution).
 _ENV_CACHE: dict = {}
-
-
-# Content hashes of the newest environment images, per array (held with it).  Every sync
-# and every turned copy of a world shares the exported pixel array, so it is hashed
-# once (an array is not modified in place; new pixels are a new array).
-_CONTENT_KEYS: dict = {}
-
-
-def image_key(img: np.ndarray):
-    return held(_CONTENT_KEYS, id(img), (img,), lambda: (
-        img.shape, hashlib.sha1(np.ascontiguousarray(img).view(np.uint8)).hexdigest()), limit=4)
 
 
 def env_key(world: envmap.WorldLighting, resolution: int):
@@ -73,27 +62,6 @@ def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> envmap.
         _ENV_CACHE.clear()
         _ENV_CACHE[key] = cube
     return cube
-
-
-def held(cache: dict, key, refs: tuple, compute, limit: int = 64):
-    """``cache[key]``, made by ``compute()`` from the objects ``refs`` -- made again when
-    missing or when it was made from other objects.  An entry keeps its ``refs`` alive,
-    so ids of them in ``key`` cannot be reused meanwhile; the oldest entry goes when a
-    new key would pass ``limit``."""
-    refs = tuple(refs)
-    entry = cache.get(key)
-    if entry is None or len(entry[0]) != len(refs) or \
-            not all(a is b for a, b in zip(entry[0], refs)):
-        if entry is None and len(cache) >= limit:
-            cache.pop(next(iter(cache)))
-        entry = cache[key] = (refs, compute())
-    return entry[1]
-
-
-def per_visibility(cache: dict, key, bits, compute, limit: int = 64):
-    """``cache[key]`` derived from ``bits`` (:func:`held` with ``bits`` as the one
-    object it is made from)."""
-    return held(cache, key, (bits,), compute, limit)
 
 
 def stored_visibility(ob_orig, points: int, nbytes: int, note=None):
@@ -162,13 +130,19 @@ class FrameState:
 
     def __init__(self):
         self.objects: list[ObjectState] = []
+        #: the lighting the methods shade: the world less its compact sources
         self.world: envmap.WorldLighting | None = None
+        #: the world as exported (the background, the per-pixel sharp lobes)
+        self.full_world: envmap.WorldLighting | None = None
+        #: addon.lights.DrawnSource of the world's compact sources (drawn per pixel)
+        self.sources: list = []
+        self.sun_lamps: list = []    # core.sg_lighting.Lamp of the visible sun lamps
         self.warnings: list[str] = []
         self.error: str | None = None
         self.resolution = 32
         self.method = "REFERENCE"
         self.settings: dict = {}     # scene.prt values of every method's settings
-        self.lamps: list = []        # core.sg_lighting.Lamp of the visible lights
+        self.lamps: list = []        # core.sg_lighting.Lamp of the visible point/spot lights
         self.background = None       # (world, GPU texture) cached by the engine
         #: the camera of the frame being drawn (set by the engine before shading):
         #: dict(clip=4×4 world-to-clip, width, height, eye, view_dir), or None
@@ -184,6 +158,10 @@ class FrameState:
         except scene_export.ExportError as exc:
             self.error = str(exc)
             self.world = envmap.WorldLighting(color=(0.0, 0.0, 0.0))
+        # the compact sources are drawn per pixel (addon/lights.py); methods shade the rest
+        self.full_world = self.world
+        self.world, self.sources = lights.split_world(self.world,
+                                                      lights.extraction_settings(scene.prt))
         self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
         self.method = scene.prt.method
         from . import methods
@@ -267,12 +245,15 @@ class FrameState:
         self.objects = objects
         from . import sg_material
         lamp_warnings = []
-        self.lamps = sg_material.export_lamps(depsgraph, lamp_warnings)
+        lamps = sg_material.export_lamps(depsgraph, lamp_warnings)
+        # sun lamps: every method, per pixel (addon/lights.py); point/spot: SSDF_SG's SGs
+        self.sun_lamps = [lamp for lamp in lamps if lamp.kind == "SUN"]
+        self.lamps = [lamp for lamp in lamps if lamp.kind != "SUN"]
         if getattr(self.method_impl, "draws_lamps", False):
             self.warnings += lamp_warnings
         elif self.lamps or lamp_warnings:
-            self.warnings.append(f"Lights are drawn by SSDF_SG only; {self.method} lights the "
-                                 "scene from the World")
+            self.warnings.append(f"Point, spot and area lights are drawn by SSDF_SG only; "
+                                 f"{self.method} draws the World and sun lamps")
         self.method_impl.sync(self)
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
 

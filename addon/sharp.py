@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core import brdf as core_brdf, envmap, visibility as core_visibility
-from . import drawing, runtime
+from . import drawing, keys
 
 #: NDF samples per pixel for a lobe of non-zero roughness (one for a mirror)
 SAMPLES = 32
@@ -117,13 +117,13 @@ def _visibility_texture(st):
     def make():
         texels, stride = visibility_texels(st.bits)
         return _texture(texels), stride
-    return runtime.per_visibility(_VISIBILITY, (st.name, id(st.bits)), st.bits, make, limit=16)
+    return keys.per_visibility(_VISIBILITY, (st.name, id(st.bits)), st.bits, make, limit=16)
 
 
 def _mip_texture(world):
     """(texture, levels) of the equirect's mip pyramid below level 0 (newest world image)."""
     img = world.image
-    key = ("color",) if img is None else runtime.image_key(img)
+    key = ("color",) if img is None else keys.image_key(img)
     got = _MIPS.get(key)
     if got is None:
         if img is None:
@@ -162,7 +162,7 @@ def draws(state, eye, view_dir, background) -> list:
     if not todo:
         return []
     env_tex, rotation, strength = background
-    world = state.world
+    world = state.full_world if state.full_world is not None else state.world
     env_size = (1, 1) if world.image is None else world.image.shape[:2]
     mip_tex, levels = _mip_texture(world)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))

@@ -1,0 +1,303 @@
+"""Compact light sources drawn per pixel for every method.
+
+The world's few compact, bright sources (a sun, softboxes, windows: :func:`core.lights.
+extract_sources`) are split off the environment; every method shades the smooth residual
+from its precomputed transfer, and this pass adds the sources per pixel
+(``shaders/lights_*.glsl``), each with its own shadow map filtered to its angular size.
+Blender's sun lamps go through the same path.  The sources are found in the image's
+texture space, so turning the world (a Mapping rotation) moves them with no new
+extraction; the shadow maps follow.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+
+from ..core import brdf as core_brdf, lights as core_lights
+from . import drawing, keys
+
+#: shadow map tile per source (texels per side)
+SHADOW_TILE = 2048
+#: sources drawn per frame at most (the extracted ones plus sun lamps)
+MAX_DRAWN = 8
+#: below this angular radius (rad) a source is point-like: its power at its centre
+POINT_RADIUS = 1e-4
+#: view-cosine nodes of the per-material tables (lights_frag.glsl TABLE)
+TABLE = 32
+
+_GPU = drawing.gpu_cache({})
+_BATCHES = drawing.gpu_cache({})
+_SHADOWS = drawing.gpu_cache({})
+# extraction per (image content, settings): (core sources, residual image)
+_SPLITS: dict = {}
+
+
+class DrawnSource:
+    """A source as the pass draws it, in world space."""
+
+    __slots__ = ("direction", "radius", "radiance", "name")
+
+    def __init__(self, direction, radius, radiance, name):
+        self.direction = np.asarray(direction, np.float64) / max(np.linalg.norm(direction),
+                                                                 1e-300)
+        self.radius = float(radius)
+        #: (3,) radiance of the disc, or the irradiance at normal incidence when point-like
+        self.radiance = np.asarray(radiance, np.float64)
+        self.name = name
+
+    @property
+    def point_like(self) -> bool:
+        return self.radius < POINT_RADIUS
+
+
+def extraction_settings(prt) -> dict:
+    return dict(max_sources=int(prt.light_sources), threshold=float(prt.light_threshold),
+                min_share=float(prt.light_min_share))
+
+
+def split_world(world, settings: dict):
+    """``(residual world, sources)``: the world with its compact sources taken out (the
+    same pixel array for the same image and settings, so caches keyed on it hold), and
+    the sources in world space with the world's strength.  No split for a uniform world,
+    ``max_sources = 0`` or a non-positive strength."""
+    img = world.image
+    if img is None or settings["max_sources"] <= 0 or world.strength <= 0.0:
+        return world, []
+    key = (keys.image_key(img), tuple(sorted(settings.items())))
+    got = _SPLITS.get(key)
+    if got is None or got[0] is not img:
+        sources, residual = core_lights.extract_sources(img, **settings)
+        got = (img, sources, residual)
+        _SPLITS.clear()
+        _SPLITS[key] = got
+    _, sources, residual = got
+    if not sources:
+        return world, []
+    out = copy.copy(world)
+    out.image = residual
+    R = np.asarray(world.rotation, np.float64)        # texture = R @ world
+    drawn = [DrawnSource(R.T @ s.direction, s.radius, s.radiance * world.strength,
+                         f"source {k + 1}") for k, s in enumerate(sources)]
+    return out, drawn
+
+
+def lamp_sources(lamps) -> list:
+    """Blender sun lamps as discs: strength is the irradiance at normal incidence, spread
+    over the disc of half the lamp's angle (Cycles' distant light)."""
+    out = []
+    for lamp in lamps:
+        if lamp.kind != "SUN":
+            continue
+        r = 0.5 * float(lamp.angle)
+        E = np.asarray(lamp.color, np.float64)
+        if r < POINT_RADIUS:
+            out.append(DrawnSource(-np.asarray(lamp.direction), 0.0, E, "sun lamp"))
+        else:
+            out.append(DrawnSource(-np.asarray(lamp.direction), r,
+                                   E / (math.pi * math.sin(r) ** 2), "sun lamp"))
+    return out
+
+
+# --------------------------------------------------------------------------- shaders
+
+def _shader():
+    import gpu
+    sh = _GPU.get("shader")
+    if sh is None:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.push_constant("MAT4", "viewProjection")
+        info.push_constant("FLOAT", "closedSide")
+        info.push_constant("INT", "sourceCount")
+        for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex")):
+            info.sampler(slot, "FLOAT_2D", ident)
+        info.vertex_in(0, "VEC3", "pos")
+        info.vertex_in(1, "VEC3", "nrm")
+        iface = gpu.types.GPUStageInterfaceInfo("prt_lights_iface")
+        iface.smooth("VEC3", "vPos")
+        iface.smooth("VEC3", "vNrm")
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source(drawing.glsl_source("lights_vert.glsl"))
+        info.fragment_source("#define COS_VIEW_MIN 1e-4\n"
+                             + drawing.glsl_source("brdf_lib.glsl", "lights_frag.glsl"))
+        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
+    return sh
+
+
+def _depth_shader():
+    import gpu
+    sh = _GPU.get("depth")
+    if sh is None:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.push_constant("MAT4", "viewProjection")
+        info.vertex_in(0, "VEC3", "pos")
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source("void main() { gl_Position = viewProjection * vec4(pos, 1.0); }")
+        info.fragment_source("void main() { fragColor = vec4(0.0); }")
+        sh = _GPU["depth"] = gpu.shader.create_from_info(info)
+    return sh
+
+
+# --------------------------------------------------------------------------- geometry
+
+def _object_batches(st):
+    """(depth batch, [(slot, surface batch)]) of one object, cached per geometry."""
+    from gpu_extras.batch import batch_for_shader
+    key = (st.name, st.fingerprint)
+    got = _BATCHES.get(key)
+    if got is not None:
+        return got
+    arrays = st.arrays
+    tri = arrays.triangles
+    corner_pos = arrays.positions[arrays.corner_verts].astype(np.float32)
+    depth = batch_for_shader(_depth_shader(), "TRIS", {"pos": np.ascontiguousarray(corner_pos)},
+                             indices=np.ascontiguousarray(tri, dtype=np.int32))
+    corner = tri.reshape(-1)
+    pos = np.ascontiguousarray(corner_pos[corner])
+    nrm = np.ascontiguousarray(arrays.corner_normals[corner].astype(np.float32))
+    tri_slot = np.repeat(arrays.corner_materials[tri[:, 0]], 3)
+    surfaces = [(int(slot), batch_for_shader(_shader(), "TRIS", {
+        "pos": np.ascontiguousarray(pos[tri_slot == slot]),
+        "nrm": np.ascontiguousarray(nrm[tri_slot == slot])})) for slot in np.unique(tri_slot)]
+    if len(_BATCHES) >= 64:
+        _BATCHES.pop(next(iter(_BATCHES)))
+    got = _BATCHES[key] = (depth, surfaces)
+    return got
+
+
+def light_matrix(direction, centre, radius) -> np.ndarray:
+    """World -> clip of an orthographic view from ``direction`` (toward the light) that
+    holds the sphere (``centre``, ``radius``): depth 0 at the light's side."""
+    c = np.asarray(direction, np.float64)
+    u = np.cross(c, [0.0, 0.0, 1.0] if abs(c[2]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(c, u)
+    M = np.eye(4)
+    for row, axis in enumerate((u, v, -c)):
+        M[row, :3] = axis / radius
+        M[row, 3] = -axis @ np.asarray(centre, np.float64) / radius
+    return M
+
+
+def _shadow_atlas(state, sources, casters):
+    """Render every source's shadow map into one depth atlas: (texture, per-source
+    (matrix, tile (u, v, size), depth range, texel size)).  Cached per geometry and
+    directions."""
+    import gpu
+    import mathutils
+    positions = [st.arrays.positions for st in casters]
+    allp = np.concatenate(positions) if positions else np.zeros((1, 3))
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6) * 1.01
+    key = (tuple(st.fingerprint for st in casters),
+           tuple(np.round(s.direction, 7).tobytes() for s in sources))
+    got = _SHADOWS.get(key)
+    if got is not None:
+        return got
+    cols = min(len(sources), 4)
+    rows = -(-len(sources) // 4)
+    width, height = SHADOW_TILE * cols, SHADOW_TILE * rows
+    tex = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
+    fb = gpu.types.GPUFrameBuffer(depth_slot=tex)
+    tiles = []
+    saved = gpu.state.viewport_get()
+    sh = _depth_shader()
+    with fb.bind():
+        fb.clear(depth=1.0)
+        gpu.state.depth_test_set("LESS_EQUAL")
+        gpu.state.depth_mask_set(True)
+        gpu.state.face_culling_set("NONE")
+        for k, s in enumerate(sources):
+            x, y = (k % 4) * SHADOW_TILE, (k // 4) * SHADOW_TILE
+            gpu.state.viewport_set(x, y, SHADOW_TILE, SHADOW_TILE)
+            M = light_matrix(s.direction, centre, radius)
+            sh.bind()
+            sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
+            for st in casters:
+                _object_batches(st)[0].draw(sh)
+            tiles.append((M, (x, y, SHADOW_TILE), 2.0 * radius, 2.0 * radius / SHADOW_TILE))
+    gpu.state.viewport_set(*saved)
+    gpu.state.depth_test_set("NONE")
+    got = (tex, tiles)
+    _SHADOWS.clear()
+    _SHADOWS[key] = got
+    return got
+
+
+# --------------------------------------------------------------------------- parameters
+
+def material_texels(material, eye4) -> np.ndarray:
+    """The paramTex rows of one material slot (layout in lights_frag.glsl)."""
+    p = np.zeros((4, max(TABLE, 9), 4), np.float32)
+    if material.has_diffuse:
+        p[0, 0, :3] = np.asarray(material.diffuse_albedo) / math.pi
+        p[0, 0, 3] = 1.0
+    lobes = [] if material.is_diffuse_only else core_brdf.sharp_lobes(material)
+    r = material.table_roughness
+    p[0, 1] = (max(r * r, core_brdf.ALPHA_MIN), 0.0 if material.lobe_distribution == "BECKMANN"
+               else 1.0, len(lobes), 1.0 if lobes else 0.0)
+    for j, (kind, weight, f0, B, eta) in enumerate(lobes[:2]):
+        p[0, 2 + 3 * j] = (kind, weight, eta, 0.0)
+        p[0, 3 + 3 * j, :3] = f0
+        p[0, 4 + 3 * j, :3] = B
+    p[0, 8] = eye4
+    mu = np.linspace(0.0, 1.0, TABLE)
+    views = np.stack([np.sqrt(np.maximum(1.0 - mu * mu, 0.0)), np.zeros(TABLE), mu], axis=1)
+    normals = np.tile([0.0, 0.0, 1.0], (TABLE, 1))
+    p[1, :TABLE, :3] = core_brdf.diffuse_view_weight(material, normals, views)
+    p[1, :TABLE, 3] = 1.0
+    cos_o = np.maximum(mu, core_brdf.COS_VIEW_MIN)
+    which = ["metal" if (material.fresnel == "DIELECTRIC" and kind == core_brdf.SHARP_F82)
+             else "main" for kind, *_ in lobes[:2]]
+    for j, w in enumerate(which):
+        p[2 + j, :TABLE, :3] = core_brdf.multiscatter_factor(material, cos_o, w)
+    return p
+
+
+def _texture(rgba):
+    return drawing.float_texture(np.ascontiguousarray(rgba, dtype=np.float32))
+
+
+def draws(state, eye, view_dir) -> list:
+    """``draw(view_projection)`` callables adding every source to the objects (empty when
+    there is none).  Renders the sources' shadow maps first (cached)."""
+    sources = (list(state.sources) + lamp_sources(state.sun_lamps))[:MAX_DRAWN]
+    casters = [st for st in state.objects if st.status != "unshadowed"]
+    if not sources or not state.objects:
+        return []
+    shadow_tex, tiles = _shadow_atlas(state, sources, casters)
+    src = np.zeros((len(sources), 8, 4), np.float32)
+    for k, (s, (M, tile, depth_range, texel)) in enumerate(zip(sources, tiles)):
+        src[k, 0] = (*s.direction, s.radius)
+        src[k, 1] = (*s.radiance, 1.0 if s.point_like else 0.0)
+        src[k, 2:6] = M.T                       # columns of the matrix (GLSL mat4 order)
+        src[k, 6] = (*tile, depth_range)
+        src[k, 7, 0] = texel
+    src_tex = _texture(src)
+    eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
+    out = []
+    for st in state.objects:
+        surfaces = _object_batches(st)[1]
+        params = {slot: _texture(material_texels(
+            st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material(), eye4))
+            for slot, _ in surfaces}
+
+        def draw(view_projection, surfaces=surfaces, params=params,
+                 side=float(st.closed_side), count=len(sources)):
+            sh = _shader()
+            sh.bind()
+            sh.uniform_float("viewProjection", view_projection)
+            sh.uniform_float("closedSide", side)
+            sh.uniform_int("sourceCount", count)
+            sh.uniform_sampler("srcTex", src_tex)
+            sh.uniform_sampler("shadowTex", shadow_tex)
+            for slot, batch in surfaces:
+                sh.uniform_sampler("paramTex", params[slot])
+                batch.draw(sh)
+
+        out.append(draw)
+    return out

@@ -1,0 +1,261 @@
+/* Compact light sources per pixel (addon/lights.py): the environment's extracted sources
+ * (core/lights.py) and Blender's sun lamps, each a disc of uniform radiance seen from
+ * every point in the same direction, added to the frame.
+ *
+ *   L_o = sum_sources V(x) * integral over the disc of  f(i, o) max(0, n.i) L  di
+ *
+ * Lambert: the disc's cosine integral is exact while it is above the horizon
+ * (pi sin^2 r (n.c)), sampled otherwise.  Glossy lobes: multiple importance sampling with
+ * the balance heuristic (Veach 1997) of NL points on the disc and NB samples of the NDF
+ * that hit it, so a lobe narrower than a softbox and a lobe wider than the sun are both
+ * integrated.  V: the source's shadow map, filtered to the disc's angular size (PCSS,
+ * Fernando 2005: blocker search, penumbra = (receiver - blocker depth) * 2 tan r).
+ * Light below the triangle's own plane does not reach the point (Cycles' shadow ray would
+ * enter the surface), whatever the interpolated normal says.
+ *
+ * paramTex (one material slot), row 0: 0 (albedo / pi, has diffuse), 1 (alpha,
+ * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
+ * weight, eta, -), (f0, -), (B, -) (core.brdf.sharp_lobes), 8 eye (w = 1 perspective);
+ * row 1: the Lambert base's view weight at mu = i / (TABLE - 1) (Principled layering),
+ * rows 2, 3: each lobe's multiscatter factor at mu (core.brdf.multiscatter_factor).
+ * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, power
+ * flag: 1 = point-like, radiance is then its irradiance), 2..5 world-to-shadow-clip
+ * columns, 6 (atlas tile origin x, y and size in texels, depth range in world units),
+ * 7 (shadow texel size in world units). */
+
+#define NL 8
+#define NB 8
+#define TABLE 32
+#define BLOCKER_TAPS 16
+#define PCF_TAPS 24
+
+vec4 param(int i, int row)
+{
+  return texelFetch(paramTex, ivec2(i, row), 0);
+}
+
+vec4 source(int s, int i)
+{
+  return texelFetch(srcTex, ivec2(i, s), 0);
+}
+
+vec3 table(int row, float mu)
+{
+  float x = clamp(mu, 0.0, 1.0) * float(TABLE - 1);
+  int i0 = min(int(x), TABLE - 2);
+  return mix(param(i0, row).rgb, param(i0 + 1, row).rgb, x - float(i0));
+}
+
+/* glossy lobes' f * cos (Fresnel, NDF, masking, multiscatter), at unit i */
+vec3 glossy_f_cos(vec3 n, vec3 o, vec3 i, float cos_o, float a, int dist, int lobes,
+                  float lam_o, vec3 ms0, vec3 ms1)
+{
+  float cos_i = dot(n, i);
+  vec3 hv = o + i;
+  float len2 = dot(hv, hv);
+  if (cos_i <= 0.0 || len2 < 1e-20) {
+    return vec3(0.0);
+  }
+  vec3 h = hv * inversesqrt(len2);
+  float common_term = ndf(dist, a, dot(n, h)) /
+                      (4.0 * cos_o * (1.0 + smith_lambda(dist, a, cos_i) + lam_o));
+  float oh = clamp(dot(o, h), 0.0, 1.0);
+  vec3 f = vec3(0.0);
+  for (int j = 0; j < lobes; j++) {
+    vec4 k0 = param(2 + 3 * j, 0);
+    f += k0.y * (j == 0 ? ms0 : ms1) *
+         lobe_fresnel(int(k0.x), param(3 + 3 * j, 0).rgb, param(4 + 3 * j, 0).rgb, k0.z, oh);
+  }
+  return f * common_term;
+}
+
+/* pdf of the NDF sampling of sample_ndf mapped to directions: D (n.h) / (4 o.h) */
+float ndf_pdf(vec3 n, vec3 o, vec3 i, float a, int dist)
+{
+  vec3 h = normalize(o + i);
+  float oh = dot(o, h);
+  return oh > 0.0 ? ndf(dist, a, max(dot(n, h), 0.0)) * max(dot(n, h), 0.0) / (4.0 * oh) : 0.0;
+}
+
+/* a direction in the cone of half angle r about c, uniform in solid angle */
+vec3 cone_sample(vec3 c, float cos_r, vec2 u)
+{
+  vec3 tx, ty;
+  tangent_frame(c, tx, ty);
+  float ct = 1.0 - u.x * (1.0 - cos_r);
+  float st = sqrt(max(1.0 - ct * ct, 0.0));
+  float phi = 2.0 * PI * u.y;
+  return tx * (st * cos(phi)) + ty * (st * sin(phi)) + c * ct;
+}
+
+/* ---------------------------------------------------------------- shadow maps */
+
+const vec2 POISSON[24] = vec2[24](
+  vec2(-0.613392, 0.617481), vec2(0.170019, -0.040254), vec2(-0.299417, 0.791925),
+  vec2(0.645680, 0.493210), vec2(-0.651784, 0.717887), vec2(0.421003, 0.027070),
+  vec2(-0.817194, -0.271096), vec2(-0.705374, -0.668203), vec2(0.977050, -0.108615),
+  vec2(0.063326, 0.142369), vec2(0.203528, 0.214331), vec2(-0.667531, 0.326090),
+  vec2(-0.098422, -0.295755), vec2(-0.885922, 0.215369), vec2(0.566637, 0.605213),
+  vec2(0.039766, -0.396100), vec2(0.751946, 0.453352), vec2(0.078707, -0.715323),
+  vec2(-0.075838, -0.529344), vec2(0.724479, -0.580798), vec2(0.222999, -0.215125),
+  vec2(-0.467574, -0.405438), vec2(-0.248268, -0.814753), vec2(0.354411, -0.887570));
+
+/* depth at uv in [0, 1]^2 of a tile (origin x, y and size in texels of the atlas) */
+float shadow_depth(vec4 tile, vec2 uv)
+{
+  ivec2 px = ivec2(tile.xy + clamp(uv, 0.0, 1.0) * tile.z);
+  px = clamp(px, ivec2(tile.xy), ivec2(tile.xy) + int(tile.z) - 1);
+  return texelFetch(shadowTex, px, 0).r;
+}
+
+float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
+{
+  vec4 tile = source(s, 6);
+  float texel = source(s, 7).x;
+  if (tile.z <= 0.0) {
+    return 1.0;
+  }
+  vec3 toward = source(s, 0).xyz;
+  /* normal offset and slope-scaled bias against acne; a little only, against leaks */
+  float cos_l = clamp(dot(ng, toward), 0.05, 1.0);
+  vec3 q = p + ng * (1.5 * texel);
+  vec4 lc = mat4(source(s, 2), source(s, 3), source(s, 4), source(s, 5)) * vec4(q, 1.0);
+  vec3 ndc = lc.xyz / lc.w;
+  vec2 uv = ndc.xy * 0.5 + 0.5;
+  float z = ndc.z * 0.5 + 0.5;
+  if (any(lessThan(uv, vec2(0.0))) || any(greaterThan(uv, vec2(1.0))) || z >= 1.0) {
+    return 1.0;
+  }
+  float depth_range = tile.w;
+  float bias = texel * (1.0 + sqrt(1.0 - cos_l * cos_l) / cos_l) / depth_range;
+  float spread = 2.0 * tan(radius);                    /* penumbra per unit of distance */
+  /* blocker search over the largest penumbra a blocker up to the light could cast */
+  float search = clamp(z * depth_range * spread / texel, 1.0, 48.0);
+  mat2 turn = mat2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x),
+                   -sin(6.2831853 * shift.x), cos(6.2831853 * shift.x));
+  float blockers = 0.0, sum = 0.0;
+  vec2 uv_texel = vec2(1.0 / tile.z);
+  for (int k = 0; k < BLOCKER_TAPS; k++) {
+    float d = shadow_depth(tile, uv + turn * POISSON[k] * search * uv_texel);
+    if (d < z - bias) {
+      blockers += 1.0;
+      sum += d;
+    }
+  }
+  if (blockers == 0.0) {
+    return 1.0;
+  }
+  float penumbra = (z - sum / blockers) * depth_range * spread / texel;   /* in texels */
+  float filter_radius = max(0.5 * penumbra, 0.75);
+  float lit = 0.0;
+  for (int k = 0; k < PCF_TAPS; k++) {
+    float d = shadow_depth(tile, uv + turn * POISSON[k] * filter_radius * uv_texel);
+    lit += d < z - bias ? 0.0 : 1.0;
+  }
+  return lit / float(PCF_TAPS);
+}
+
+/* ---------------------------------------------------------------- main */
+
+void main()
+{
+  bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
+  if (inner || sourceCount == 0) {
+    fragColor = vec4(0.0);
+    return;
+  }
+  vec3 n = normalize(vNrm);
+  vec3 ng = normalize(cross(dFdx(vPos), dFdy(vPos)));
+  ng = dot(ng, n) < 0.0 ? -ng : ng;
+  vec4 eye = param(8, 0);
+  vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+  float cos_o = dot(n, o);
+  if (cos_o < COS_VIEW_MIN) {
+    o = normalize(o + (COS_VIEW_MIN - cos_o) * n);
+  }
+  cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
+  vec4 kd = param(0, 0);
+  vec4 lobe = param(1, 0);
+  float a = max(lobe.x, 1e-4);
+  int dist = int(lobe.y);
+  int lobes = int(lobe.z);
+  bool glossy = lobe.w > 0.5 && lobes > 0;
+  vec3 wd = table(1, cos_o);
+  vec3 ms0 = table(2, cos_o), ms1 = table(3, cos_o);
+  float lam_o = smith_lambda(dist, a, cos_o);
+  vec3 tx, ty;
+  tangent_frame(n, tx, ty);
+  vec2 shift = fract(vec2(0.7548776662, 0.5698402910) *
+                     dot(floor(gl_FragCoord.xy), vec2(1.0, 61.0)));
+  vec3 color = vec3(0.0);
+  for (int s = 0; s < sourceCount; s++) {
+    vec4 s0 = source(s, 0);
+    vec4 s1 = source(s, 1);
+    vec3 c = s0.xyz;
+    float r = s0.w;
+    if (dot(ng, c) < -sin(r)) {
+      continue;                                     /* the whole disc is below the plane */
+    }
+    float V = visibility(s, vPos, ng, r, shift);
+    if (V <= 0.0) {
+      continue;
+    }
+    vec3 sum = vec3(0.0);
+    if (s1.w > 0.0) {                               /* point-like: its irradiance */
+      if (dot(ng, c) > 0.0) {
+        sum = (kd.rgb * wd * max(dot(n, c), 0.0) +
+               (glossy ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
+                       : vec3(0.0))) * s1.rgb;
+      }
+    }
+    else {
+      float cos_r = cos(r);
+      float omega = 2.0 * PI * (1.0 - cos_r);
+      vec3 L = s1.rgb;
+      /* Lambert: the cap's exact cosine integral while above both horizons */
+      float nc = dot(n, c);
+      float sr = sin(r);
+      bool clear = nc >= sr && dot(ng, c) >= sr;
+      if (kd.w > 0.5 && clear) {
+        sum += kd.rgb * wd * (PI * sr * sr * nc) * L;
+      }
+      for (int l = 0; l < NL; l++) {
+        vec2 u = fract(vec2((float(l) + 0.5) / float(NL), radical_inverse(l)) + shift);
+        vec3 i = cone_sample(c, cos_r, u);
+        if (dot(ng, i) <= 0.0) {
+          continue;
+        }
+        vec3 f = vec3(0.0);
+        if (kd.w > 0.5 && !clear) {
+          f += kd.rgb * wd * max(dot(n, i), 0.0) * (omega / float(NL));
+        }
+        if (glossy) {
+          float pl = 1.0 / omega;
+          float pb = ndf_pdf(n, o, i, a, dist);
+          f += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) /
+               (float(NL) * pl + float(NB) * pb);
+        }
+        sum += f * L;
+      }
+      if (glossy) {
+        for (int b = 0; b < NB; b++) {
+          vec2 u = fract(vec2((float(b) + 0.5) / float(NB), radical_inverse(b + 7)) + shift.yx);
+          vec3 h = sample_ndf(dist, a, u, n, tx, ty);
+          float oh = dot(o, h);
+          if (oh <= 0.0) {
+            continue;
+          }
+          vec3 i = 2.0 * oh * h - o;
+          if (dot(i, c) < cos_r || dot(ng, i) <= 0.0) {
+            continue;                               /* misses the disc */
+          }
+          float pb = ndf_pdf(n, o, i, a, dist);
+          sum += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L /
+                 (float(NL) / omega + float(NB) * pb);
+        }
+      }
+    }
+    color += V * sum;
+  }
+  fragColor = vec4(max(color, vec3(0.0)), 0.0);
+}
