@@ -33,6 +33,19 @@ _BATCHES = drawing.gpu_cache({})
 _SHADOWS = drawing.gpu_cache({})
 # extraction per (image content, settings): (core sources, residual image)
 _SPLITS: dict = {}
+#: one line per source of the last synced frame, for the panel
+LAST_SOURCES: list = []
+
+
+def describe(source, total_power: float) -> str:
+    """A panel line: elevation/azimuth, angular diameter and share of the world's light."""
+    d = source.direction
+    elevation = math.degrees(math.asin(max(-1.0, min(1.0, float(d[2])))))
+    azimuth = math.degrees(math.atan2(float(d[1]), float(d[0])))
+    share = float(source.radiance @ core_lights.LUMINANCE) * (
+        2.0 * math.pi * (1.0 - math.cos(source.radius))) / max(total_power, 1e-30)
+    return (f"{source.name}: elevation {elevation:.0f}°, azimuth {azimuth:.0f}°, "
+            f"{math.degrees(2.0 * source.radius):.2f}° wide, {share:.0%} of the light")
 
 
 class DrawnSource:
@@ -64,23 +77,26 @@ def split_world(world, settings: dict):
     the sources in world space with the world's strength.  No split for a uniform world,
     ``max_sources = 0`` or a non-positive strength."""
     img = world.image
+    LAST_SOURCES.clear()
     if img is None or settings["max_sources"] <= 0 or world.strength <= 0.0:
         return world, []
+    # keyed on the pixels' content: a packed image is exported as a new array every sync
     key = (keys.image_key(img), tuple(sorted(settings.items())))
     got = _SPLITS.get(key)
-    if got is None or got[0] is not img:
-        sources, residual = core_lights.extract_sources(img, **settings)
-        got = (img, sources, residual)
+    if got is None:
+        got = core_lights.extract_sources(img, **settings)
         _SPLITS.clear()
         _SPLITS[key] = got
-    _, sources, residual = got
+    sources, residual = got
     if not sources:
         return world, []
     out = copy.copy(world)
     out.image = residual
     R = np.asarray(world.rotation, np.float64)        # texture = R @ world
     drawn = [DrawnSource(R.T @ s.direction, s.radius, s.radiance * world.strength,
-                         f"source {k + 1}") for k, s in enumerate(sources)]
+                         f"Source {k + 1}") for k, s in enumerate(sources)]
+    total = float(world.total_power() @ core_lights.LUMINANCE)
+    LAST_SOURCES[:] = [describe(s, total) for s in drawn]
     return out, drawn
 
 
@@ -276,7 +292,7 @@ def draws(state, eye, view_dir) -> list:
         src[k, 1] = (*s.radiance, 1.0 if s.point_like else 0.0)
         src[k, 2:6] = M.T                       # columns of the matrix (GLSL mat4 order)
         src[k, 6] = (*tile, depth_range)
-        src[k, 7, 0] = texel
+        src[k, 7] = (texel, *(M[0, :3] / np.linalg.norm(M[0, :3])))   # the map's x axis
     src_tex = _texture(src)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
     out = []

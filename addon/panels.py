@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import methods, storage
+from . import lights, methods, storage
 from .operators import RUNNING
 from .runtime import LAST_MESSAGES
 
@@ -13,6 +13,17 @@ def draw_settings(layout, context):
     col = layout.column()
     col.prop(prt, "method")
     methods.get(prt.method).draw_settings(col, prt)
+    box = col.box()
+    box.label(text="Compact sources (drawn per pixel)", icon="LIGHT_SUN")
+    box.prop(prt, "light_sources")
+    sub = box.column()
+    sub.active = prt.light_sources > 0
+    sub.prop(prt, "light_threshold")
+    sub.prop(prt, "light_min_share")
+    for line in lights.LAST_SOURCES[:8]:
+        sub.label(text=line)
+    if prt.light_sources > 0 and not lights.LAST_SOURCES:
+        sub.label(text="None found: the whole World goes through the method")
     col.prop(prt, "resolution")
     col.prop(prt, "ray_offset")
     col.prop(prt, "supersampling")

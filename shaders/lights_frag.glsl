@@ -21,7 +21,7 @@
  * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, power
  * flag: 1 = point-like, radiance is then its irradiance), 2..5 world-to-shadow-clip
  * columns, 6 (atlas tile origin x, y and size in texels, depth range in world units),
- * 7 (shadow texel size in world units). */
+ * 7 (shadow texel size in world units, the map's x axis in world space). */
 
 #define NL 8
 #define NB 8
@@ -111,13 +111,16 @@ float shadow_depth(vec4 tile, vec2 uv)
 float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
 {
   vec4 tile = source(s, 6);
-  float texel = source(s, 7).x;
+  vec4 s7 = source(s, 7);
+  float texel = s7.x;
   if (tile.z <= 0.0) {
     return 1.0;
   }
   vec3 toward = source(s, 0).xyz;
-  /* normal offset and slope-scaled bias against acne; a little only, against leaks */
-  float cos_l = clamp(dot(ng, toward), 0.05, 1.0);
+  vec3 ax = s7.yzw;                                    /* the map's x axis; y = toward x ax */
+  vec3 ay = cross(toward, ax);
+  float cos_l = max(dot(ng, toward), 0.1);
+  /* a little normal offset and bias against acne, no more (light would leak at contact) */
   vec3 q = p + ng * (1.5 * texel);
   vec4 lc = mat4(source(s, 2), source(s, 3), source(s, 4), source(s, 5)) * vec4(q, 1.0);
   vec3 ndc = lc.xyz / lc.w;
@@ -127,17 +130,21 @@ float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
     return 1.0;
   }
   float depth_range = tile.w;
-  float bias = texel * (1.0 + sqrt(1.0 - cos_l * cos_l) / cos_l) / depth_range;
+  float bias = 2.0 * texel / depth_range;
+  /* the receiver's plane in the map: its depth at an offset of the lookup (receiver-plane
+   * depth bias), so a wide filter on a sloped surface does not shadow the surface itself */
+  vec2 slope = vec2(dot(ng, ax), dot(ng, ay)) / cos_l;
   float spread = 2.0 * tan(radius);                    /* penumbra per unit of distance */
   /* blocker search over the largest penumbra a blocker up to the light could cast */
   float search = clamp(z * depth_range * spread / texel, 1.0, 48.0);
   mat2 turn = mat2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x),
                    -sin(6.2831853 * shift.x), cos(6.2831853 * shift.x));
   float blockers = 0.0, sum = 0.0;
-  vec2 uv_texel = vec2(1.0 / tile.z);
+  float uv_texel = 1.0 / tile.z;
   for (int k = 0; k < BLOCKER_TAPS; k++) {
-    float d = shadow_depth(tile, uv + turn * POISSON[k] * search * uv_texel);
-    if (d < z - bias) {
+    vec2 off = turn * POISSON[k] * search * uv_texel;
+    float d = shadow_depth(tile, uv + off);
+    if (d < z + dot(off, slope) - bias) {
       blockers += 1.0;
       sum += d;
     }
@@ -145,12 +152,12 @@ float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
   if (blockers == 0.0) {
     return 1.0;
   }
-  float penumbra = (z - sum / blockers) * depth_range * spread / texel;   /* in texels */
+  float penumbra = max(z - sum / blockers, 0.0) * depth_range * spread / texel;  /* texels */
   float filter_radius = max(0.5 * penumbra, 0.75);
   float lit = 0.0;
   for (int k = 0; k < PCF_TAPS; k++) {
-    float d = shadow_depth(tile, uv + turn * POISSON[k] * filter_radius * uv_texel);
-    lit += d < z - bias ? 0.0 : 1.0;
+    vec2 off = turn * POISSON[k] * filter_radius * uv_texel;
+    lit += shadow_depth(tile, uv + off) < z + dot(off, slope) - bias ? 0.0 : 1.0;
   }
   return lit / float(PCF_TAPS);
 }

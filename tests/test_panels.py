@@ -79,3 +79,22 @@ def test_material_panel_draws_every_model(model):
     panel = types.SimpleNamespace(layout=FakeLayout(log))       # stands in for the Panel
     sg_material.PRT_PT_sg_material.draw(panel, FakeContext(bpy.context.scene, mat))
     assert ("prop", "model") in log and len(log) >= 5
+
+
+def test_settings_panel_lists_the_compact_sources_it_draws():
+    import numpy as np
+
+    from prt_relight.addon import runtime
+    bs.reset()
+    img = np.full((64, 128, 3), 0.05, np.float32)
+    img[10, 30] = 2e4
+    bs.add_world(image=bs.float_image("sun", img))
+    bs.add_suzanne(subdiv=0)
+    scene = bpy.context.scene
+    runtime.FrameState().sync(bpy.context.evaluated_depsgraph_get())
+    log = []
+    panels.draw_settings(FakeLayout(log), FakeContext(scene))
+    shown = {name for kind, name in log if kind == "prop"}
+    assert {"light_sources", "light_threshold", "light_min_share"} <= shown
+    lines = [text for kind, text in log if kind == "label" and text.startswith("Source 1:")]
+    assert len(lines) == 1 and "elevation 60°" in lines[0], lines
