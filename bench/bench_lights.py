@@ -1,0 +1,151 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Compact sources per pixel (addon/lights.py): error against Cycles and relit F12 time
+per method, with and without the split, against Workbench's F12 of the same scene in
+the same run.
+
+    python bench/bench_lights.py [--out out/bench_lights] [--methods REFERENCE,SH,...]
+
+Scenes: Suzanne on a 96² ground under a dim sky with one 1-pixel sun (2·10⁴), the same
+Suzanne diffuse under 'forest' (a soft HDRI), and Beckmann 0.3 glossy under 'sunrise'.
+"Relit F12" turns the world's Mapping rotation by a new angle before every frame (the
+lighting changes; the shadow maps are drawn again); "viewport" draws one sample per pixel
+(`engine.render_pixels` inside a render, no supersampling).  Timings are medians of three
+frames on this machine; compare the ratios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import pathlib
+import statistics
+import sys
+import time
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import scenes  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+METHODS = ["REFERENCE", "SSDF_SG", "RSL", "SH", "WAVELET"]
+
+
+def dim_sky_with_sun(h=512, w=1024, direction=(0.5, -0.6, 0.6), sun=2e4):
+    theta = (np.arange(h) + 0.5) / h * math.pi
+    sky = (0.03 + 0.05 * np.clip(np.cos(theta), 0.0, 1.0))[:, None, None] \
+        * np.array([0.6, 0.8, 1.0])
+    img = np.repeat(sky, w, axis=1).astype(np.float32)
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    u = (0.5 - math.atan2(d[1], d[0]) / (2 * math.pi)) % 1.0
+    img[min(int(math.acos(d[2]) / math.pi * h), h - 1), min(int(u * w), w - 1)] = sun
+    return img
+
+
+def image_world(pixels, name):
+    """A world whose Environment Texture is ``pixels`` (top row first), with a Mapping."""
+    import bpy
+    h, w, _ = pixels.shape
+    img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True, is_data=True)
+    rgba = np.ones((h, w, 4), np.float32)
+    rgba[..., :3] = pixels
+    img.pixels.foreach_set(rgba[::-1].reshape(-1))
+    img.pack()
+    world = scenes.add_world("forest", rotation_z=0.01)
+    env = next(n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT")
+    env.image = img
+
+
+def build(kind):
+    import bpy
+    scenes.reset()
+    if kind == "sun":
+        image_world(dim_sky_with_sun(), "sun sky")
+    else:
+        scenes.add_world("forest" if kind == "diffuse" else "sunrise", rotation_z=0.01)
+    ground = scenes.add_ground(cuts=96)
+    scenes.add_bsdf_material(ground, "Ground", "ShaderNodeBsdfDiffuse", Color=(0.8, 0.8, 0.8, 1))
+    ob = scenes.add_suzanne(subdiv=2)
+    if kind == "glossy":
+        scenes.add_bsdf_material(ob, "Glossy", "ShaderNodeBsdfGlossy", distribution="BECKMANN",
+                                 Roughness=0.3, Color=(1.0, 1.0, 1.0, 1.0))
+    else:
+        scenes.add_bsdf_material(ob, "Diffuse", "ShaderNodeBsdfDiffuse",
+                                 Color=(0.8, 0.8, 0.8, 1))
+    scenes.add_camera(resolution=(256, 192))
+    bpy.context.scene.prt.supersampling = 3
+
+
+def median_time(fn, repeats=3):
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t0)
+    return statistics.median(out)
+
+
+def run(kind, methods, out_dir, lines):
+    import bpy
+    build(kind)                            # registers the add-on as prt_relight
+    from prt_relight.addon.engine import in_render, render_pixels, render_view
+    from prt_relight.addon.runtime import FrameState
+    scene = bpy.context.scene
+    scenes.precompute(32)
+    d = out_dir / kind
+    samples = 1024 if kind != "diffuse" else 512
+    scenes.render_cycles(d.with_suffix(".cycles.exr"), samples=samples)
+    truth = scenes.read_exr(d.with_suffix(".cycles.exr"))
+    t_wb = median_time(lambda: scenes.render_workbench())
+    mapping = next(n for n in scene.world.node_tree.nodes if n.type == "MAPPING")
+    lines.append(f"### {kind} (256×192, Cycles {samples} spp; Workbench F12 {t_wb:.2f} s)")
+    lines.append("")
+    lines.append("| method | split | sources | vs Cycles | relit F12 | ÷ Workbench | viewport frame |")
+    lines.append("|---|---|---|---|---|---|---|")
+    for method in methods:
+        for split in (0, 8):
+            scene.prt.method = method
+            scene.prt.light_sources = split
+            path = d.with_suffix(f".{method}.{split}.exr")
+            scenes.render_prt(path)                             # first frame: caches
+            err = scenes.rel_l2(scenes.read_exr(path), truth)
+            angle = [mapping.inputs["Rotation"].default_value[2]]
+
+            def relit():
+                angle[0] += 0.013
+                mapping.inputs["Rotation"].default_value[2] = angle[0]
+                scenes.render_prt(path.with_suffix(".turned.exr"))
+            t_relit = median_time(relit)
+
+            def viewport(depsgraph):
+                state = FrameState()
+                state.sync(depsgraph)
+                view, proj, w, h, persp = render_view(scene, depsgraph)
+                render_pixels(state, view, proj, w, h, True, persp)    # caches
+                t = median_time(lambda: render_pixels(state, view, proj, w, h, True, persp))
+                return t, len(state.sources)
+            t_view, count = in_render(scene, viewport)
+            mapping.inputs["Rotation"].default_value[2] = 0.01
+            row = (f"| {method} | {'on' if split else 'off'} | {count} | {100 * err:.2f} % | "
+                   f"{t_relit:.2f} s | {t_relit / t_wb:.1f}× | {t_view:.3f} s |")
+            print(row, flush=True)
+            lines.append(row)
+    lines.append("")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default="out/bench_lights")
+    ap.add_argument("--methods", default=",".join(METHODS))
+    ap.add_argument("--scenes", default="sun,diffuse,glossy")
+    args = ap.parse_args()
+    out_dir = pathlib.Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    lines = []
+    for kind in args.scenes.split(","):
+        run(kind, args.methods.split(","), out_dir, lines)
+    (out_dir / "table.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
