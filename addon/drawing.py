@@ -31,8 +31,9 @@ def free_gpu_resources():
     """Drop every cached GPU object while Blender's GPU context still exists: on
     unregister, and at interpreter exit before Blender's own exit handler frees the
     context (Python collecting a texture or shader after that crashes)."""
-    global _QUAD
+    global _QUAD, _WHITE
     _QUAD = None
+    _WHITE = None
     for cache in _GPU_CACHES:
         cache.clear()
     import gc
@@ -75,6 +76,130 @@ def _shader(name, push_constants, vertex_inputs, varyings, samplers=()):
 def surface_shader():
     return _shader("surface", [("MAT4", "viewProjection")],
                    [("VEC3", "pos"), ("VEC4", "radiance")], [("VEC4", "vRadiance")])
+
+
+def textured_shader():
+    """Per-vertex radiance times a per-pixel colour (shaders/surface_tex_*.glsl)."""
+    if "surface_tex" not in _SHADERS:
+        info = gpu.types.GPUShaderCreateInfo()
+        for kind, ident in (("MAT4", "viewProjection"), ("VEC4", "texInfo"),
+                            ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
+            info.push_constant(kind, ident)
+        info.sampler(0, "FLOAT_2D", "albedoTex")
+        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC4", "diffuse"),
+                                              ("VEC3", "specular"), ("VEC2", "uv"),
+                                              ("VEC4", "attr"))):
+            info.vertex_in(slot, kind, ident)
+        iface = gpu.types.GPUStageInterfaceInfo("prt_surface_tex_iface")
+        for kind, ident in (("VEC4", "vDiffuse"), ("VEC3", "vSpecular"), ("VEC2", "vUv"),
+                            ("VEC4", "vAttr")):
+            iface.smooth(kind, ident)
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source(_source("surface_tex_vert.glsl"))
+        info.fragment_source(glsl_source("texture_lib.glsl", "surface_tex_frag.glsl"))
+        _SHADERS["surface_tex"] = gpu.shader.create_from_info(info)
+    return _SHADERS["surface_tex"]
+
+
+# GPU textures of colour inputs, per image content (keys.image_key)
+_ALBEDO_TEXTURES = gpu_cache({})
+
+
+def albedo_texture(pixels: np.ndarray):
+    """The GPU texture of a core.textures.ImageTexture's pixels (H, W, 4), row 0 at v = 0."""
+    from .keys import image_key
+    key = image_key(pixels)
+    tex = _ALBEDO_TEXTURES.get(key)
+    if tex is None:
+        if len(_ALBEDO_TEXTURES) >= 16:
+            _ALBEDO_TEXTURES.pop(next(iter(_ALBEDO_TEXTURES)))
+        tex = _ALBEDO_TEXTURES[key] = float_texture(pixels)
+    return tex
+
+
+def source_uniforms(source) -> dict:
+    """Push-constant values of a core.textures.ColorSource (texture_lib.glsl); None: a
+    slot without one."""
+    if source is None:
+        return dict(texInfo=(0.0, 0.0, -1.0, 0.0), texMap0=(1.0, 0.0, 0.0),
+                    texMap1=(0.0, 1.0, 0.0), mixColor=(0.0, 0.0, 0.0, 0.0))
+    tex = source.texture
+    interp = ext = 0.0
+    map0, map1 = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)
+    if tex is not None:
+        interp = {"CLOSEST": 0.0, "LINEAR": 1.0, "CUBIC": 2.0}[tex.interpolation]
+        ext = {"REPEAT": 0.0, "EXTEND": 1.0, "CLIP": 2.0, "MIRROR": 3.0}[tex.extension]
+        map0, map1 = (tuple(map(float, tex.transform[0])), tuple(map(float, tex.transform[1])))
+    mode, mix_colour = 0.0, (0.0, 0.0, 0.0, 0.0)
+    if source.mix is not None:
+        kind, f, other, first = source.mix
+        mode = (1.0 if kind == "MIX" else 2.0) + (0.0 if first else 2.0)
+        mix_colour = (*(float(c) for c in other[:3]), float(f))
+    return dict(texInfo=(interp, ext, 0.0 if tex is not None else 1.0, mode), texMap0=map0,
+                texMap1=map1, mixColor=mix_colour)
+
+
+_WHITE = None
+
+
+def white_texture():
+    """A 1x1 white RGBA texture (the colour of a slot without one)."""
+    global _WHITE
+    if _WHITE is None:
+        _WHITE = float_texture(np.ones((1, 1, 4), np.float32))
+    return _WHITE
+
+
+def textured_draws(positions, radiance, triangles, closed_side, textures, corner_slots):
+    """Draw callables of an object whose radiance is an ``addon.runtime.TexturedRadiance``:
+    per textured slot a batch multiplying ``radiance.diffuse`` by the slot's colour per
+    pixel (plus ``radiance.specular``); the other slots as plain radiance."""
+    tri_slot = corner_slots[triangles[:, 0]]
+    draws = []
+    rest = ~np.isin(tri_slot, list(textures))
+    if rest.any():
+        plain = surface_batch(positions, radiance, triangles[rest], closed_side)
+
+        def draw_plain(view_projection, batch=plain):
+            sh = surface_shader()
+            sh.bind()
+            sh.uniform_float("viewProjection", view_projection)
+            batch.draw(sh)
+        draws.append(draw_plain)
+    for slot, (source, values) in textures.items():
+        sel = triangles[tri_slot == slot]
+        if not len(sel):
+            continue
+        corners = sel.reshape(-1)
+        diffuse = np.empty((len(corners), 4), np.float32)
+        diffuse[:, :3] = radiance.diffuse[corners]
+        diffuse[:, 3] = float(closed_side)
+        uv = np.zeros((len(corners), 2), np.float32)
+        attr = np.ones((len(corners), 4), np.float32)
+        if source.texture is not None:
+            uv[:] = values[corners]
+        else:
+            attr[:] = values[corners]
+        batch = batch_for_shader(textured_shader(), "TRIS", {
+            "pos": np.ascontiguousarray(positions[corners], dtype=np.float32),
+            "diffuse": diffuse,
+            "specular": np.ascontiguousarray(radiance.specular[corners], dtype=np.float32),
+            "uv": uv, "attr": attr})
+        tex = albedo_texture(source.texture.pixels) if source.texture is not None \
+            else white_texture()
+        uniforms = source_uniforms(source)
+
+        def draw_textured(view_projection, batch=batch, tex=tex, uniforms=uniforms):
+            sh = textured_shader()
+            sh.bind()
+            sh.uniform_float("viewProjection", view_projection)
+            for name, value in uniforms.items():
+                sh.uniform_float(name, value)
+            sh.uniform_sampler("albedoTex", tex)
+            batch.draw(sh)
+        draws.append(draw_textured)
+    return draws
 
 
 def background_shader():

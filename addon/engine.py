@@ -12,7 +12,7 @@ from mathutils import Matrix
 
 from ..core import pixel_filter
 from . import drawing, lights, sharp
-from .runtime import FrameState
+from .runtime import FrameState, TexturedRadiance
 
 
 def _background(state: FrameState):
@@ -36,9 +36,18 @@ def _background(state: FrameState):
 
 
 def _batches(state: FrameState, radiance_per_object):
-    return [drawing.surface_batch(st.arrays.positions[st.arrays.corner_verts], rad,
-                                  st.arrays.triangles, st.closed_side)
-            for st, rad in zip(state.objects, radiance_per_object)]
+    """(plain batches, draw callables of textured objects) of per-corner radiance."""
+    batches, draws = [], []
+    for st, rad in zip(state.objects, radiance_per_object):
+        positions = st.arrays.positions[st.arrays.corner_verts]
+        if isinstance(rad, TexturedRadiance):
+            draws += drawing.textured_draws(positions, rad, st.arrays.triangles,
+                                            st.closed_side, st.textures,
+                                            st.arrays.corner_materials)
+        else:
+            batches.append(drawing.surface_batch(positions, rad, st.arrays.triangles,
+                                                 st.closed_side))
+    return batches, draws
 
 
 def _eye(view_matrix, is_perspective: bool):
@@ -103,7 +112,7 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
     own samples averaged), so an F12 frame is filtered as Cycles filters its samples.
     ``eye`` / ``view_dir`` (as :func:`_eye` gives them) let the per-pixel sharp lobes
     (:mod:`.sharp`) be added; without either they are not drawn."""
-    batches = [] if object_draws is not None else _batches(state, radiance)
+    batches, textured = ([], []) if object_draws is not None else _batches(state, radiance)
     s = max(1, int(supersampling))
     background = _background(state)
     added = (sharp.draws(state, eye, view_dir, background)
@@ -111,7 +120,8 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
         else []
     big = drawing.render_offscreen(batches, background, projection @ view,
                                    width * s, height * s, transparent,
-                                   object_draws=object_draws or (), added_draws=added)
+                                   object_draws=list(object_draws or ()) + textured,
+                                   added_draws=added)
     if s > 1:
         big = pixel_filter.resolve(big, s, filter_width)
     return big

@@ -124,21 +124,25 @@ def _shader():
     sh = _GPU.get("shader")
     if sh is None:
         info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant("MAT4", "viewProjection")
-        info.push_constant("FLOAT", "closedSide")
-        info.push_constant("INT", "sourceCount")
-        for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex")):
+        # 128 bytes of push constants at most (the closed side rides in paramTex, the
+        # source count is srcTex's height)
+        for kind, ident in (("MAT4", "viewProjection"), ("VEC4", "texInfo"),
+                            ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
+            info.push_constant(kind, ident)
+        for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex", "albedoTex")):
             info.sampler(slot, "FLOAT_2D", ident)
-        info.vertex_in(0, "VEC3", "pos")
-        info.vertex_in(1, "VEC3", "nrm")
+        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"), ("VEC2", "uv"),
+                                              ("VEC4", "attr"))):
+            info.vertex_in(slot, kind, ident)
         iface = gpu.types.GPUStageInterfaceInfo("prt_lights_iface")
-        iface.smooth("VEC3", "vPos")
-        iface.smooth("VEC3", "vNrm")
+        for kind, ident in (("VEC3", "vPos"), ("VEC3", "vNrm"), ("VEC2", "vUv"),
+                            ("VEC4", "vAttr")):
+            iface.smooth(kind, ident)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
         info.vertex_source(drawing.glsl_source("lights_vert.glsl"))
-        info.fragment_source("#define COS_VIEW_MIN 1e-4\n"
-                             + drawing.glsl_source("brdf_lib.glsl", "lights_frag.glsl"))
+        info.fragment_source("#define COS_VIEW_MIN 1e-4\n" + drawing.glsl_source(
+            "brdf_lib.glsl", "texture_lib.glsl", "lights_frag.glsl"))
         sh = _GPU["shader"] = gpu.shader.create_from_info(info)
     return sh
 
@@ -162,7 +166,8 @@ def _depth_shader():
 def _object_batches(st):
     """(depth batch, [(slot, surface batch)]) of one object, cached per geometry."""
     from gpu_extras.batch import batch_for_shader
-    key = (st.name, st.fingerprint)
+    key = (st.name, st.fingerprint, tuple(sorted((slot, id(values)) for slot, (_, values)
+                                                 in st.textures.items())))
     got = _BATCHES.get(key)
     if got is not None:
         return got
@@ -175,9 +180,19 @@ def _object_batches(st):
     pos = np.ascontiguousarray(corner_pos[corner])
     nrm = np.ascontiguousarray(arrays.corner_normals[corner].astype(np.float32))
     tri_slot = np.repeat(arrays.corner_materials[tri[:, 0]], 3)
-    surfaces = [(int(slot), batch_for_shader(_shader(), "TRIS", {
-        "pos": np.ascontiguousarray(pos[tri_slot == slot]),
-        "nrm": np.ascontiguousarray(nrm[tri_slot == slot])})) for slot in np.unique(tri_slot)]
+    surfaces = []
+    for slot in np.unique(tri_slot):
+        sel = tri_slot == slot
+        uv = np.zeros((int(sel.sum()), 2), np.float32)
+        attr = np.ones((int(sel.sum()), 4), np.float32)
+        source, values = st.textures.get(int(slot), (None, None))
+        if source is not None and source.texture is not None:
+            uv[:] = values[corner[sel]]
+        elif source is not None:
+            attr[:] = values[corner[sel]]
+        surfaces.append((int(slot), batch_for_shader(_shader(), "TRIS", {
+            "pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
+            "uv": uv, "attr": attr})))
     if len(_BATCHES) >= 64:
         _BATCHES.pop(next(iter(_BATCHES)))
     got = _BATCHES[key] = (depth, surfaces)
@@ -246,9 +261,10 @@ def _shadow_atlas(state, sources, casters):
 
 # --------------------------------------------------------------------------- parameters
 
-def material_texels(material, eye4) -> np.ndarray:
-    """The paramTex rows of one material slot (layout in lights_frag.glsl)."""
-    p = np.zeros((4, max(TABLE, 9), 4), np.float32)
+def material_texels(material, eye4, closed_side=0) -> np.ndarray:
+    """The paramTex rows of one material slot of an object (layout in lights_frag.glsl)."""
+    p = np.zeros((4, max(TABLE, 10), 4), np.float32)
+    p[0, 9, 0] = closed_side
     if material.has_diffuse:
         p[0, 0, :3] = np.asarray(material.diffuse_albedo) / math.pi
         p[0, 0, 3] = 1.0
@@ -299,20 +315,23 @@ def draws(state, eye, view_dir) -> list:
     for st in state.objects:
         surfaces = _object_batches(st)[1]
         params = {slot: _texture(material_texels(
-            st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material(), eye4))
-            for slot, _ in surfaces}
+            st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material(), eye4,
+            st.closed_side)) for slot, _ in surfaces}
 
-        def draw(view_projection, surfaces=surfaces, params=params,
-                 side=float(st.closed_side), count=len(sources)):
+        def draw(view_projection, surfaces=surfaces, params=params, textures=st.textures):
             sh = _shader()
             sh.bind()
             sh.uniform_float("viewProjection", view_projection)
-            sh.uniform_float("closedSide", side)
-            sh.uniform_int("sourceCount", count)
             sh.uniform_sampler("srcTex", src_tex)
             sh.uniform_sampler("shadowTex", shadow_tex)
             for slot, batch in surfaces:
                 sh.uniform_sampler("paramTex", params[slot])
+                source = textures.get(slot, (None, None))[0]
+                for name, value in drawing.source_uniforms(source).items():
+                    sh.uniform_float(name, value)
+                sh.uniform_sampler("albedoTex", drawing.albedo_texture(source.texture.pixels)
+                                   if source is not None and source.texture is not None
+                                   else drawing.white_texture())
                 batch.draw(sh)
 
         out.append(draw)

@@ -9,11 +9,12 @@ returns per-corner radiance for each object with the active method.
 from __future__ import annotations
 
 import copy
+from dataclasses import replace
 
 import numpy as np
 
 from ..core import brdf as core_brdf, directions, envmap, mesh as core_mesh, visibility
-from . import lights, scene_export, storage
+from . import lights, scene_export, storage, texture_export
 from .keys import held, image_key, per_visibility  # noqa: F401  (methods use runtime.held)
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
@@ -104,9 +105,38 @@ def closed_side(arrays, fingerprint: str) -> int:
     return side
 
 
+class TexturedRadiance(np.ndarray):
+    """Per-corner radiance (C, 3) with the mean colour of its textured slots (what every
+    consumer of plain radiance gets), plus ``diffuse`` (C, 3), the part a slot's colour
+    texture multiplies per pixel, and ``specular`` (C, 3), the rest."""
+
+    diffuse = None
+    specular = None
+
+    @classmethod
+    def of(cls, radiance, diffuse, specular):
+        out = np.asarray(radiance).view(cls)
+        out.diffuse = np.asarray(diffuse, np.float32)
+        out.specular = np.asarray(specular, np.float32)
+        return out
+
+
+def _with_base(state, value: float):
+    """``state`` (a shallow copy) whose objects' textured slots have base colour ``value``."""
+    sub = copy.copy(state)
+    sub.objects = []
+    for st in state.objects:
+        twin = copy.copy(st)
+        twin.data = st.data
+        twin.materials = [replace(m, diffuse_albedo=(value, value, value))
+                          if i in st.textures else m for i, m in enumerate(st.materials)]
+        sub.objects.append(twin)
+    return sub
+
+
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "data",
-                 "fingerprint", "closed_side")
+                 "fingerprint", "closed_side", "textures")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -123,6 +153,9 @@ class ObjectState:
         self.data = {}               # per-method data loaded in Method.sync
         #: core.mesh.closed_side: which side of a closed mesh is its (black) inside
         self.closed_side = closed_side(arrays, fingerprint) if fingerprint else 0
+        #: {slot: (core.textures.ColorSource, per-corner UVs or colours)}: the slots whose
+        #: colour varies per pixel (addon.texture_export)
+        self.textures = {}
 
 
 class FrameState:
@@ -181,9 +214,13 @@ class FrameState:
             core_mesh.repair_normals(arrays)
             points = core_mesh.shading_points(arrays)
             fingerprint = core_mesh.fingerprint(arrays)
+            # textured colour inputs: their mean colour in the material, drawn per pixel
+            textured = texture_export.slot_sources(ob, self.warnings)
+            colours = {slot: texture_export.mean_albedo(src, values)
+                       for slot, (src, values) in textured.items()}
             # lobes too narrow for the cubemap are drawn per pixel (addon/sharp.py)
             mats = [core_brdf.with_sharp_lobe(m, self.resolution)
-                    for m in scene_export.object_materials(ob, self.warnings)]
+                    for m in scene_export.object_materials(ob, self.warnings, colours)]
             orig = ob.original
             data = orig.prt
             bits = None
@@ -216,6 +253,7 @@ class FrameState:
             if data.coarse_warning and status == "ok":
                 self.warnings.append(data.coarse_warning)
             st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
+            st.textures = textured
             # the original material per slot, for methods with their own material settings
             st.data["material_names"] = [
                 slot.material.original.name if slot.material is not None else None
@@ -281,7 +319,19 @@ class FrameState:
         ``eye``: camera position for perspective views; ``view_dirs_for`` a unit
         direction toward an orthographic camera (then ``eye`` is ignored).
         """
-        return self.method_impl.shade(self, eye, view_dirs_for)
+        out = self.method_impl.shade(self, eye, view_dirs_for)
+        textured = [i for i, st in enumerate(self.objects) if st.textures]
+        if out is None or not textured:
+            return out
+        # Radiance is linear in a slot's base colour (Lambert base, metal F0): shaded with
+        # white and with black, their difference is what the texture multiplies per pixel
+        sub = copy.copy(self)
+        sub.objects = [self.objects[i] for i in textured]
+        white = self.method_impl.shade(_with_base(sub, 1.0), eye, view_dirs_for)
+        black = self.method_impl.shade(_with_base(sub, 0.0), eye, view_dirs_for)
+        for i, w, b in zip(textured, white, black):
+            out[i] = TexturedRadiance.of(out[i], np.asarray(w) - np.asarray(b), b)
+        return out
 
     def draw_objects(self, eye, view_dirs_for=None):
         """Per-pixel draw callables of the active method, or None (see methods)."""

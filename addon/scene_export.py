@@ -173,8 +173,8 @@ def _surface_node(material):
     return surf.links[0].from_node
 
 
-def _export_principled(node, warnings, label) -> Material:
-    base = _input_value(node, "Base Color", warnings, label) or (0.8, 0.8, 0.8)
+def _export_principled(node, warnings, label, colour=None) -> Material:
+    base = colour or _input_value(node, "Base Color", warnings, label) or (0.8, 0.8, 0.8)
     rough = _input_value(node, "Roughness", warnings, label)
     metal = _input_value(node, "Metallic", warnings, label)
     ior = _input_value(node, "IOR", warnings, label)
@@ -202,7 +202,7 @@ def _export_principled(node, warnings, label) -> Material:
         distribution=dist)
 
 
-def export_material(material, warnings: list) -> Material:
+def export_material(material, warnings: list, colour=None) -> Material:
     """Translate a Blender material into a core :class:`Material`.
 
     Supported: Diffuse BSDF (Lambert), Glossy BSDF (Beckmann, GGX, Multiscatter
@@ -225,7 +225,7 @@ def export_material(material, warnings: list) -> Material:
         c = tuple(material.diffuse_color)[:3]
         return Material(diffuse_albedo=c)
     if node.type == "BSDF_DIFFUSE":
-        color = _input_value(node, "Color", warnings, label)
+        color = colour or _input_value(node, "Color", warnings, label)
         rough = node.inputs.get("Roughness")
         if rough is not None and (rough.is_linked or float(rough.default_value) >= 1e-5):
             warnings.append(f"{label}: Diffuse roughness (Oren-Nayar) is not modelled; "
@@ -245,7 +245,7 @@ def export_material(material, warnings: list) -> Material:
         return Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=color,
                         roughness=float(rough), distribution=dist, fresnel="NONE")
     if node.type == "BSDF_PRINCIPLED":
-        return _export_principled(node, warnings, label)
+        return _export_principled(node, warnings, label, colour)
     if node.type == "EMISSION":
         warnings.append(f"{label}: Emission is not a reflectance; drawn as black diffuse")
         return Material(diffuse_albedo=(0.0, 0.0, 0.0))
@@ -254,9 +254,13 @@ def export_material(material, warnings: list) -> Material:
     return Material(diffuse_albedo=tuple(material.diffuse_color)[:3])
 
 
-def object_materials(ob_eval, warnings: list) -> list:
-    """Core materials per material slot of an evaluated object (at least one)."""
-    mats = [export_material(slot.material, warnings) for slot in ob_eval.material_slots]
+def object_materials(ob_eval, warnings: list, colours=None) -> list:
+    """Core materials per material slot of an evaluated object (at least one).
+    ``colours``: {slot: RGB} for slots whose colour input is textured (the mean colour of
+    the texture, addon.texture_export; drawn per pixel where a pass can)."""
+    colours = colours or {}
+    mats = [export_material(slot.material, warnings, colours.get(i))
+            for i, slot in enumerate(ob_eval.material_slots)]
     return mats or [DEFAULT_MATERIAL]
 
 
@@ -271,7 +275,9 @@ def _find_world_output(tree):
     return out
 
 
+# newest images read, by file and colour settings (the world and a few textures)
 _PIXEL_CACHE = {}
+_PIXEL_CACHE_MAX = 8
 
 
 def ocio_config_path() -> str:
@@ -301,7 +307,8 @@ def _image_pixels(image) -> np.ndarray:
     cached = _PIXEL_CACHE.get(key)
     if cached is None:
         cached = _read_image_pixels(image, path)
-        _PIXEL_CACHE.clear()
+        if len(_PIXEL_CACHE) >= _PIXEL_CACHE_MAX:
+            _PIXEL_CACHE.pop(next(iter(_PIXEL_CACHE)))
         _PIXEL_CACHE[key] = cached
     return cached
 

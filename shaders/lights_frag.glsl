@@ -15,7 +15,8 @@
  *
  * paramTex (one material slot), row 0: 0 (albedo / pi, has diffuse), 1 (alpha,
  * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
- * weight, eta, -), (f0, -), (B, -) (core.brdf.sharp_lobes), 8 eye (w = 1 perspective);
+ * weight, eta, -), (f0, -), (B, -) (core.brdf.sharp_lobes), 8 eye (w = 1 perspective),
+ * 9 (core.mesh.closed_side of the object, -, -, -);
  * row 1: the Lambert base's view weight at mu = i / (TABLE - 1) (Principled layering),
  * rows 2, 3: each lobe's multiscatter factor at mu (core.brdf.multiscatter_factor).
  * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, power
@@ -166,6 +167,8 @@ float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
 
 void main()
 {
+  float closedSide = param(9, 0).x;
+  int sourceCount = textureSize(srcTex, 0).y;
   bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
   if (inner || sourceCount == 0) {
     fragColor = vec4(0.0);
@@ -182,6 +185,9 @@ void main()
   }
   cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
   vec4 kd = param(0, 0);
+  if (texInfo.z > -0.5 && kd.w > 0.5) {          /* the slot's colour, per pixel / pi */
+    kd.rgb = input_colour(albedoTex, vUv, vAttr, texInfo, texMap0, texMap1, mixColor) / PI;
+  }
   vec4 lobe = param(1, 0);
   float a = max(lobe.x, 1e-4);
   int dist = int(lobe.y);

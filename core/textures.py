@@ -1,0 +1,136 @@
+"""Spatially varying colour inputs: image textures on UV maps and colour attributes (pure
+numpy; the GLSL twin is ``shaders/texture_lib.glsl``).
+
+A colour input of a material slot is one :class:`ColorSource`: an :class:`ImageTexture`
+read at the corner's UV (through a Mapping node's 2D transform), or a mesh colour
+attribute interpolated across the triangle, optionally combined with a constant colour
+by a Mix node (``MIX`` by a factor, or ``MULTIPLY``).  Sampling follows Blender's Image
+Texture node: texel centres at ``((i + 0.5) / W, (j + 0.5) / H)`` with row 0 at v = 0;
+*Closest*, *Linear* (bilinear) and *Cubic* (uniform cubic B-spline, as Cycles'
+``interp_cubic``); *Repeat*, *Extend* (clamp to the edge), *Clip* (transparent black
+outside [0, 1]) and *Mirror*.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+INTERPOLATIONS = ("CLOSEST", "LINEAR", "CUBIC")
+EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
+
+
+@dataclass
+class ImageTexture:
+    pixels: np.ndarray                         # (H, W, 4) float32, linear, row 0 at v = 0
+    uv_map: str = ""                           # "" = the mesh's active UV map
+    transform: np.ndarray = field(default_factory=lambda: np.array([[1.0, 0.0, 0.0],
+                                                                    [0.0, 1.0, 0.0]]))
+    interpolation: str = "LINEAR"
+    extension: str = "REPEAT"
+    name: str = ""
+
+    def __post_init__(self):
+        px = np.asarray(self.pixels, dtype=np.float32)
+        if px.ndim != 3 or px.shape[2] != 4:
+            raise ValueError("texture pixels must be (H, W, 4)")
+        if not np.isfinite(px).all():
+            raise ValueError(f"texture '{self.name}' has NaN/Inf pixels")
+        self.pixels = np.ascontiguousarray(px)
+        self.transform = np.asarray(self.transform, dtype=np.float64).reshape(2, 3)
+        self.interpolation = str(self.interpolation).upper()
+        if self.interpolation not in INTERPOLATIONS:
+            self.interpolation = "LINEAR"
+        self.extension = str(self.extension).upper()
+        if self.extension not in EXTENSIONS:
+            self.extension = "REPEAT"
+
+
+@dataclass
+class ColorSource:
+    """What drives one colour input: a texture or an attribute, maybe mixed with a colour.
+
+    ``mix``: None, or ``(mode, factor, colour, source_first)``: Blender's Mix node in
+    colour mode, ``MIX``: ``(1 - f) A + f B``, ``MULTIPLY``: ``A (1 - f + f B)``, with A,
+    B the node's inputs (the source is A when ``source_first``)."""
+
+    texture: ImageTexture | None = None
+    attribute: str = ""
+    mix: tuple | None = None
+
+    def combine(self, colour: np.ndarray) -> np.ndarray:
+        """The input's value from the source's colour (..., 3|4), as the Mix node does."""
+        c = np.asarray(colour, dtype=np.float64)[..., :3]
+        if self.mix is None:
+            return c
+        mode, f, other, first = self.mix
+        other = np.asarray(other, dtype=np.float64)[:3]
+        a, b = (c, other) if first else (other, c)
+        if mode == "MULTIPLY":
+            return a * (1.0 - f + f * b)
+        return (1.0 - f) * a + f * b
+
+
+def transformed_uv(texture: ImageTexture, uv: np.ndarray) -> np.ndarray:
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    return uv @ texture.transform[:, :2].T + texture.transform[:, 2]
+
+
+def _wrap(i, n, extension):
+    if extension == "REPEAT":
+        return np.mod(i, n)
+    if extension == "MIRROR":
+        m = np.mod(i, 2 * n)
+        return np.where(m < n, m, 2 * n - 1 - m)
+    return np.clip(i, 0, n - 1)
+
+
+def _bspline(t):
+    """Uniform cubic B-spline weights of the four taps around a fractional position t."""
+    t2, t3 = t * t, t * t * t
+    return ((1.0 - t) ** 3 / 6.0, (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0,
+            (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0, t3 / 6.0)
+
+
+def sample(texture: ImageTexture, uv: np.ndarray) -> np.ndarray:
+    """RGBA (P, 4) of ``texture`` at UVs (P, 2), as Blender's Image Texture node reads it."""
+    img = texture.pixels.astype(np.float64)
+    H, W = img.shape[:2]
+    st = transformed_uv(texture, uv)
+    x, y = st[:, 0] * W - 0.5, st[:, 1] * H - 0.5
+    ext = texture.extension
+    if texture.interpolation == "CLOSEST":
+        out = img[_wrap(np.floor(y + 0.5).astype(np.int64), H, ext),
+                  _wrap(np.floor(x + 0.5).astype(np.int64), W, ext)]
+    elif texture.interpolation == "CUBIC":
+        x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+        wx, wy = _bspline(x - x0), _bspline(y - y0)
+        out = np.zeros((len(st), 4))
+        for j in range(4):
+            for i in range(4):
+                out += (wx[i] * wy[j])[:, None] * img[_wrap(y0 - 1 + j, H, ext),
+                                                      _wrap(x0 - 1 + i, W, ext)]
+    else:
+        x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        xa, xb = _wrap(x0, W, ext), _wrap(x0 + 1, W, ext)
+        ya, yb = _wrap(y0, H, ext), _wrap(y0 + 1, H, ext)
+        out = ((img[ya, xa] * (1 - fx) + img[ya, xb] * fx) * (1 - fy)
+               + (img[yb, xa] * (1 - fx) + img[yb, xb] * fx) * fy)
+    if ext == "CLIP":
+        outside = (st[:, 0] < 0.0) | (st[:, 0] > 1.0) | (st[:, 1] < 0.0) | (st[:, 1] > 1.0)
+        out[outside] = 0.0
+    return out
+
+
+def mean_colour(source: ColorSource, corner_colours=None) -> np.ndarray:
+    """An average RGB of the input (what consumers that cannot vary it per pixel use):
+    the texture's pixel mean, or the attribute's corner mean, through the mix."""
+    if source.texture is not None:
+        c = source.texture.pixels[..., :3].reshape(-1, 3).mean(axis=0)
+    elif corner_colours is not None and len(corner_colours):
+        c = np.asarray(corner_colours, dtype=np.float64)[:, :3].mean(axis=0)
+    else:
+        c = np.ones(3)
+    return np.maximum(source.combine(c), 0.0)

@@ -1,0 +1,12 @@
+/* texInfo.z: 0 an image texture at vUv, 1 a colour attribute (vAttr) (texture_lib.glsl). */
+bool inner_side(float side)
+{
+  return side > 0.5 ? !gl_FrontFacing : (side < -0.5 ? gl_FrontFacing : false);
+}
+
+void main()
+{
+  vec3 c = input_colour(albedoTex, vUv, vAttr, texInfo, texMap0, texMap1, mixColor);
+  vec3 rgb = inner_side(vDiffuse.a) ? vec3(0.0) : max(vDiffuse.rgb * c + vSpecular, vec3(0.0));
+  fragColor = vec4(rgb, 1.0);
+}

@@ -1,0 +1,306 @@
+"""Textured colour inputs (core/textures.py, addon/texture_export.py): sampling as Blender's
+Image Texture node, the node patterns read, per-pixel drawing for every method."""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+from prt_relight.core import textures
+
+from . import blender_scene as bs
+
+pytestmark = pytest.mark.usefixtures("registered_addon")
+
+METHODS = ["REFERENCE", "RSL", "BLOCKS", "SH", "WAVELET"]
+
+
+# --------------------------------------------------------------------------- core
+
+def _tex(pixels, **kw):
+    return textures.ImageTexture(np.asarray(pixels, np.float32), **kw)
+
+
+def test_sampling_hits_texel_centres_and_interpolates_between():
+    px = np.zeros((2, 4, 4), np.float32)
+    px[..., 0] = np.arange(4)[None, :]          # red = column index
+    px[..., 1] = np.arange(2)[:, None]          # green = row index (row 0 at v = 0)
+    tex = _tex(px, extension="EXTEND")
+    centres = np.array([[(i + 0.5) / 4, (j + 0.5) / 2] for j in range(2) for i in range(4)])
+    got = textures.sample(tex, centres)
+    np.testing.assert_allclose(got[:, 0], np.tile(np.arange(4), 2), atol=1e-12)
+    np.testing.assert_allclose(got[:, 1], np.repeat(np.arange(2), 4), atol=1e-12)
+    mid = textures.sample(tex, [[0.5, 0.5]])           # between columns 1 and 2, rows 0/1
+    np.testing.assert_allclose(mid[0, :2], [1.5, 0.5], atol=1e-12)
+    closest = textures.sample(_tex(px, interpolation="CLOSEST", extension="EXTEND"),
+                              [[0.30, 0.8]])
+    np.testing.assert_allclose(closest[0, :2], [1.0, 1.0])
+
+
+def test_extension_modes():
+    px = np.zeros((1, 4, 4), np.float32)
+    px[0, :, 0] = [1.0, 2.0, 3.0, 4.0]
+    uv = np.array([[1.125, 0.5], [-0.125, 0.5]])        # a quarter texel past each edge
+    rep = textures.sample(_tex(px, extension="REPEAT", interpolation="CLOSEST"), uv)[:, 0]
+    ext = textures.sample(_tex(px, extension="EXTEND", interpolation="CLOSEST"), uv)[:, 0]
+    mir = textures.sample(_tex(px, extension="MIRROR", interpolation="CLOSEST"), uv)[:, 0]
+    clip = textures.sample(_tex(px, extension="CLIP"), uv)[:, 0]
+    np.testing.assert_array_equal(rep, [1.0, 4.0])
+    np.testing.assert_array_equal(ext, [4.0, 1.0])
+    np.testing.assert_array_equal(mir, [4.0, 1.0])
+    np.testing.assert_array_equal(clip, [0.0, 0.0])
+
+
+def test_cubic_b_spline_keeps_constants_and_linear_ramps():
+    const = _tex(np.full((8, 8, 4), 0.3, np.float32), interpolation="CUBIC")
+    uv = np.random.default_rng(1).random((50, 2))
+    np.testing.assert_allclose(textures.sample(const, uv), 0.3, atol=1e-12)
+    ramp = np.zeros((1, 16, 4), np.float32)
+    ramp[0, :, 0] = np.arange(16)
+    tex = _tex(ramp, interpolation="CUBIC", extension="EXTEND")
+    x = np.linspace(0.2, 0.8, 7)                       # away from the clamped ends
+    got = textures.sample(tex, np.stack([x, np.full(7, 0.5)], axis=1))[:, 0]
+    np.testing.assert_allclose(got, x * 16 - 0.5, atol=1e-9)   # B-splines reproduce lines
+
+
+def test_mapping_transform_and_mix():
+    px = np.zeros((1, 2, 4), np.float32)
+    px[0, 1, 0] = 1.0
+    shifted = _tex(px, interpolation="CLOSEST", transform=[[1.0, 0.0, 0.5], [0.0, 1.0, 0.0]])
+    assert textures.sample(shifted, [[0.1, 0.5]])[0, 0] == 1.0      # 0.1 + 0.5 -> column 1
+    src = textures.ColorSource(mix=("MULTIPLY", 0.5, (0.2, 0.4, 1.0), True))
+    np.testing.assert_allclose(src.combine([1.0, 1.0, 1.0]), [0.6, 0.7, 1.0])
+    src = textures.ColorSource(mix=("MIX", 0.25, (0.0, 0.0, 0.0), False))
+    np.testing.assert_allclose(src.combine([1.0, 0.5, 0.0]), [0.25, 0.125, 0.0])
+
+
+# --------------------------------------------------------------------------- Blender
+
+def _image(name, rgba, colorspace="Non-Color"):
+    h, w = rgba.shape[:2]
+    img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True)
+    img.colorspace_settings.name = colorspace         # first: it regenerates the buffer
+    img.pixels.foreach_set(np.ascontiguousarray(rgba, np.float32).reshape(-1))
+    img.pack()
+    return img
+
+
+def _checker(n=32, cells=4):
+    yy, xx = np.mgrid[0:n, 0:n]
+    chk = ((xx // (n // cells) + yy // (n // cells)) % 2).astype(np.float32)
+    rgba = np.ones((n, n, 4), np.float32)
+    rgba[..., 0] = 0.1 + 0.8 * chk
+    rgba[..., 1] = 0.5
+    rgba[..., 2] = 0.9 - 0.8 * chk
+    return rgba
+
+
+def _textured(name, img, interpolation="Linear", extension="REPEAT", uv_map=None,
+              mapping=None, node="ShaderNodeBsdfDiffuse"):
+    mat = bpy.data.materials.new(name)
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        if n.type == "BSDF_PRINCIPLED":
+            nt.nodes.remove(n)
+    bsdf = nt.nodes.new(node)
+    nt.links.new(bsdf.outputs[0], next(n for n in nt.nodes
+                                      if n.type == "OUTPUT_MATERIAL").inputs["Surface"])
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation, tex.extension = img, interpolation, extension
+    colour = "Color" if node == "ShaderNodeBsdfDiffuse" else "Base Color"
+    nt.links.new(tex.outputs["Color"], bsdf.inputs[colour])
+    vec = tex.inputs["Vector"]
+    if mapping is not None:
+        m = nt.nodes.new("ShaderNodeMapping")
+        m.inputs["Location"].default_value = mapping
+        nt.links.new(m.outputs["Vector"], vec)
+        vec = m.inputs["Vector"]
+    if uv_map is not None:
+        uvn = nt.nodes.new("ShaderNodeUVMap")
+        uvn.uv_map = uv_map
+        nt.links.new(uvn.outputs["UV"], vec)
+    return mat
+
+
+def _white_world():
+    bs.add_world(image=bs.float_image("white", np.ones((8, 16, 3), np.float32)))
+
+
+def _plane_from_above(size=2.0, pixels=16):
+    bpy.ops.mesh.primitive_plane_add(size=size)
+    plane = bpy.context.object
+    cam = bs.add_camera(location=(0.0, 0.0, 5.0), rotation=(0.0, 0.0, 0.0))
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = size
+    bs.set_resolution(pixels, pixels)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 1
+    scene.render.filter_size = 0.0
+    return plane
+
+
+@pytest.mark.parametrize("interpolation, extension, mapping", [
+    ("Linear", "REPEAT", None), ("Closest", "EXTEND", None), ("Cubic", "MIRROR", None),
+    ("Linear", "CLIP", (0.3, -0.2, 0.0))])
+def test_glsl_texture_equals_numpy_at_every_pixel(tmp_path, interpolation, extension, mapping):
+    """An unoccluded Lambert plane under a white world shows its albedo: each pixel is the
+    texture read (core.textures.sample) at the pixel centre's UV."""
+    bs.reset()
+    _white_world()
+    plane = _plane_from_above()
+    rng = np.random.default_rng(4)
+    rgba = np.ones((8, 8, 4), np.float32)
+    rgba[..., :3] = rng.random((8, 8, 3))
+    img = _image("noise", rgba)
+    plane.data.materials.append(_textured("Tex", img, interpolation, extension,
+                                          mapping=mapping))
+    bpy.ops.prt.precompute()
+    frame = bs.render_exr(tmp_path / "f.exr")[::-1]            # bottom row first, as v
+    n = frame.shape[0]
+    centres = (np.arange(n) + 0.5) / n
+    uv = np.stack(np.meshgrid(centres, centres, indexing="xy"), axis=-1).reshape(-1, 2)
+    transform = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    if mapping is not None:
+        transform[:, 2] = mapping[:2]
+    tex = textures.ImageTexture(rgba, transform=transform, interpolation=interpolation,
+                                extension=extension)
+    expected = textures.sample(tex, uv)[:, :3].reshape(n, n, 3)
+    np.testing.assert_allclose(frame[..., :3], expected, atol=2e-4)
+
+
+def test_colour_attribute_and_mix_with_a_colour(tmp_path):
+    bs.reset()
+    _white_world()
+    plane = _plane_from_above(pixels=8)
+    attr = plane.data.color_attributes.new("Paint", "FLOAT_COLOR", "POINT")
+    cols = np.array([[1, 0, 0, 1], [0, 1, 0, 1], [0, 0, 1, 1], [1, 1, 1, 1]], np.float32)
+    attr.data.foreach_set("color", cols.reshape(-1))
+    mat = bpy.data.materials.new("Attr")
+    nt = mat.node_tree
+    bsdf = nt.nodes["Principled BSDF"]
+    node = nt.nodes.new("ShaderNodeVertexColor")
+    node.layer_name = "Paint"
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type, mix.blend_type = "RGBA", "MULTIPLY"
+    mix.inputs[0].default_value = 1.0
+    nt.links.new(node.outputs["Color"], mix.inputs[6])
+    mix.inputs[7].default_value = (0.5, 0.5, 0.5, 1.0)
+    nt.links.new(mix.outputs[2], bsdf.inputs["Base Color"])
+    plane.data.materials.append(mat)
+    from prt_relight.addon import runtime
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    assert 0 in state.objects[0].textures
+    assert not any("driven by a node link" in w for w in state.warnings), state.warnings
+    bpy.ops.prt.precompute()
+    frame = bs.render_exr(tmp_path / "a.exr")
+    # a corner pixel reads close to its vertex's colour times 0.5 (Principled: a bit less)
+    corner = frame[-1, 0, :3]                                  # bottom left: vertex 0
+    assert corner[0] > 4 * max(corner[1], corner[2]) and 0.4 < corner[0] < 0.6
+
+
+def test_unsupported_nodes_still_warn_by_name():
+    bs.reset()
+    _white_world()
+    plane = _plane_from_above(pixels=8)
+    mat = bpy.data.materials.new("Noise")
+    nt = mat.node_tree
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    nt.links.new(noise.outputs["Color"], nt.nodes["Principled BSDF"].inputs["Base Color"])
+    plane.data.materials.append(mat)
+    from prt_relight.addon import runtime
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    assert state.objects[0].textures == {}
+    assert any("'Base Color' is driven by a node link" in w for w in state.warnings)
+
+
+def test_swapping_or_painting_the_image_redraws_without_recompute(tmp_path):
+    bs.reset()
+    _white_world()
+    plane = _plane_from_above(pixels=8)
+    rgba = np.ones((4, 4, 4), np.float32) * 0.25
+    img = _image("paint", rgba)
+    plane.data.materials.append(_textured("Tex", img, "Closest"))
+    bpy.ops.prt.precompute()
+    pid = plane.prt.precompute_id
+    a = bs.render_exr(tmp_path / "a.exr")
+    np.testing.assert_allclose(a[..., :3], 0.25, atol=1e-5)
+    rgba[..., :3] = (0.7, 0.2, 0.1)
+    img.pixels.foreach_set(rgba.reshape(-1))                 # what Texture Paint does
+    b = bs.render_exr(tmp_path / "b.exr")
+    np.testing.assert_allclose(b[..., :3], np.broadcast_to((0.7, 0.2, 0.1), b[..., :3].shape),
+                               atol=1e-5)
+    other = _image("other", np.full((2, 2, 4), 0.9, np.float32))
+    plane.active_material.node_tree.nodes["Image Texture"].image = other
+    c = bs.render_exr(tmp_path / "c.exr")
+    np.testing.assert_allclose(c[..., :3], 0.9, atol=1e-5)
+    assert plane.prt.precompute_id == pid
+
+
+def test_srgb_texture_is_linearised_and_non_color_is_not(tmp_path):
+    bs.reset()
+    _white_world()
+    plane = _plane_from_above(pixels=4)
+    # an 8-bit image: Blender stores bytes, Cycles linearises sRGB ones
+    img = bpy.data.images.new("grey", 2, 2, alpha=True)
+    img.pixels.foreach_set(np.full(16, 128 / 255, np.float32))
+    img.pack()
+    plane.data.materials.append(_textured("Tex", img, "Closest"))
+    bpy.ops.prt.precompute()
+    img.colorspace_settings.name = "sRGB"
+    srgb = bs.render_exr(tmp_path / "s.exr")[..., 0].mean()
+    img.colorspace_settings.name = "Non-Color"
+    data = bs.render_exr(tmp_path / "n.exr")[..., 0].mean()
+    assert srgb == pytest.approx(((128 / 255 + 0.055) / 1.055) ** 2.4, rel=1e-3)
+    assert data == pytest.approx(128 / 255, rel=1e-3)
+
+
+def test_a_second_uv_map_is_read_when_the_node_names_it(tmp_path):
+    bs.reset()
+    _white_world()
+    plane = _plane_from_above(pixels=8)
+    second = plane.data.uv_layers.new(name="Shifted")
+    uv = np.empty(len(plane.data.loops) * 2, np.float32)
+    plane.data.uv_layers[0].data.foreach_get("uv", uv)
+    second.data.foreach_set("uv", (uv.reshape(-1, 2)[:, ::-1]).reshape(-1))  # u <-> v
+    plane.data.uv_layers.active = plane.data.uv_layers[0]
+    px = np.ones((1, 2, 4), np.float32)
+    px[0, 0, :3], px[0, 1, :3] = 0.1, 0.9                       # dark left, bright right
+    plane.data.materials.append(_textured("Tex", _image("lr", px), "Closest", "EXTEND",
+                                          uv_map="Shifted"))
+    bpy.ops.prt.precompute()
+    frame = bs.render_exr(tmp_path / "f.exr")
+    # swapped UVs: the split runs along the image's rows (top bright, bottom dark)
+    assert frame[0, :, 0].mean() == pytest.approx(0.9, abs=1e-4)
+    assert frame[-1, :, 0].mean() == pytest.approx(0.1, abs=1e-4)
+
+
+@pytest.mark.slow
+def test_textured_statue_on_a_textured_ground_matches_cycles(tmp_path):
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    ground = bs.add_ground(size=6.0, cuts=48)
+    img = _image("checker", _checker(64, 8))
+    ground.data.materials.append(_textured("Ground", img, node="ShaderNodeBsdfPrincipled"))
+    suzanne = bs.add_suzanne(subdiv=2)
+    photo = np.ones((32, 32, 4), np.float32)
+    yy, xx = np.mgrid[0:32, 0:32] / 32.0
+    photo[..., 0] = 0.5 + 0.4 * np.sin(9 * xx)
+    photo[..., 1] = 0.4 + 0.3 * np.cos(7 * yy)
+    photo[..., 2] = 0.3 + 0.2 * xx * yy
+    suzanne.data.materials.append(_textured("Statue", _image("photo", photo, "sRGB")))
+    bs.add_camera()
+    bs.set_resolution(96, 72)
+    bpy.context.scene.prt.supersampling = 3
+    bpy.ops.prt.precompute()
+    truth = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=512)
+    errors = {}
+    for method in METHODS:
+        bpy.context.scene.prt.method = method
+        errors[method] = bs.rel_l2(bs.render_exr(tmp_path / f"{method}.exr"), truth)
+    assert errors["REFERENCE"] < 0.02, errors
+    assert all(e < 0.08 for e in errors.values()), errors
