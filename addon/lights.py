@@ -49,21 +49,31 @@ def describe(source, total_power: float) -> str:
 
 
 class DrawnSource:
-    """A source as the pass draws it, in world space."""
+    """A source as the pass draws it, in world space: a distant disc (the world's sources,
+    sun lamps) or, with a ``position``, a local lamp (point or spot: a sphere of radius
+    ``radius`` and power ``radiance`` (watts times colour); ``spot`` = (axis the lamp shines
+    along, cos of its half angle, smoothstep width))."""
 
-    __slots__ = ("direction", "radius", "radiance", "name")
+    __slots__ = ("direction", "radius", "radiance", "name", "position", "spot")
 
-    def __init__(self, direction, radius, radiance, name):
+    def __init__(self, direction, radius, radiance, name, position=None, spot=None):
         self.direction = np.asarray(direction, np.float64) / max(np.linalg.norm(direction),
                                                                  1e-300)
         self.radius = float(radius)
-        #: (3,) radiance of the disc, or the irradiance at normal incidence when point-like
+        #: (3,) radiance of the disc, the irradiance at normal incidence when point-like,
+        #: or a local lamp's power
         self.radiance = np.asarray(radiance, np.float64)
         self.name = name
+        self.position = None if position is None else np.asarray(position, np.float64)
+        self.spot = spot
 
     @property
     def point_like(self) -> bool:
         return self.radius < POINT_RADIUS
+
+    @property
+    def local(self) -> bool:
+        return self.position is not None
 
 
 def extraction_settings(prt) -> dict:
@@ -101,10 +111,23 @@ def split_world(world, settings: dict):
 
 
 def lamp_sources(lamps) -> list:
-    """Blender sun lamps as discs: strength is the irradiance at normal incidence, spread
-    over the disc of half the lamp's angle (Cycles' distant light)."""
+    """Blender lamps: a sun is a disc of half its angle whose strength is the irradiance
+    at normal incidence (Cycles' distant light); a point or spot lamp a sphere of its
+    radius giving Phi / (4 pi d^2) at normal incidence (Cycles), a spot masked by its
+    cone's smoothstep (core.sg_lighting)."""
     out = []
     for lamp in lamps:
+        if lamp.kind in ("POINT", "SPOT"):
+            spot = None
+            if lamp.kind == "SPOT":
+                cos_half = math.cos(0.5 * lamp.spot_size)
+                spot = (np.asarray(lamp.direction, np.float64), cos_half,
+                        (1.0 - cos_half) * lamp.spot_blend)
+            out.append(DrawnSource(lamp.direction, max(float(lamp.radius), 0.0),
+                                   np.asarray(lamp.color, np.float64),
+                                   f"{lamp.kind.lower()} lamp", position=lamp.position,
+                                   spot=spot))
+            continue
         if lamp.kind != "SUN":
             continue
         r = 0.5 * float(lamp.angle)
@@ -129,7 +152,8 @@ def _shader():
         for kind, ident in (("MAT4", "viewProjection"), ("VEC4", "texInfo"),
                             ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
             info.push_constant(kind, ident)
-        for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex", "albedoTex")):
+        for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex", "albedoTex",
+                                      "cubeTex")):
             info.sampler(slot, "FLOAT_2D", ident)
         for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"), ("VEC2", "uv"),
                                               ("VEC4", "attr"))):
@@ -144,6 +168,26 @@ def _shader():
         info.fragment_source("#define COS_VIEW_MIN 1e-4\n" + drawing.glsl_source(
             "brdf_lib.glsl", "texture_lib.glsl", "lights_frag.glsl"))
         sh = _GPU["shader"] = gpu.shader.create_from_info(info)
+    return sh
+
+
+def _distance_shader():
+    """Writes each fragment's distance to ``lamp`` (a local lamp's shadow faces)."""
+    import gpu
+    sh = _GPU.get("distance")
+    if sh is None:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.push_constant("MAT4", "viewProjection")
+        info.push_constant("VEC3", "lamp")
+        info.vertex_in(0, "VEC3", "pos")
+        iface = gpu.types.GPUStageInterfaceInfo("prt_lights_distance_iface")
+        iface.smooth("VEC3", "vPos")
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source("void main() { vPos = pos; "
+                           "gl_Position = viewProjection * vec4(pos, 1.0); }")
+        info.fragment_source("void main() { fragColor = vec4(length(vPos - lamp)); }")
+        sh = _GPU["distance"] = gpu.shader.create_from_info(info)
     return sh
 
 
@@ -259,6 +303,81 @@ def _shadow_atlas(state, sources, casters):
     return got
 
 
+#: a local lamp's shadow faces (texels per side; six per lamp)
+CUBE_TILE = 1024
+_CUBES = drawing.gpu_cache({})
+#: the six 90-degree faces around a local lamp, in lights_frag.glsl's order
+CUBE_AXES = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0],
+                      [0, 0, -1.0]])
+
+
+def face_matrix(position, axis, near, far) -> np.ndarray:
+    """World -> clip of a square 90-degree perspective view from ``position`` along
+    ``axis`` (one face of a local lamp's shadow cube)."""
+    f = np.asarray(axis, np.float64)
+    up = np.array([0.0, 0.0, 1.0]) if abs(f[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    right = np.cross(f, up)
+    right /= np.linalg.norm(right)
+    up = np.cross(right, f)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = right, up, -f
+    view[:3, 3] = -view[:3, :3] @ np.asarray(position, np.float64)
+    proj = np.zeros((4, 4))
+    proj[0, 0] = proj[1, 1] = 1.0
+    proj[2, 2] = -(far + near) / (far - near)
+    proj[2, 3] = -2.0 * far * near / (far - near)
+    proj[3, 2] = -1.0
+    return proj @ view
+
+
+def _cube_atlas(sources, casters):
+    """Render each local lamp's six faces (distance to the lamp) into one R32F atlas: one
+    row of six tiles per lamp.  (texture, per lamp (tile origin x, y, face size, the six
+    matrices)); cached per geometry and lamp positions."""
+    import gpu
+    import mathutils
+    key = (tuple(st.fingerprint for st in casters),
+           tuple(np.round(s.position, 7).tobytes() for s in sources))
+    got = _CUBES.get(key)
+    if got is not None:
+        return got
+    allp = np.concatenate([st.arrays.positions for st in casters]) if casters else \
+        np.zeros((1, 3))
+    width, height = 6 * CUBE_TILE, CUBE_TILE * len(sources)
+    colour = gpu.types.GPUTexture((width, height), format="R32F")
+    depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
+    fb = gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=colour)
+    saved = gpu.state.viewport_get()
+    sh = _distance_shader()
+    out = []
+    with fb.bind():
+        fb.clear(color=(1e30, 1e30, 1e30, 1e30), depth=1.0)
+        gpu.state.depth_test_set("LESS_EQUAL")
+        gpu.state.depth_mask_set(True)
+        gpu.state.face_culling_set("NONE")
+        gpu.state.blend_set("NONE")
+        for k, s in enumerate(sources):
+            reach = float(np.max(np.linalg.norm(allp - s.position, axis=1))) * 1.01 + 1e-3
+            near = max(min(0.5 * s.radius, 0.05 * reach), 1e-4 * reach)
+            mats = []
+            for face, axis in enumerate(CUBE_AXES):
+                gpu.state.viewport_set(face * CUBE_TILE, k * CUBE_TILE, CUBE_TILE, CUBE_TILE)
+                M = face_matrix(s.position, axis, near, reach)
+                mats.append(M)
+                sh.bind()
+                sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
+                sh.uniform_float("lamp", tuple(map(float, s.position)))
+                for st in casters:
+                    _object_batches(st)[0].draw(sh)
+            out.append(((0.0, float(k * CUBE_TILE), float(CUBE_TILE)), mats))
+    gpu.state.viewport_set(*saved)
+    gpu.state.depth_test_set("NONE")
+    got = (colour, out)
+    _CUBES.clear()
+    _CUBES[key] = got
+    return got
+
+
 # --------------------------------------------------------------------------- parameters
 
 def material_texels(material, eye4, closed_side=0) -> np.ndarray:
@@ -297,18 +416,32 @@ def _texture(rgba):
 def draws(state, eye, view_dir) -> list:
     """``draw(view_projection)`` callables adding every source to the objects (empty when
     there is none).  Renders the sources' shadow maps first (cached)."""
-    sources = (list(state.sources) + lamp_sources(state.sun_lamps))[:MAX_DRAWN]
+    sources = (list(state.sources) + lamp_sources(state.drawn_lamps))[:MAX_DRAWN]
     casters = [st for st in state.objects if st.status != "unshadowed"]
     if not sources or not state.objects:
         return []
-    shadow_tex, tiles = _shadow_atlas(state, sources, casters)
-    src = np.zeros((len(sources), 8, 4), np.float32)
-    for k, (s, (M, tile, depth_range, texel)) in enumerate(zip(sources, tiles)):
+    distant = [s for s in sources if not s.local]
+    local = [s for s in sources if s.local]
+    shadow_tex, tiles = _shadow_atlas(state, distant, casters) if distant else \
+        (drawing.white_texture(), [])
+    cube_tex, cubes = _cube_atlas(local, casters) if local else (drawing.white_texture(), [])
+    src = np.zeros((len(sources), 32, 4), np.float32)
+    for k, (s, (M, tile, depth_range, texel)) in enumerate(zip(distant, tiles)):
         src[k, 0] = (*s.direction, s.radius)
         src[k, 1] = (*s.radiance, 1.0 if s.point_like else 0.0)
         src[k, 2:6] = M.T                       # columns of the matrix (GLSL mat4 order)
         src[k, 6] = (*tile, depth_range)
         src[k, 7] = (texel, *(M[0, :3] / np.linalg.norm(M[0, :3])))   # the map's x axis
+    for k, (s, (tile, mats)) in enumerate(zip(local, cubes), start=len(distant)):
+        src[k, 0] = (*s.position, s.radius)
+        src[k, 1] = (*s.radiance, 2.0 if s.spot is None else 3.0)
+        if s.spot is not None:
+            axis, cos_half, smooth = s.spot
+            src[k, 2] = (*axis, cos_half)
+            src[k, 3, 0] = smooth
+        src[k, 6, :3] = tile
+        for face, M in enumerate(mats):
+            src[k, 8 + 4 * face:12 + 4 * face] = M.T
     src_tex = _texture(src)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
     out = []
@@ -324,6 +457,7 @@ def draws(state, eye, view_dir) -> list:
             sh.uniform_float("viewProjection", view_projection)
             sh.uniform_sampler("srcTex", src_tex)
             sh.uniform_sampler("shadowTex", shadow_tex)
+            sh.uniform_sampler("cubeTex", cube_tex)
             for slot, batch in surfaces:
                 sh.uniform_sampler("paramTex", params[slot])
                 source = textures.get(slot, (None, None))[0]

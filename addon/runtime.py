@@ -169,13 +169,13 @@ class FrameState:
         self.full_world: envmap.WorldLighting | None = None
         #: addon.lights.DrawnSource of the world's compact sources (drawn per pixel)
         self.sources: list = []
-        self.sun_lamps: list = []    # core.sg_lighting.Lamp of the visible sun lamps
+        self.drawn_lamps: list = []  # core.sg_lighting.Lamp drawn per pixel (addon/lights.py)
         self.warnings: list[str] = []
         self.error: str | None = None
         self.resolution = 32
         self.method = "REFERENCE"
         self.settings: dict = {}     # scene.prt values of every method's settings
-        self.lamps: list = []        # core.sg_lighting.Lamp of the visible point/spot lights
+        self.lamps: list = []        # core.sg_lighting.Lamp the method draws itself (SSDF_SG)
         self.background = None       # (world, GPU texture) cached by the engine
         #: the camera of the frame being drawn (set by the engine before shading):
         #: dict(clip=4×4 world-to-clip, width, height, eye, view_dir), or None
@@ -284,14 +284,12 @@ class FrameState:
         from . import sg_material
         lamp_warnings = []
         lamps = sg_material.export_lamps(depsgraph, lamp_warnings)
-        # sun lamps: every method, per pixel (addon/lights.py); point/spot: SSDF_SG's SGs
-        self.sun_lamps = [lamp for lamp in lamps if lamp.kind == "SUN"]
-        self.lamps = [lamp for lamp in lamps if lamp.kind != "SUN"]
-        if getattr(self.method_impl, "draws_lamps", False):
-            self.warnings += lamp_warnings
-        elif self.lamps or lamp_warnings:
-            self.warnings.append(f"Point, spot and area lights are drawn by SSDF_SG only; "
-                                 f"{self.method} draws the World and sun lamps")
+        # lamps are drawn per pixel (addon/lights.py), except the point and spot lamps of a
+        # method that draws them itself (SSDF_SG: its spherical Gaussians, eq. 32-33)
+        own = getattr(self.method_impl, "draws_lamps", False)
+        self.lamps = [lamp for lamp in lamps if lamp.kind != "SUN"] if own else []
+        self.drawn_lamps = [lamp for lamp in lamps if lamp.kind == "SUN" or not own]
+        self.warnings += lamp_warnings
         self.method_impl.sync(self)
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
 

@@ -19,10 +19,13 @@
  * 9 (core.mesh.closed_side of the object, -, -, -);
  * row 1: the Lambert base's view weight at mu = i / (TABLE - 1) (Principled layering),
  * rows 2, 3: each lobe's multiscatter factor at mu (core.brdf.multiscatter_factor).
- * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, power
- * flag: 1 = point-like, radiance is then its irradiance), 2..5 world-to-shadow-clip
+ * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, kind:
+ * 0 a disc, 1 point-like (radiance is then its irradiance)), 2..5 world-to-shadow-clip
  * columns, 6 (atlas tile origin x, y and size in texels, depth range in world units),
- * 7 (shadow texel size in world units, the map's x axis in world space). */
+ * 7 (shadow texel size in world units, the map's x axis in world space).  A local lamp:
+ * 0 (position, sphere radius), 1 (power times colour, kind 2 point / 3 spot), 2 (spot
+ * axis, cos of its half angle), 3 (spot smoothstep width), 6 (cubeTex tile origin x, y
+ * and face size), 8..31 the six faces' world-to-clip columns. */
 
 #define NL 8
 #define NB 8
@@ -163,6 +166,58 @@ float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
   return lit / float(PCF_TAPS);
 }
 
+/* a local lamp's shadow: six 90-degree faces around it (+X, -X, +Y, -Y, +Z, -Z, matrices
+ * in srcTex texels 8..31), each holding the distance to the lamp of what it sees; PCSS
+ * with the lamp's radius: penumbra = (receiver - blocker) / blocker * 2 R */
+float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec2 shift)
+{
+  vec4 tile = source(s, 6);
+  if (tile.z <= 0.0) {
+    return 1.0;
+  }
+  vec3 v0 = p - lamp;
+  float texel = 2.0 * max(max(abs(v0.x), abs(v0.y)), abs(v0.z)) / tile.z;
+  vec3 q = p + ng * (1.5 * texel);
+  vec3 v = q - lamp;
+  vec3 av = abs(v);
+  int face = av.x >= av.y && av.x >= av.z ? (v.x >= 0.0 ? 0 : 1) :
+             (av.y >= av.z ? (v.y >= 0.0 ? 2 : 3) : (v.z >= 0.0 ? 4 : 5));
+  vec4 lc = mat4(source(s, 8 + 4 * face), source(s, 9 + 4 * face), source(s, 10 + 4 * face),
+                 source(s, 11 + 4 * face)) * vec4(q, 1.0);
+  vec2 uv = clamp(lc.xy / lc.w * 0.5 + 0.5, 0.0, 1.0);
+  vec4 ftile = vec4(tile.x + float(face) * tile.z, tile.y, tile.z, 0.0);
+  float d = length(v);
+  float bias = 2.0 * texel;
+  mat2 turn = mat2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x),
+                   -sin(6.2831853 * shift.x), cos(6.2831853 * shift.x));
+  float uv_texel = 1.0 / tile.z;
+  float search = clamp(lamp_radius / texel, 1.0, 24.0);
+  float blockers = 0.0, sum = 0.0;
+  for (int k = 0; k < BLOCKER_TAPS; k++) {
+    float b = texelFetch(cubeTex, ivec2(ftile.xy + clamp(uv + turn * POISSON[k] * search
+                                                         * uv_texel, 0.0, 1.0) * (tile.z - 1.0)),
+                         0).r;
+    if (b < d - bias) {
+      blockers += 1.0;
+      sum += b;
+    }
+  }
+  if (blockers == 0.0) {
+    return 1.0;
+  }
+  float avg = max(sum / blockers, 1e-6);
+  float penumbra = (d - avg) / avg * 2.0 * lamp_radius / texel;       /* in texels */
+  float filter_radius = clamp(0.5 * penumbra, 0.75, 32.0);
+  float lit = 0.0;
+  for (int k = 0; k < PCF_TAPS; k++) {
+    float b = texelFetch(cubeTex, ivec2(ftile.xy + clamp(uv + turn * POISSON[k] * filter_radius
+                                                         * uv_texel, 0.0, 1.0) * (tile.z - 1.0)),
+                         0).r;
+    lit += b < d - bias ? 0.0 : 1.0;
+  }
+  return lit / float(PCF_TAPS);
+}
+
 /* ---------------------------------------------------------------- main */
 
 void main()
@@ -206,15 +261,36 @@ void main()
     vec4 s1 = source(s, 1);
     vec3 c = s0.xyz;
     float r = s0.w;
+    float kind = s1.w;                /* 0 disc, 1 point-like direction, 2 point, 3 spot */
+    if (kind > 1.5) {                 /* a local lamp: the sphere seen from here */
+      vec3 to_lamp = s0.xyz - vPos;
+      float d2 = max(dot(to_lamp, to_lamp), 1e-12);
+      c = to_lamp * inversesqrt(d2);
+      float e = 1.0 / (4.0 * PI * d2);              /* Cycles: Phi / (4 pi d^2) at normal */
+      if (kind > 2.5) {                             /* spot cone (core.sg_lighting) */
+        vec4 spot = source(s, 2);
+        float smooth_w = source(s, 3).x;
+        float t = dot(-c, spot.xyz);
+        e *= smooth_w > 0.0 ? smoothstep(0.0, 1.0, (t - spot.w) / smooth_w)
+                            : (t > spot.w ? 1.0 : 0.0);
+      }
+      if (e <= 0.0) {
+        continue;
+      }
+      r = asin(min(s0.w * inversesqrt(d2), 0.999));
+      kind = r < 1e-4 ? 1.0 : 0.0;
+      s1.rgb *= kind > 0.5 ? e : e / (PI * sin(r) * sin(r));
+    }
     if (dot(ng, c) < -sin(r)) {
       continue;                                     /* the whole disc is below the plane */
     }
-    float V = visibility(s, vPos, ng, r, shift);
+    float V = s1.w > 1.5 ? local_visibility(s, vPos, ng, s0.xyz, s0.w, shift)
+                         : visibility(s, vPos, ng, r, shift);
     if (V <= 0.0) {
       continue;
     }
     vec3 sum = vec3(0.0);
-    if (s1.w > 0.0) {                               /* point-like: its irradiance */
+    if (kind > 0.5) {                               /* point-like: its irradiance */
       if (dot(ng, c) > 0.0) {
         sum = (kd.rgb * wd * max(dot(n, c), 0.0) +
                (glossy ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)

@@ -239,3 +239,23 @@ def test_negative_light_is_warned_and_never_drawn(tmp_path):
     scene.render.film_transparent = False
     frame = bs.render_exr(tmp_path / "negative.exr", transparent=False)
     assert frame.min() >= 0.0
+
+
+def test_a_tiny_bright_sun_keeps_the_balls_shadow_with_ssdf_sg(tmp_path):
+    """Under a 1-pixel 1e6 sun SSDF_SG drew 17.5 in the ball's shadow on the ground where
+    REFERENCE had 0.28; the sun is now drawn per pixel with its own shadow map for every
+    method, so the shadow is there for SSDF_SG as for REFERENCE."""
+    cam = _ball_scene()
+    img = np.full((128, 256, 3), 0.05, np.float32)
+    img += bs.sun_image(256, 128, (0.6, 0.0, 0.8), radiance=1e6)
+    bpy.context.scene.world.node_tree.nodes["Environment Texture"].image = \
+        bs.float_image("sun", img)
+    cam.location, cam.rotation_euler = (0.0, 0.0, 6.0), (0.0, 0.0, 0.0)   # 0.09 m a pixel
+    bpy.ops.prt.precompute()
+    for method in ("REFERENCE", "SSDF_SG"):
+        bpy.context.scene.prt.method = method
+        frame = bs.render_exr(tmp_path / f"{method}.exr")
+        # the ground at x = -1.2: outside the ball's silhouette, inside its shadow (the sun
+        # is toward +x); and at x = +1.6: in the sun
+        shadow, lit = frame[16, 10, :3], frame[16, 41, :3]
+        assert shadow.max() < 0.05 * lit.max(), (method, shadow, lit)

@@ -243,3 +243,79 @@ def test_glossy_statue_under_a_low_sun_gains_from_the_split(tmp_path):
     scene.prt.light_sources = 0
     before = bs.rel_l2(bs.render_exr(tmp_path / "nosplit.exr"), truth)
     assert after < 0.16 and after < 0.5 * before, (after, before)
+
+
+def _local_lamp(kind, power, location, radius=0.1, rotation=(0.0, 0.0, 0.0), size=0.8,
+                blend=0.2):
+    light = bpy.data.lights.new(kind.title(), kind)
+    light.energy, light.shadow_soft_size = power, radius
+    if kind == "SPOT":
+        light.spot_size, light.spot_blend = size, blend
+    lamp = bpy.data.objects.new(kind.title(), light)
+    bpy.context.scene.collection.objects.link(lamp)
+    lamp.location, lamp.rotation_euler = location, rotation
+    return lamp
+
+
+@pytest.mark.parametrize("method", ["REFERENCE", "SH"])
+def test_point_and_spot_lamps_light_every_method_per_pixel(tmp_path, method):
+    """A point lamp 2 m above a Lambert plane gives albedo / pi * Phi / (4 pi d^2) * cos
+    (Cycles' point light); a spot pointing down keeps that inside its cone and nothing
+    outside; a plate between the lamp and the plane casts a shadow."""
+    bs.reset()
+    _black_world()
+    ground = bs.add_ground(size=8.0, cuts=8)
+    ground.data.materials.append(bs.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
+                                                  Color=(0.8, 0.8, 0.8, 1.0)))
+    lamp = _local_lamp("POINT", 500.0, (0.0, 0.0, 2.0), radius=0.01)
+    cam = bs.add_camera(location=(0.0, 0.0, 1.0), rotation=(0.0, 0.0, 0.0))
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 6.0
+    bs.set_resolution(30, 30)
+    scene = bpy.context.scene
+    scene.prt.method = method
+    scene.prt.supersampling = 1
+    scene.render.filter_size = 0.0
+    bpy.ops.prt.precompute()
+    frame = bs.render_exr(tmp_path / "point.exr")[::-1]          # row 0 at y = -3
+    xs = (np.arange(30) + 0.5) / 30 * 6.0 - 3.0
+    X, Y = np.meshgrid(xs, xs, indexing="xy")
+    d2 = X * X + Y * Y + 4.0
+    expected = 0.8 / math.pi * 500.0 / (4 * math.pi * d2) * (2.0 / np.sqrt(d2))
+    np.testing.assert_allclose(frame[..., 0], expected, rtol=0.01)
+    bpy.data.objects.remove(lamp)
+    _local_lamp("SPOT", 500.0, (0.0, 0.0, 2.0), radius=0.01, size=math.radians(60),
+                blend=0.0)
+    frame = bs.render_exr(tmp_path / "spot.exr")[::-1]
+    inside = np.arctan(np.sqrt(X * X + Y * Y) / 2.0) < math.radians(27)
+    outside = np.arctan(np.sqrt(X * X + Y * Y) / 2.0) > math.radians(33)
+    np.testing.assert_allclose(frame[..., 0][inside], expected[inside], rtol=0.01)
+    assert frame[..., 0][outside].max() == 0.0
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(1.5, 0.0, 1.5))
+    bpy.ops.prt.precompute()
+    frame = bs.render_exr(tmp_path / "shadow.exr")[::-1]
+    # the plate at x 1..2 (1.5 m up) shades the ground from x = 1.33 to 2.67 (the lamp at
+    # x = 0, 2 m up): inside the shadow but within the cone
+    col = int((2.0 + 3.0) / 6.0 * 30)
+    assert frame[15, col, 0] < 0.02 * expected[15, col]
+
+
+@pytest.mark.slow
+def test_lamps_of_each_type_against_cycles(tmp_path):
+    bs.reset()
+    _black_world()
+    bs.add_ground(size=6.0, cuts=24)
+    bs.add_suzanne(subdiv=2)
+    _sun_lamp(2.0, math.radians(3.0), tilt=0.5)
+    _local_lamp("POINT", 300.0, (2.0, -1.5, 2.5), radius=0.15)
+    _local_lamp("SPOT", 600.0, (-2.0, -2.0, 3.0), radius=0.1,
+                rotation=(math.radians(40), 0.0, math.radians(-45)), size=math.radians(50))
+    bs.add_camera(location=(0.0, -6.0, 3.5), rotation=(1.1, 0.0, 0.0))
+    bs.set_resolution(80, 60)
+    bpy.context.scene.prt.supersampling = 3
+    bpy.ops.prt.precompute()
+    truth = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=512)
+    for method in ("REFERENCE", "SH"):
+        bpy.context.scene.prt.method = method
+        err = bs.rel_l2(bs.render_exr(tmp_path / f"{method}.exr"), truth)
+        assert err < 0.04, (method, err)

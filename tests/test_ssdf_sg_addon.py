@@ -229,7 +229,7 @@ def test_sun_lamp_lights_an_open_plane_like_lambert_and_moves_live(tmp_path):
         frame = bs.render_exr(tmp_path / f"{method}60.exr")
         np.testing.assert_allclose(frame[..., :3], 0.8 / np.pi * 3.0 * 0.5, rtol=0.01,
                                    err_msg=method)
-        assert not _state().lamps and len(_state().sun_lamps) == 1
+        assert not _state().lamps and len(_state().drawn_lamps) == 1
     assert ground.prt.precompute_id == pid
 
 
