@@ -32,30 +32,10 @@ from bpy.props import BoolProperty, IntProperty, StringProperty
 
 from ..core import report as core_report
 from ..core import visibility
-from . import methods, precompute, scene_build, scene_export, storage
+from . import methods, precompute, relit, scene_build, scene_export, storage
+from .drawing import ensure_gpu
 from .operators import RUNNING, end_modal
-from .runtime import FrameState, rotated_world
-
-_GPU_READY = False
-
-
-def ensure_gpu(scene):
-    """In ``-b`` the gpu module needs one Workbench render before offscreen drawing."""
-    global _GPU_READY
-    if _GPU_READY or not bpy.app.background:
-        return
-    r = scene.render
-    saved = (r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage)
-    try:
-        r.engine = "BLENDER_WORKBENCH"
-        r.resolution_x = r.resolution_y = 8
-        r.resolution_percentage = 100
-        with bpy.context.temp_override(scene=scene):
-            bpy.ops.render.render()
-        _GPU_READY = True
-    finally:
-        r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
-
+from .runtime import FrameState
 
 def sweep(method_ids=None, budgets_per_method=None):
     """(method, budget property or None, value or None) for every registered method and
@@ -232,7 +212,6 @@ class ReportRun:
         self.steps_total = (len(sweep(method_ids, budgets_per_method)) + 3 + int(self._has_auto)
                             + int(include_cycles) + int(stability))
         self.steps_done = 0
-        self._frames = 0
 
     # -------------------------------------------------------------- helpers
     def _frame(self, depsgraph, view, projection, w, h, persp, supersampling, filter_width):
@@ -249,27 +228,13 @@ class ReportRun:
         return self._relit_times([state], self.repeats, view, projection, w, h, persp)[0]
 
     def _relit_times(self, states, rounds, view, projection, w, h, persp):
-        """Seconds of ``rounds`` relit frames per state, after a warm-up round; with
-        several states the frames are *interleaved* (one each per round), so the
-        machine's load weighs on each alike (the AUTO check).  Every frame turns the
-        environment to an angle not drawn before."""
+        """Seconds of ``rounds`` relit frames per state (:func:`.relit.relit_times`: a
+        warm-up round first; several states interleaved, the AUTO check): the full
+        ``render_pixels`` call at the camera's view."""
         from .engine import render_pixels
-        times = [[] for _ in states]
-        saved = [(st.world, st.background) for st in states]
-        for k in range(rounds + 1):                       # the first round warms up
-            for i, st in enumerate(states):
-                world, background = saved[i]
-                self._frames += 1
-                st.world = rotated_world(world, 0.05 + 0.37 * self._frames)
-                if background is not None:                # same pixels: no texture upload
-                    st.background = (st.world, background[1])
-                t0 = time.perf_counter()
-                render_pixels(st, view, projection, w, h, True, persp, 1)
-                if k:
-                    times[i].append(time.perf_counter() - t0)
-        for st, (world, background) in zip(states, saved):
-            st.world, st.background = world, background
-        return times
+        return relit.relit_times(
+            states, lambda st: render_pixels(st, view, projection, w, h, True, persp, 1),
+            rounds)
 
     def _auto_check(self, auto_state, target, view, projection, w, h, persp):
         """AUTO against the fastest fixed method/budget that meets AUTO's target: the
@@ -371,7 +336,7 @@ class ReportRun:
                     images[len(self.rows)] = img
                 self.rows.append(row)
                 if method.id == "AUTO" and img is not None:
-                    self.auto_rows = list(getattr(method, "last_choices", lambda: [])())
+                    self.auto_rows = list(method.last_choices())
                     auto_frame = (state, view, projection, persp)
                 pm = per_method.setdefault(method.id, dict(
                     id=method.id, label=method.label, precompute_seconds=trace_seconds,
@@ -688,17 +653,15 @@ BASE_CASES = [
 
 
 def stability_cases(method_ids=None):
-    """:data:`BASE_CASES` plus the cases methods declare with an optional
+    """:data:`BASE_CASES` plus the cases methods declare with
     ``Method.stability_cases()`` (same dict form; e.g. SG sharpness 1e-3…1e5 or
     anisotropy 1:16 for a method with spherical Gaussians)."""
     cases = list(BASE_CASES)
     for m in methods.REGISTRY.values():
         if method_ids is not None and m.id not in method_ids:
             continue
-        extra = getattr(m, "stability_cases", None)
-        if extra is not None:
-            for case in extra():
-                cases.append(dict(case, name=f"{case['name']} [{m.id}]"))
+        for case in m.stability_cases():
+            cases.append(dict(case, name=f"{case['name']} [{m.id}]"))
     return cases
 
 

@@ -87,7 +87,7 @@ change-index sums on the DCT-projected lighting instead of decompressing.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from .cache import Cache, memo
 
 import numpy as np
 
@@ -122,7 +122,7 @@ def block_count(resolution: int) -> int:
     return 6 * blocks_per_face(resolution) ** 2
 
 
-@lru_cache(maxsize=8)
+@memo(8)
 def block_permutation(resolution: int) -> np.ndarray:
     """(blocks, 256) int64: flat cubemap texel of pixel ``i*16+j`` of each block.
 
@@ -136,7 +136,7 @@ def block_permutation(resolution: int) -> np.ndarray:
     return flat
 
 
-@lru_cache(maxsize=8)
+@memo(8)
 def inverse_block_permutation(resolution: int) -> np.ndarray:
     """(6*N*N,) int64: position in the block-major order of each flat texel."""
     perm = block_permutation(resolution).reshape(-1)
@@ -172,7 +172,7 @@ def from_blocks(values: np.ndarray, resolution: int, axis: int = 0) -> np.ndarra
 
 # --------------------------------------------------------------------------- DCT
 
-@lru_cache(maxsize=1)
+@memo(1)
 def dct_matrix() -> np.ndarray:
     """(16, 16) orthonormal DCT-II matrix ``C[u, x] = a_u cos(pi (2x+1) u / 32)``."""
     u = np.arange(BLOCK)[:, None]
@@ -188,7 +188,7 @@ DCT_ORDER = tuple(sorted(((u, v) for u in range(4) for v in range(4)),
                          key=lambda p: (max(p), p[0], p[1])))
 
 
-@lru_cache(maxsize=1)
+@memo(1)
 def dct_basis() -> np.ndarray:
     """(16, 256): the functions of :data:`DCT_ORDER` on the block pixels (row-major).
 
@@ -204,7 +204,7 @@ def _nodes(l: int) -> np.ndarray:
     return np.array([(2 * i + 1) * (BLOCK // 2) // l - 1 for i in range(l)], dtype=np.int64)
 
 
-@lru_cache(maxsize=4)
+@memo(4)
 def projection_system(l: int):
     """Precomputed (sample pixels (l*l,), inverse matrix (l*l, l*l)) of eq. 4.
 
@@ -864,7 +864,7 @@ class BlockGeometry:
         return self.radius.astype(np.float32)
 
 
-@lru_cache(maxsize=4)
+@memo(4)
 def block_geometry(resolution: int) -> BlockGeometry:
     n = int(resolution)
     d = to_blocks(cubemap(n).directions, n)
@@ -1267,7 +1267,8 @@ def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: 
     return val, h
 
 
-_ANGLE_CACHE: dict = {}
+# half-vector angles of a lobe's thresholds per (distribution, alpha, thresholds)
+_ANGLE_CACHE = Cache(64)
 
 
 class GlossyLobe:

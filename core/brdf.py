@@ -180,7 +180,7 @@ Differences from Cycles that callers should know about
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from .cache import memo
 
 import numpy as np
 
@@ -607,7 +607,7 @@ def _grid_value(i: int, n: int, hi: float = 1.0) -> float:
     return min(max(i / (n - 1), 1e-4), hi)
 
 
-@lru_cache(maxsize=8)
+@memo(8)
 def _unit_disk_grid(n: int, alpha: float):
     """Quadrature on the unit disk for the VNDF mapping: ``(x, y, weight)``.
 
@@ -675,7 +675,7 @@ def _ggx_E_quadrature(rough: float, mus) -> np.ndarray:
     return w @ wq
 
 
-@lru_cache(maxsize=64)
+@memo(64)
 def ggx_E_table_column(ix: int) -> np.ndarray:
     """``E`` at roughness node ``ix`` of Cycles' 32 x 32 ``ggx_E`` grid, all 32 mu nodes."""
     rough = _grid_value(ix, _E_SIZE)
@@ -683,7 +683,7 @@ def ggx_E_table_column(ix: int) -> np.ndarray:
     return np.clip(_ggx_E_quadrature(rough, mus), 0.0, 1.0)
 
 
-@lru_cache(maxsize=64)
+@memo(64)
 def ggx_E_avg_node(ix: int) -> float:
     """``E_avg = 2 int_0^1 E(mu) mu dmu`` at roughness node ``ix`` (Gauss-Legendre in mu)."""
     rough = _grid_value(ix, _E_SIZE) if ix > 0 else 0.0
@@ -692,7 +692,7 @@ def ggx_E_avg_node(ix: int) -> float:
     return float(np.clip(np.sum(w * mu * _ggx_E_quadrature(max(rough, 1e-4), mu)), 0.0, 1.0))
 
 
-@lru_cache(maxsize=512)
+@memo(512)
 def dielectric_s_table_column(ix: int, iz: int) -> np.ndarray:
     """``S`` of Cycles' 16^3 ``ggx_gen_schlick_ior_s`` grid at (rough node ``ix``,
     z node ``iz``), all 16 mu nodes: VNDF mean of ``s(h.wi)`` (0 below horizon)."""

@@ -18,7 +18,7 @@ add up to 4*pi to rounding.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from .cache import memo
 
 import numpy as np
 
@@ -63,7 +63,7 @@ class Cubemap:
         return direction_to_texel(np.asarray(dirs, dtype=np.float64), self.resolution)
 
 
-@lru_cache(maxsize=8)
+@memo(8)
 def cubemap(resolution: int = 32) -> Cubemap:
     """The cubemap direction set of ``resolution`` texels per face edge."""
     n = int(resolution)

@@ -88,7 +88,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from .cache import memo
 from typing import NamedTuple
 
 import numpy as np
@@ -480,7 +480,7 @@ def fit_anisotropic_ndf(model, p, q, n_pairs=None, iterations=60):
     return best
 
 
-@lru_cache(maxsize=64)
+@memo(64)
 def _aniso_cached(model, p, q):
     return fit_anisotropic_ndf(model, p, q)
 
@@ -510,7 +510,7 @@ def ndf_lobes(material: SGMaterial) -> NDFLobes:
     return _iso_cached(material.model, _round_sig(a, 6))
 
 
-@lru_cache(maxsize=256)
+@memo(256)
 def _iso_cached(model, a):
     lam, mu = iso_ndf_sg(model, a)
     lam, mu = float(lam), float(mu)

@@ -25,6 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from .cache import Cache
 from .directions import Cubemap
 
 try:
@@ -107,7 +108,8 @@ def hemisphere_rays(points: np.ndarray, normals: np.ndarray, cube: Cubemap, offs
     return origins, directions, mask
 
 
-_DIRS32 = {}
+# float32 texel directions per cubemap resolution
+_DIRS32 = Cache(8)
 
 
 def _directions32(cube: Cubemap) -> np.ndarray:

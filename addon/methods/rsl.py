@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 
 from ...core import brdf, directions, envmap, reference, rsl
-from .. import drawing, runtime, storage
+from .. import drawing, keys, storage
 from . import Method, glossy_or_layered, register
 
 #: disk-map resolution of the BRDF SATs and visibility tables (§5.1: 32 x 32)
@@ -21,26 +21,21 @@ BRDF_SUBSAMPLES = 3
 #: sub-samples per disk texel edge when reading the visibility bits
 VISIBILITY_SUBSAMPLES = 2
 
-_LIGHTING: dict = {}        # unrotated cubemap lighting per (content, strength, resolution)
-_LIGHTS: dict = {}          # SquareLights per (lighting key, K / budget)
-_TABLES: dict = {}          # BrdfTables per material
-_VISIBILITY: dict = {}      # per-vertex VDT / SAT per (object, bits)
-_FACTORS: dict = {}         # view-independent (V, C) per (object, bits, lights, rotation)
-_STORED: dict = {}          # (VDT, pose) reconstructed per stored blob (storage.key)
+_LIGHTING = keys.cache(1)       # unrotated cubemap lighting per (content, strength, resolution)
+_LIGHTS = keys.cache(8)         # SquareLights per (lighting key, K / budget)
+_TABLES = keys.cache(32)        # BrdfTables per material
+_VISIBILITY = keys.cache(8)     # per-vertex VDT / SAT per (object, bits)
+_FACTORS = keys.cache(8)        # view-independent (V, C) per (object, bits, lights, rotation)
+_STORED = keys.cache(8)         # (VDT, pose) reconstructed per stored blob (storage.key)
 
 
 def _unrotated_lighting(world: envmap.WorldLighting, resolution: int):
     """The world's cubemap in texture space (no Mapping rotation): the decomposition
     does not change when the world rotates, only the light centres do."""
-    key = runtime.env_key(world, resolution)
+    key = keys.env_key(world, resolution)
     key = (key[0], key[1], resolution)
-    got = _LIGHTING.get(key)
-    if got is None:
-        flat = dataclasses.replace(world, rotation=np.eye(3))
-        got = flat.to_cubemap(resolution)
-        _LIGHTING.clear()
-        _LIGHTING[key] = got
-    return key, got
+    return key, keys.held(_LIGHTING, key, (), lambda: dataclasses.replace(
+        world, rotation=np.eye(3)).to_cubemap(resolution))
 
 
 def square_lights(state):
@@ -50,25 +45,14 @@ def square_lights(state):
     budget = s.get("rsl_error_budget") if s.get("rsl_mode", "COUNT") == "BUDGET" else None
     count = int(s.get("rsl_lights", 30))
     lkey = (key, count, budget)
-    got = _LIGHTS.get(lkey)
-    if got is None:
-        cube = directions.cubemap(state.resolution)
-        got = rsl.decompose(lighting, cube, count if budget is None else None,
-                            error_budget=budget)
-        if len(_LIGHTS) > 8:
-            _LIGHTS.pop(next(iter(_LIGHTS)))
-        _LIGHTS[lkey] = got
-    return lkey, got
+    return lkey, keys.held(_LIGHTS, lkey, (), lambda: rsl.decompose(
+        lighting, directions.cubemap(state.resolution), count if budget is None else None,
+        error_budget=budget))
 
 
 def brdf_tables(material: brdf.Material) -> rsl.BrdfTables:
-    got = _TABLES.get(material)
-    if got is None:
-        got = rsl.brdf_tables(material, DISK_RESOLUTION, VIEW_NODES, BRDF_SUBSAMPLES)
-        if len(_TABLES) > 32:
-            _TABLES.pop(next(iter(_TABLES)))
-        _TABLES[material] = got
-    return got
+    return keys.held(_TABLES, material, (), lambda: rsl.brdf_tables(
+        material, DISK_RESOLUTION, VIEW_NODES, BRDF_SUBSAMPLES))
 
 
 def derive_visibility(bits, normals, resolution: int) -> dict:
@@ -88,13 +72,13 @@ def object_visibility(st, resolution: int, kind: str, normals=None, rows=None) -
     if kind == "VDT" and stored is not None:
         if rows is None:
             return stored
-        return runtime.per_visibility(_VISIBILITY, (st.name, "rows", rows.tobytes()), stored,
-                                      lambda: stored[rows], limit=8)
+        return keys.per_visibility(_VISIBILITY, (st.name, "rows", rows.tobytes()), stored,
+                                   lambda: stored[rows])
     bits = st.bits if rows is None else st.bits[rows]
     key = (st.name, id(st.bits), resolution, None if rows is None else rows.tobytes())
-    return runtime.per_visibility(
+    return keys.per_visibility(
         _VISIBILITY, key, st.bits,
-        lambda: derive_visibility(bits, normals, resolution), limit=8)[kind]
+        lambda: derive_visibility(bits, normals, resolution))[kind]
 
 
 # ------------------------------------------------------------------ rigid motion
@@ -196,7 +180,7 @@ class RSLMethod(Method):
 
     def scene_properties(self):
         from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
-        upd = runtime.redraw_viewports
+        upd = drawing.redraw_viewports
         return {
             "rsl_lights": IntProperty(
                 name="Lights", default=30, min=1, max=2000, update=upd,
@@ -273,7 +257,7 @@ class RSLMethod(Method):
         import bpy
         for st in state.objects:
             ob = bpy.data.objects.get(st.name)
-            got = storage.load(ob, BLOB, _STORED, _stored_tables, state.note, limit=8)
+            got = storage.load(ob, BLOB, _STORED, _stored_tables, state.note)
             if got is None or len(got[0]) != st.points.count:
                 continue
             vdt, R0, probe = got
@@ -318,9 +302,9 @@ class RSLMethod(Method):
                     state.note(f"RSL GPU pass failed ({exc}); shading with numpy")
                     use_gpu = False
             if radiance is None:
-                V, C = runtime.per_visibility(
+                V, C = keys.per_visibility(
                     _FACTORS, (st.name, id(st.bits), id(vis), kind, rkey), st.bits,
-                    lambda: ev.diffuse_factors(normals, kind, vis, cos_tables), limit=8)
+                    lambda: ev.diffuse_factors(normals, kind, vis, cos_tables))
                 radiance = np.zeros((pts.count, 3))
                 for mat, sel, vd in _groups(st, eye, view_dir, turn):
                     radiance[sel] = ev.shade(mat, brdf_tables(mat), normals[sel], vd,
@@ -331,28 +315,22 @@ class RSLMethod(Method):
 
     @staticmethod
     def _shade_gpu(st, evaluator, kind, vis, eye, view_dir, lighting_key, normals, turn):
-        key = ("vis", st.name, kind)
-        got = _GPU.get(key)
-        if got is None or got[0] is not vis:
-            _GPU[key] = got = (vis, _texture(_tiles(vis), "R32F"))
+        vis_texture = keys.held(_GPU, ("vis", st.name, kind), (vis,),
+                                lambda: _texture(_tiles(vis), "R32F"))
         pts = st.points
         radiance = np.zeros((pts.count, 3))
         for mat, sel, vd in _groups(st, eye, view_dir, turn):
-            group_normals = normals[sel]
+            def shade(mat=mat, sel=sel, vd=vd):
+                group_normals = normals[sel]
+                return gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
+                                 brdf_tables(mat), group_normals, vd,
+                                 rsl.point_weights(mat, group_normals, vd), kind, vis_texture,
+                                 vis.shape[-1] - (kind == "SAT"), sel)
             if vd is None:                  # view independent: once per lighting/rotation
-                rkey = (st.name, kind, mat, lighting_key)
-                done = _GPU_DIFFUSE.get(rkey)
-                if done is not None and done[0] is vis:
-                    radiance[sel] = done[1]
-                    continue
-            radiance[sel] = gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
-                                      brdf_tables(mat), group_normals, vd,
-                                      rsl.point_weights(mat, group_normals, vd), kind, got[1],
-                                      vis.shape[-1] - (kind == "SAT"), sel)
-            if vd is None:
-                if len(_GPU_DIFFUSE) > 16:
-                    _GPU_DIFFUSE.pop(next(iter(_GPU_DIFFUSE)))
-                _GPU_DIFFUSE[rkey] = (vis, radiance[sel])
+                radiance[sel] = keys.held(_GPU_DIFFUSE, (st.name, kind, mat, lighting_key),
+                                          (vis,), shade)
+            else:
+                radiance[sel] = shade()
         return radiance
 
 
@@ -384,9 +362,9 @@ register(RSLMethod())
 MAX_TERMS = 8
 TEXTURE_WIDTH = 8192
 # shader, cached textures (per object tables, per material SATs)
-_GPU: dict = drawing.gpu_cache({})
+_GPU = drawing.gpu_cache({}, limit=64)
 # view-independent GPU results per (object, material, lighting)
-_GPU_DIFFUSE: dict = drawing.gpu_cache({})
+_GPU_DIFFUSE = drawing.gpu_cache({}, limit=16)
 
 
 def gpu_available() -> bool:
@@ -402,25 +380,25 @@ def gpu_available() -> bool:
 
 
 def _shader():
-    sh = _GPU.get("shader")
-    if sh is None:
-        import gpu
-        from .. import drawing
-        info = gpu.types.GPUShaderCreateInfo()
-        for ident in ("width", "pointCount", "lightCount", "termCount", "visMode", "visRes",
-                      "visTile", "brdfRes", "viewNodes"):
-            info.push_constant("INT", ident)
-        info.push_constant("FLOAT", "viewStep")
-        for slot, ident in enumerate(("pointData", "weights", "lights", "visTable",
-                                      "brdfTables")):
-            info.sampler(slot, "FLOAT_2D", ident)
-        info.vertex_in(0, "VEC2", "ndc")
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.define("MAX_TERMS", str(MAX_TERMS))
-        info.vertex_source(drawing._source("rsl_vertex_vert.glsl"))
-        info.fragment_source(drawing._source("rsl_vertex_frag.glsl"))
-        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
-    return sh
+    return keys.held(_GPU, "shader", (), _make_shader)
+
+
+def _make_shader():
+    import gpu
+    info = gpu.types.GPUShaderCreateInfo()
+    for ident in ("width", "pointCount", "lightCount", "termCount", "visMode", "visRes",
+                  "visTile", "brdfRes", "viewNodes"):
+        info.push_constant("INT", ident)
+    info.push_constant("FLOAT", "viewStep")
+    for slot, ident in enumerate(("pointData", "weights", "lights", "visTable",
+                                  "brdfTables")):
+        info.sampler(slot, "FLOAT_2D", ident)
+    info.vertex_in(0, "VEC2", "ndc")
+    info.fragment_out(0, "VEC4", "fragColor")
+    info.define("MAX_TERMS", str(MAX_TERMS))
+    info.vertex_source(drawing._source("rsl_vertex_vert.glsl"))
+    info.fragment_source(drawing._source("rsl_vertex_frag.glsl"))
+    return gpu.shader.create_from_info(info)
 
 
 def _texture(values: np.ndarray, fmt: str):
@@ -487,10 +465,8 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
     lt[0, :, :3] = lights_centres
     lt[0, :, 3] = lights_half
     lt[1, :, :3] = energy
-    key = ("brdf", id(tables))
-    got = _GPU.get(key)
-    if got is None or got[0] is not tables:
-        _GPU[key] = got = (tables, _texture(brdf_texture_blocks(tables), "R32F"))
+    brdf_texture = keys.held(_GPU, ("brdf", id(tables)), (tables,),
+                             lambda: _texture(brdf_texture_blocks(tables), "R32F"))
     sh = _shader()
     offscreen = gpu.types.GPUOffScreen(width, rows, format="RGBA32F")
     try:
@@ -515,7 +491,7 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
             sh.uniform_sampler("weights", weight_tex)
             sh.uniform_sampler("lights", light_tex)
             sh.uniform_sampler("visTable", vis_texture)
-            sh.uniform_sampler("brdfTables", got[1])
+            sh.uniform_sampler("brdfTables", brdf_texture)
             batch = batch_for_shader(sh, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
                                      indices=[(0, 1, 2), (0, 2, 3)])
             batch.draw(sh)

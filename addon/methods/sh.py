@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from ...core import brdf, directions, reference, sh
-from .. import runtime
+from .. import drawing, keys
 from . import Method, register
 
 # SH transfer vectors per (object, visibility, order).
-_TRANSFER_CACHE: dict = {}
+_TRANSFER_CACHE = keys.cache(64)
 # SH lighting projectors per order (each caches its unrotated projection).
-_PROJECTORS: dict = {}
+_PROJECTORS = keys.cache(4)
 
 
 class SHMethod(Method):
@@ -24,20 +24,20 @@ class SHMethod(Method):
     def scene_properties(self):
         from bpy.props import IntProperty
         return {"sh_order": IntProperty(
-            name="SH Order", default=4, min=2, max=5, update=runtime.redraw_viewports,
+            name="SH Order", default=4, min=2, max=5, update=drawing.redraw_viewports,
             description="Spherical-harmonic bands kept by the SH method (order n: n*n "
                         "coefficients)")}
 
     def shade(self, state, eye, view_dir):
         order = int(state.settings["sh_order"])
         cube = directions.cubemap(state.resolution)
-        projector = _PROJECTORS.setdefault(order, sh.LightingProjector(order))
-        light = projector.coefficients(state.world, runtime.env_key(state.world, 0)[0])
+        projector = keys.held(_PROJECTORS, order, (), lambda: sh.LightingProjector(order))
+        light = projector.coefficients(state.world, keys.env_key(state.world, 0)[0])
         out = []
         glossy = []
         for st in state.objects:
             pts = st.points
-            transfer = runtime.per_visibility(
+            transfer = keys.per_visibility(
                 _TRANSFER_CACHE, (st.name, id(st.bits), order), st.bits,
                 lambda: sh.transfer(st.bits, pts.normals, cube, order))
             sums = sh.shade_diffuse(transfer, light)

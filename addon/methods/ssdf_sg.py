@@ -33,16 +33,16 @@ import numpy as np
 from ...core import directions, envmap, reference, sg_brdf, sg_lighting, ssdf, ssdf_sg
 from ...core import mesh as core_mesh
 from ...core import brdf as core_brdf
-from .. import drawing, runtime, storage
+from .. import drawing, keys, storage
 from . import Method, register
 
 #: name of the stored blob (addon.storage): one object's PCA SSDF and how it was made
 BLOB = "ssdf_sg"
 # (ident, resolution) -> (diffuse SGs, PrefilteredEnvironment) of the unrotated image
-_LIGHTING_CACHE: dict = {}
+_LIGHTING_CACHE = keys.cache(1)
 # SSDF PCA derived at draw time per (object, visibility, settings); a field carries its
 # GPU textures once drawn (``field.gpu``), so the cache is freed with the GPU objects
-_FIELD_CACHE: dict = drawing.gpu_cache({})
+_FIELD_CACHE = drawing.gpu_cache({}, limit=8)
 
 
 def cosine_of(settings) -> ssdf_sg.CosineLobes:
@@ -84,10 +84,10 @@ FIT_CUBE_RESOLUTION = 128
 def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes: int = 8):
     """``(axes, lam, mu)`` diffuse SG fit and the SG-prefiltered pyramid of the
     world's image without rotation/strength (texture space), cached per image."""
-    ident = runtime.env_key(world, resolution)[0]
+    ident = keys.env_key(world, resolution)[0]
     key = (ident, resolution, max_lobes)
-    hit = _LIGHTING_CACHE.get(key)
-    if hit is None:
+
+    def fit():
         base = envmap.WorldLighting(image=world.image, color=world.color, strength=1.0)
         cube = directions.cubemap(resolution)
         radiance = np.asarray(base.to_cubemap(resolution).radiance, np.float64)
@@ -97,10 +97,8 @@ def environment_lighting(world: envmap.WorldLighting, resolution: int, max_lobes
         axes, lam, mu, rel = sg_lighting.fit_environment_sgs(
             fit_radiance, directions.cubemap(fine), max_lobes=max_lobes)
         pre = sg_lighting.PrefilteredEnvironment(radiance, cube)
-        hit = ((axes, lam, mu, rel), pre)
-        _LIGHTING_CACHE.clear()
-        _LIGHTING_CACHE[key] = hit
-    return hit
+        return ((axes, lam, mu, rel), pre)
+    return keys.held(_LIGHTING_CACHE, key, (), fit)
 
 
 #: scene points (drawn by surface area among the points with a diffuse part) at which
@@ -111,7 +109,7 @@ PRIOR_WEIGHT = 1e-3
 # ("points", objects) -> scene_fit_points' draw; ("fit", lighting) -> the scene-fitted
 # lighting (entries keep their fields alive, which may hold GPU textures: freed with the
 # GPU caches)
-_SCENE_FIT_CACHE: dict = drawing.gpu_cache({})
+_SCENE_FIT_CACHE = drawing.gpu_cache({}, limit=8)
 
 
 def scene_fit_points(state, fields, count: int = SCENE_FIT_POINTS, seed: int = 0):
@@ -165,13 +163,13 @@ def scene_fit(state, fields, fit, cosine):
                    tuple(tuple(_diffuse_slots(st)) for st in state.objects))
     # drawn points: the same while the objects and their diffuse slots are (a turned world
     # or a new fit reuses them)
-    picks = runtime.held(_SCENE_FIT_CACHE, ("points", objects_key), refs,
+    picks = keys.held(_SCENE_FIT_CACHE, ("points", objects_key), refs,
                          lambda: scene_fit_points(state, fields), limit=8)
     if not picks:
         return fit
-    lighting_key = (runtime.env_key(world, state.resolution)[0], world.rotation.round(9).tobytes(),
+    lighting_key = (keys.env_key(world, state.resolution)[0], world.rotation.round(9).tobytes(),
                     state.resolution, cosine.sharpness, len(cosine.amplitudes), objects_key)
-    return runtime.held(_SCENE_FIT_CACHE, ("fit", lighting_key), refs + (fit,),
+    return keys.held(_SCENE_FIT_CACHE, ("fit", lighting_key), refs + (fit,),
                         lambda: _solve_scene_fit(state, fields, fit, cosine, picks), limit=8)
 
 
@@ -180,7 +178,7 @@ def _solve_scene_fit(state, fields, fit, cosine, picks):
     world = state.world
     strength = float(world.strength)
     cube = directions.cubemap(state.resolution)
-    L = runtime.environment_cubemap(world, state.resolution)
+    L = keys.environment_cubemap(world, state.resolution)
     axes_w = sg_lighting.rotate_to_world(axes, world.rotation)
     T, E, W = [], [], []
     for o, rows, w in picks:
@@ -296,7 +294,7 @@ class SSDFSGMethod(Method):
         from bpy.props import EnumProperty, FloatProperty, IntProperty
         return {
             "ssdf_cosine": EnumProperty(
-                name="Clamped Cosine", default="SG7", update=runtime.redraw_viewports,
+                name="Clamped Cosine", default="SG7", update=drawing.redraw_viewports,
                 items=[("EQ40", "1 lobe (paper, eq. 40)",
                         "One SG on the normal: fastest, L2 error 17.7 %"),
                        ("SG7", "7 lobes", "SG mixture over the hemisphere, L2 error 6.3 %"),
@@ -325,7 +323,7 @@ class SSDFSGMethod(Method):
                             "changes, curved ones per pixel (0 = the budget alone; needs a "
                             "precompute)"),
             "sg_lighting_fit": EnumProperty(
-                name="Lighting Fit", default="SCENE", update=runtime.redraw_viewports,
+                name="Lighting Fit", default="SCENE", update=drawing.redraw_viewports,
                 items=[("SCENE", "Scene",
                         "Lobes from the environment, amplitudes fitted to the scene's exact "
                         "shadowed irradiance at up to 1024 surface points (redone when the "
@@ -336,7 +334,7 @@ class SSDFSGMethod(Method):
                 description="How the diffuse term's SG lighting (eq. 39) is fitted"),
             "sg_environment_lobes": IntProperty(
                 name="Environment Lobes", default=8, min=1, max=16,
-                update=runtime.redraw_viewports,
+                update=drawing.redraw_viewports,
                 description="SG lobes fitted to the environment for the diffuse term"),
         }
 
@@ -416,7 +414,7 @@ class SSDFSGMethod(Method):
             else:
                 key = (st.name, id(st.bits), res, budget, max_terms, occlusion,
                        state.resolution)
-                field = runtime.per_visibility(
+                field = keys.per_visibility(
                     _FIELD_CACHE, key, st.bits,
                     lambda: _field_from(derive_object(st.bits, st.points.normals, cube,
                                                       state.settings)), limit=8)
@@ -574,7 +572,7 @@ def _stored_field(arrays, meta):
     return meta, StoredField(mean, eigen, coeffs, res, rms, occlusion_kept=kept)
 
 
-_READ_CACHE: dict = drawing.gpu_cache({})    # fields read from the .blend (GPU textures too)
+_READ_CACHE = drawing.gpu_cache({}, limit=16)    # fields read from the .blend (GPU textures too)
 
 
 def read_field(ob, points, cube_resolution, resolution, budget, max_terms,
@@ -600,7 +598,7 @@ def read_field(ob, points, cube_resolution, resolution, budget, max_terms,
 
 # ----------------------------------------------------------------- GPU (per pixel)
 
-_GPU = drawing.gpu_cache({})
+_GPU = drawing.gpu_cache({}, limit=8)
 
 
 _SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"), ("FLOAT_2D", "envTex"),
@@ -874,7 +872,7 @@ def pair_table(st, field, flat_points, light_tex, param_tex, light_count, cosine
 
 
 # pair tables per (object, geometry, lighting): entries hold the field and the fit
-_PAIR_TABLES: dict = drawing.gpu_cache({})
+_PAIR_TABLES = drawing.gpu_cache({}, limit=8)
 
 
 def gpu_draws(state, fields, fit, pre, eye, view_dir):
@@ -905,7 +903,7 @@ def gpu_draws(state, fields, fit, pre, eye, view_dir):
         if len(batches.flat_points):
             key = (st.name, st.fingerprint, np.asarray(world.rotation).round(12).tobytes(),
                    cosine.sharpness, M, int(light_count))
-            pair_tex = runtime.held(
+            pair_tex = keys.held(
                 _PAIR_TABLES, key, (field, fit, batches),
                 lambda: pair_table(st, field, batches.flat_points, light_tex,
                                    next(iter(params.values())), int(light_count), M, rot),
