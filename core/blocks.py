@@ -87,10 +87,10 @@ change-index sums on the DCT-projected lighting instead of decompressing.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from .cache import Cache, memo
 
 import numpy as np
 
+from .cache import Cache, memo
 from .directions import cubemap
 from .visibility import unpack_visibility
 

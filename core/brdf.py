@@ -180,9 +180,10 @@ Differences from Cycles that callers should know about
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from .cache import memo
 
 import numpy as np
+
+from .cache import memo
 
 __all__ = [
     "ALPHA_MIN",

@@ -18,9 +18,10 @@ add up to 4*pi to rounding.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from .cache import memo
 
 import numpy as np
+
+from .cache import memo
 
 #: (major axis, U, V) per face, in world coordinates.
 FACE_AXES = np.array(

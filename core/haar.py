@@ -87,9 +87,9 @@ pixel-basis REFERENCE: ``O(6 N^2)`` per point.
 
 from __future__ import annotations
 
-from .cache import memo
-
 import numpy as np
+
+from .cache import memo
 
 __all__ = [
     "forward", "inverse", "cube_forward", "cube_inverse", "transform_matrix",

@@ -39,10 +39,9 @@ through it and vertices within ``1e-10`` are put on it (errors below 1e-8 there)
 
 from __future__ import annotations
 
-from .cache import memo
-
 import numpy as np
 
+from .cache import memo
 from .directions import FACE_AXES
 
 _TWO_PI = 2.0 * np.pi

@@ -88,12 +88,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from .cache import memo
 from typing import NamedTuple
 
 import numpy as np
 
 from . import brdf as core_brdf
+from .cache import memo
 from .directions import orthonormal_frame
 from .fitting import levenberg_marquardt
 

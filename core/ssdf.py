@@ -55,10 +55,10 @@ import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from .cache import memo
 
 import numpy as np
 
+from .cache import memo
 from .directions import shirley_chiu_to_hemisphere, texel_of_components
 from .visibility import unpack_visibility
 
