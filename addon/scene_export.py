@@ -14,16 +14,9 @@ import bpy
 import numpy as np
 
 from ..core import envmap, sg_lighting
-from ..core.brdf import Material, principled_material
+from ..core.brdf import DEFAULT_MATERIAL, Material, principled_material
 from ..core.mesh import MeshArrays
 from . import keys
-
-#: what Cycles uses for a surface without a material: a Principled BSDF with the
-#: node defaults (``ShaderManager::add_default`` in ``intern/cycles/scene/shader.cpp``;
-#: base 0.8, metallic 0, roughness 0.5, IOR 1.5, specular IOR level 0.5, specular
-#: tint 1, Multiscatter GGX) -- not a Lambert 0.8, which is ~1-4 % off depending on
-#: the view (the specular layer takes energy from the base at grazing angles).
-DEFAULT_MATERIAL = principled_material()
 
 #: Principled inputs we do not model: (socket, "is non-zero" test, what it is).
 _PRINCIPLED_UNMODELLED = (

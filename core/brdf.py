@@ -209,6 +209,8 @@ __all__ = [
     "multiscatter_factor",
     "specular_albedo_estimate",
     "principled_material",
+    "DEFAULT_MATERIAL",
+    "slot_material",
     "sharp_alpha_limit",
     "is_sharp",
     "with_sharp_lobe",
@@ -1087,3 +1089,21 @@ def principled_material(base_color=(0.8, 0.8, 0.8), metallic=0.0, roughness=0.5,
     return Material(diffuse_albedo=base, specular_color=tuple(np.clip(f0 * tint, 0.0, 1.0)),
                     roughness=roughness, distribution=dist, fresnel="DIELECTRIC", ior=eta,
                     f82_tint=tuple(np.minimum(tint, 1.0)), metallic=metallic)
+
+
+#: What Cycles uses for a surface without a material: a Principled BSDF with the node
+#: defaults (``ShaderManager::add_default`` in ``intern/cycles/scene/shader.cpp``: base 0.8,
+#: metallic 0, roughness 0.5, IOR 1.5, specular IOR level 0.5, specular tint 1,
+#: Multiscatter GGX) -- not a Lambert 0.8, which is ~1-4 % off depending on the view (the
+#: specular layer takes energy from the base at grazing angles).
+DEFAULT_MATERIAL = principled_material()
+
+
+def slot_material(table, slot):
+    """The material a face of material index ``slot`` is drawn with, from the per-slot
+    ``table`` of its object, as Cycles assigns it: the index clamped into the object's
+    slots (``clamp_material_index`` in ``intern/cycles/blender/mesh.cc``); an object
+    without slots has the default surface :data:`DEFAULT_MATERIAL`."""
+    if len(table) == 0:
+        return DEFAULT_MATERIAL
+    return table[min(max(int(slot), 0), len(table) - 1)]
