@@ -1734,7 +1734,7 @@ def shade_points(pairs: ActivePairs, sums: np.ndarray, tables: LightTables, posi
         t0 = _tick(st, "lambert", t0)
     for slot in np.unique(materials):
         sel = np.nonzero(materials == slot)[0]
-        mat = material_table[int(slot)] if 0 <= int(slot) < len(material_table) else _brdf.Material()
+        mat = _brdf.slot_material(material_table, slot)
         needs_view = mat.fresnel == "DIELECTRIC" or not mat.is_diffuse_only or exact_lambert
         vd = None
         if needs_view:

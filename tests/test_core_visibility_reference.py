@@ -381,7 +381,8 @@ def test_reference_material_slots_and_view_dirs():
                                  np.array([0, 0, 5.0]), cube, light)
     np.testing.assert_allclose(out[0], m0.diffuse_albedo, atol=1e-3)
     np.testing.assert_allclose(out[1], m1.diffuse_albedo, atol=1e-3)
-    np.testing.assert_allclose(out[3], brdf.Material().diffuse_albedo, atol=1e-3)  # unknown slot
+    # a slot past the table is the last one (Cycles clamps the material index)
+    np.testing.assert_allclose(out[3], m1.diffuse_albedo, atol=1e-3)
     # view_dirs overrides eye
     glossy = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.5)
     vd = np.tile([0.0, 0.0, 1.0], (4, 1))
@@ -525,6 +526,32 @@ def test_degenerate_triangles():
                          [[0, 1, 2], [3, 4, 5]])
     assert mesh.degenerate_triangles(m2).tolist() == [True, False]
     assert mesh.degenerate_triangles(m2, scale=1e-6).tolist() == [False, False]
+
+
+def test_occluders_are_the_faces_the_warning_keeps():
+    """The precompute's warning counts the zero-area faces it ignores; the occluder scene
+    holds exactly the others.  A face that is zero-area relative to its mesh but not in
+    float32 (a 0.02 x 0.01 triangle on a mesh 1e4 across) is ignored by both: a ray
+    through it is not blocked, while a ray through a kept face of the same mesh is."""
+    small = [[0.0, 0.0, 1.0], [0.02, 0.0, 1.0], [0.0, 0.01, 1.0]]        # area 1e-4
+    big = [[3.0, -1.0, 1.0], [5.0, -1.0, 1.0], [4.0, 1.0, 1.0]]
+    far = [[1e4, 0.0, 0.0], [1e4, 1.0, 0.0], [1e4, 0.0, 1.0]]
+    collapsed = [[5.0, 5.0, 5.0], [5.0, 5.0, 5.0], [6.0, 5.0, 5.0]]
+    tris = np.array([small, big, far, collapsed])
+    m = mesh.MeshArrays(tris.reshape(-1, 3), np.arange(12), np.tile([0, 0, 1.0], (12, 1)),
+                        np.arange(12).reshape(-1, 3))
+    kept, ignored = mesh.occluder_triangles(m)
+    assert ignored == int(mesh.degenerate_triangles(m).sum()) == 2
+    np.testing.assert_array_equal(kept, tris[[1, 2]])
+    up = np.array([[0.0, 0.0, 1.0]], np.float32)
+    through_small = np.array([[0.005, 0.0025, 0.0]], np.float32)
+    through_big = np.array([[4.0, -0.5, 0.0]], np.float32)
+    scene = visibility.build_occluder_scene(kept)
+    assert scene.run(through_big, up, query="OCCLUDED")[0] != -1
+    assert scene.run(through_small, up, query="OCCLUDED")[0] == -1
+    # every face handed to Embree (what its own float32 area test would keep) blocks it
+    every = visibility.build_occluder_scene(tris)
+    assert every.run(through_small, up, query="OCCLUDED")[0] != -1
 
 
 def test_fingerprint():

@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from ...core import brdf, directions, envmap, reference, rsl
+from ...core import brdf, directions, envmap, reference, rigid, rsl
 from .. import drawing, keys, storage
 from . import Method, glossy_or_layered, register
 
@@ -79,54 +79,6 @@ def object_visibility(st, resolution: int, kind: str, normals=None, rows=None) -
     return keys.per_visibility(
         _VISIBILITY, key, st.bits,
         lambda: derive_visibility(bits, normals, resolution))[kind]
-
-
-# ------------------------------------------------------------------ rigid motion
-
-def _rotation_part(M: np.ndarray) -> np.ndarray:
-    """Nearest rotation to the linear part of a 4x4 matrix (polar decomposition)."""
-    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=np.float64)[:3, :3])
-    R = U @ Vt
-    if np.linalg.det(R) < 0:
-        R = U @ np.diag([1.0, 1.0, -1.0]) @ Vt
-    return R
-
-
-def _local_probe(world_positions: np.ndarray, M: np.ndarray, count: int = 64) -> np.ndarray:
-    """A few vertices in object space (detects edits other than a rigid motion)."""
-    pos = np.asarray(world_positions, dtype=np.float64)
-    idx = np.linspace(0, len(pos) - 1, min(count, len(pos))).astype(np.int64)
-    return (pos[idx] - M[:3, 3]) @ np.linalg.inv(M[:3, :3]).T
-
-
-def _precompute_rows(st, turn):
-    """Stored row of each current shading point: points are ordered by (vertex,
-    quantised world normal, material), so after a turn the split normals of a vertex
-    may sort differently; the precompute order is the order of the turned-back
-    normals (as in :func:`..core.mesh.shading_points`)."""
-    pts, arrays = st.points, st.arrays
-    vert = np.empty(pts.count, dtype=np.int64)
-    vert[pts.point_of_corner] = arrays.corner_verts
-    n0 = np.asarray(pts.normals, np.float64) @ turn
-    q = np.clip(np.round(n0 * 4096.0).astype(np.int64) + 4096, 0, 8192)
-    mat = np.clip(pts.materials, 0, (1 << 20) - 1)
-    key = (((q[:, 0] << 14) | q[:, 1]) << 14 | q[:, 2]) << 20 | mat
-    order = np.lexsort((key, vert))          # order[i]: current point of stored row i
-    rows = np.empty(pts.count, dtype=np.int64)
-    rows[order] = np.arange(pts.count)
-    return rows
-
-
-def _rigid_rotation(ob, st, R0, probe):
-    """``R1 R0^T`` when the object only moved/turned since precompute (same object-space
-    vertices; ``R0`` and ``probe`` stored then), else None."""
-    M = np.array(ob.matrix_world, dtype=np.float64)
-    now = _local_probe(st.arrays.positions, M)
-    then = np.asarray(probe, dtype=np.float64).reshape(-1, 3)
-    scale = max(float(np.abs(then).max(initial=0.0)), 1e-9)
-    if now.shape != then.shape or np.abs(now - then).max() > 1e-4 * scale:
-        return None
-    return _rotation_part(M) @ np.asarray(R0, dtype=np.float64).reshape(3, 3).T
 
 
 # ------------------------------------------------------------------ storage (§5.1)
@@ -250,8 +202,8 @@ class RSLMethod(Method):
             # pose at precompute: the VDTs live in vertex frames that turn with the object
             job_ob = next(o for o in job.objects if o.name == name)
             M = np.array(ob.matrix_world, dtype=np.float64)
-            storage.put(ob, BLOB, cpca_blob(model, DISK_RESOLUTION, _rotation_part(M),
-                                            _local_probe(job_ob.arrays.positions, M)))
+            storage.put(ob, BLOB, cpca_blob(model, DISK_RESOLUTION, rigid.rotation_part(M),
+                                            rigid.local_probe(job_ob.arrays.positions, M)))
 
     def sync(self, state):
         import bpy
@@ -262,11 +214,12 @@ class RSLMethod(Method):
                 continue
             vdt, R0, probe = got
             if st.status != "ok":
-                turn = _rigid_rotation(ob, st, R0, probe)
+                turn = rigid.rigid_turn(np.array(ob.matrix_world, dtype=np.float64),
+                                        st.arrays.positions, R0, probe)
                 if turn is None:
                     continue
                 st.data["rsl_rotation"] = turn
-                st.data["rsl_rows"] = _precompute_rows(st, turn)
+                st.data["rsl_rows"] = rigid.stored_rows(st.points, st.arrays, turn)
                 state.note(f"RSL: {st.name} turned since precompute; its self-shadowing turns "
                            "with it (shadows on other objects are not updated)")
             st.data["rsl"] = vdt
@@ -340,7 +293,7 @@ def _groups(st, eye, view_dir, turn=None):
     pts = st.points
     for slot in np.unique(pts.materials):
         sel = np.nonzero(pts.materials == slot)[0]
-        mat = st.materials[int(slot)] if 0 <= slot < len(st.materials) else brdf.Material()
+        mat = brdf.slot_material(st.materials, slot)
         vd = None
         if not mat.is_diffuse_only or mat.fresnel == "DIELECTRIC":
             if view_dir is not None:

@@ -44,7 +44,7 @@ class SHMethod(Method):
             radiance = np.zeros_like(sums)
             for slot in np.unique(pts.materials):
                 sel = np.nonzero(pts.materials == slot)[0]
-                mat = st.materials[int(slot)] if 0 <= slot < len(st.materials) else brdf.Material()
+                mat = brdf.slot_material(st.materials, slot)
                 vd = None
                 if mat.fresnel == "DIELECTRIC":
                     if view_dir is not None:

@@ -75,8 +75,7 @@ class WaveletMethod(Method):
             radiance = np.zeros((pts.count, 3), dtype=np.float32)
             for slot in np.unique(pts.materials):
                 sel = np.nonzero(pts.materials == slot)[0]
-                mat = (st.materials[int(slot)] if 0 <= slot < len(st.materials)
-                       else brdf.Material())
+                mat = brdf.slot_material(st.materials, slot)
                 vd = None
                 if mat.fresnel == "DIELECTRIC" or not mat.is_diffuse_only:
                     if view_dir is not None:
