@@ -1182,10 +1182,7 @@ def _beckmann_grazing(val, cos_i, a2, lam_o, lowest):
         at = np.unravel_index(g, shape)
     if g.size:
         ci = np.asarray(cos_i)[at]
-        t2 = a2 * np.maximum(one / (ci * ci) - one, f32(0.0))
-        a = one / np.sqrt(np.maximum(t2, f32(0.39)))
-        lg = ((f32(0.396) * a - f32(1.259)) * a + one) / ((f32(2.181) * a + f32(3.535)) * a)
-        lg[t2 < f32(0.39)] = 0.0
+        lg = _brdf.lambda_of_t2("BECKMANN", a2 * np.maximum(one / (ci * ci) - one, f32(0.0)))
         lo = np.broadcast_to(lam_o, shape)[at]
         val.reshape(-1)[g] *= (one + lo) / (one + lo + lg)
 
@@ -1253,8 +1250,7 @@ def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: 
         den = one - c + a2 * c
         val = a2 / (f32(np.pi) * den * den)
         ci = np.clip(cos_i, f32(1e-12), one)
-        t2 = a2 * np.maximum(one / (ci * ci) - one, f32(0.0))
-        lam = f32(0.5) * (np.sqrt(one + t2) - one)
+        lam = _brdf.lambda_of_t2("GGX", a2 * np.maximum(one / (ci * ci) - one, f32(0.0)))
         lam += one + lam_o
         lam *= f32(4.0) * cos_o
         val /= lam

@@ -467,16 +467,24 @@ def microfacet_D(distribution, alpha, cos_theta_m) -> np.ndarray:
     return np.where(c > 0.0, d, 0.0)
 
 
-def _lambda_raw(dist: str, a2, cos_theta) -> np.ndarray:
-    """Smith Lambda for ``a2 = alpha^2`` *without* the ALPHA_MIN floor."""
-    c = np.maximum(np.nan_to_num(np.asarray(cos_theta, dtype=np.float64), nan=0.0), _COS_FLOOR)
-    c = np.minimum(c, 1.0)
-    t2 = a2 * np.maximum(1.0 / (c * c) - 1.0, 0.0)
+def lambda_of_t2(dist: str, t2) -> np.ndarray:
+    """Cycles' Smith ``Lambda`` from ``t2 = alpha^2 tan^2(theta)``
+    (``bsdf_lambda_from_sqr_alpha_tan_n``; :func:`smith_lambda` has the formulas) for
+    ``dist`` "GGX" or "BECKMANN", in the dtype of ``t2`` (BLOCKS' float32 evaluator
+    calls it with float32)."""
+    t2 = np.asarray(t2)
     if dist == "GGX":
         return 0.5 * (np.sqrt(1.0 + t2) - 1.0)
     a = 1.0 / np.sqrt(np.maximum(t2, 0.39))
     lam = ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a)
     return np.where(t2 < 0.39, 0.0, lam)
+
+
+def _lambda_raw(dist: str, a2, cos_theta) -> np.ndarray:
+    """Smith Lambda for ``a2 = alpha^2`` *without* the ALPHA_MIN floor."""
+    c = np.maximum(np.nan_to_num(np.asarray(cos_theta, dtype=np.float64), nan=0.0), _COS_FLOOR)
+    c = np.minimum(c, 1.0)
+    return lambda_of_t2(dist, a2 * np.maximum(1.0 / (c * c) - 1.0, 0.0))
 
 
 def smith_lambda(distribution, alpha, cos_theta) -> np.ndarray:
