@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core import blocks as core_blocks, visibility
+from ...core import blocks as core_blocks, blocks_encoding, visibility
 from .. import drawing, keys, storage
 from . import Method, register
 
@@ -47,7 +47,7 @@ def _stored_visibility(arrays, meta):
     if stream is None:
         raise storage.Unreadable("no BLOCKS stream in the stored data")
     try:
-        return core_blocks.deserialize_visibility(stream.tobytes()), int(stream.size)
+        return blocks_encoding.deserialize_visibility(stream.tobytes()), int(stream.size)
     except ValueError as exc:
         raise storage.Unreadable(f"BLOCKS stream unreadable ({exc})") from None
 
@@ -80,8 +80,8 @@ class BlocksMethod(Method):
         for o in job.objects:
             if job.cancel_requested:
                 raise visibility.Cancelled()
-            dv = core_blocks.encode_visibility(o.bits, job.resolution)
-            out[o.name] = core_blocks.serialize_visibility(dv)
+            dv = blocks_encoding.encode_visibility(o.bits, job.resolution)
+            out[o.name] = blocks_encoding.serialize_visibility(dv)
         return out
 
     def store(self, scene, job, derived):
@@ -118,7 +118,7 @@ class BlocksMethod(Method):
         if dv is not None and dv.resolution == resolution:
             return dv, "stored"
         dv = keys.per_visibility(_ENCODED, (st.name, id(st.bits), resolution), st.bits,
-                                 lambda: core_blocks.encode_visibility(st.bits, resolution))
+                                 lambda: blocks_encoding.encode_visibility(st.bits, resolution))
         return dv, "encoded"
 
     def shade(self, state, eye, view_dir):
