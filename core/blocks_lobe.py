@@ -3,7 +3,7 @@
 BRDF representation (:func:`glossy_levels`).
 
 The formulas are those of :mod:`.brdf` (Cycles' ``bsdf_microfacet_eval``: the NDF, the
-Smith ``Lambda`` of :func:`.brdf.lambda_of_t2`, the Fresnel and multiscatter factors)
+Smith ``Lambda`` of :func:`.microfacet.lambda_of_t2`, the Fresnel and multiscatter factors)
 written for float32 arrays of any shape and for paired samples, where :mod:`.brdf`
 evaluates every pair of a point set and a direction set in float64.
 """
@@ -15,6 +15,7 @@ import numpy as np
 from . import brdf as _brdf
 from .blocks_encoding import PIXEL, BlockGeometry
 from .cache import Cache
+from .microfacet import lambda_of_t2
 
 #: Default rule thresholds on q = D(closest half-vector) / D(peak) (see glossy_levels).
 DEFAULT_LEVEL_THRESHOLDS = (1e-2, 1e-3, 1e-4, 1e-9)
@@ -52,7 +53,7 @@ def _beckmann_grazing(val, cos_i, a2, lam_o, lowest):
         at = np.unravel_index(g, shape)
     if g.size:
         ci = np.asarray(cos_i)[at]
-        lg = _brdf.lambda_of_t2("BECKMANN", a2 * np.maximum(one / (ci * ci) - one, f32(0.0)))
+        lg = lambda_of_t2("BECKMANN", a2 * np.maximum(one / (ci * ci) - one, f32(0.0)))
         lo = np.broadcast_to(lam_o, shape)[at]
         val.reshape(-1)[g] *= (one + lo) / (one + lo + lg)
 
@@ -120,7 +121,7 @@ def microfacet_lobe(distribution: str, a2, cos_i, dot_io, cos_o, lam_o, want_h: 
         den = one - c + a2 * c
         val = a2 / (f32(np.pi) * den * den)
         ci = np.clip(cos_i, f32(1e-12), one)
-        lam = _brdf.lambda_of_t2("GGX", a2 * np.maximum(one / (ci * ci) - one, f32(0.0)))
+        lam = lambda_of_t2("GGX", a2 * np.maximum(one / (ci * ci) - one, f32(0.0)))
         lam += one + lam_o
         lam *= f32(4.0) * cos_o
         val /= lam

@@ -96,6 +96,7 @@ from . import brdf as core_brdf
 from .cache import memo
 from .directions import orthonormal_frame
 from .fitting import levenberg_marquardt
+from .microfacet import _lambda_raw
 
 __all__ = [
     "MODELS", "ISOTROPIC_MODELS", "FRESNEL_MODES", "MAX_LOBES", "ALPHA_MIN",
@@ -584,8 +585,8 @@ def _m_factor(model, roughness, cos_i, cos_o, h_dot_i):
         ci = np.maximum(cos_i, COS_MIN)
         co = np.maximum(cos_o, COS_MIN)
         a2 = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN) ** 2
-        li = core_brdf._lambda_raw("BECKMANN", a2, ci)
-        lo = core_brdf._lambda_raw("BECKMANN", a2, co)
+        li = _lambda_raw("BECKMANN", a2, ci)
+        lo = _lambda_raw("BECKMANN", a2, co)
         return 1.0 / ((1.0 + li + lo) * 4.0 * ci * co)
     if model in ("WARD", "WARD_ANISO"):
         ci = np.maximum(cos_i, COS_MIN_SINGULAR)
