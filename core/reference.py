@@ -122,6 +122,14 @@ def view_directions(positions, eye) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
 
 
+def point_views(positions, eye=None, view_dir=None) -> np.ndarray:
+    """Unit directions toward the viewer, (P, 3) float64: the orthographic camera's
+    ``view_dir`` at every point when given, else toward the perspective ``eye``."""
+    if view_dir is not None:
+        return np.broadcast_to(np.asarray(view_dir, np.float64), (len(positions), 3))
+    return view_directions(positions, eye)
+
+
 def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                       eye, cube: Cubemap, lighting: CubeLighting, material: Material,
                       view_dirs: np.ndarray | None = None) -> np.ndarray:

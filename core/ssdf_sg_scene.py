@@ -129,12 +129,7 @@ def shade_points(field, normals, positions, materials_of_points, materials, worl
             out[sel] = rd * kd
             lobes = (None, None, None)
             if glossy:
-                if view_dir is not None:
-                    v = np.broadcast_to(np.asarray(view_dir, np.float64), n.shape)
-                else:
-                    v = positions[sel] - 0.0
-                    v = np.asarray(eye, np.float64)[None, :] - v
-                    v = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
+                v = reference.point_views(positions[sel], eye, view_dir)
                 lobes = sg_brdf.specular_lobes(mat, n, v)
                 out[sel] += specular_radiance(field, sel, n, *lobes, env_lookup, t, b,
                                               cosine=cosine)

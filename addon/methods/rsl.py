@@ -296,10 +296,7 @@ def _groups(st, eye, view_dir, turn=None):
         mat = brdf.slot_material(st.materials, slot)
         vd = None
         if not mat.is_diffuse_only or mat.fresnel == "DIELECTRIC":
-            if view_dir is not None:
-                vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
-            else:
-                vd = reference.view_directions(pts.positions[sel], eye)
+            vd = reference.point_views(pts.positions[sel], eye, view_dir)
             if turn is not None:
                 vd = vd @ turn
         yield mat, sel, vd

@@ -47,10 +47,7 @@ class SHMethod(Method):
                 mat = brdf.slot_material(st.materials, slot)
                 vd = None
                 if mat.fresnel == "DIELECTRIC":
-                    if view_dir is not None:
-                        vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
-                    else:
-                        vd = reference.view_directions(pts.positions[sel], eye)
+                    vd = reference.point_views(pts.positions[sel], eye, view_dir)
                 radiance[sel] = reference.lambert_layer(mat, sums[sel], pts.normals[sel], vd)
                 if not mat.is_diffuse_only:
                     glossy.append(st.name)

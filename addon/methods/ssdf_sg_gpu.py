@@ -225,6 +225,17 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
     return ObjectBatches(draws, flat_points)
 
 
+def _bind_field_and_lighting(sh, rotation, field_textures, env_tex, light_tex):
+    """The uniforms both passes read: the world's rotation, the SSDF's coefficient and
+    eigen-image textures, the prefiltered environment and the light lobes."""
+    import mathutils
+    sh.uniform_float("envRot", mathutils.Matrix(rotation))
+    sh.uniform_sampler("coeffTex", field_textures[0])
+    sh.uniform_sampler("eigenTex", field_textures[1])
+    sh.uniform_sampler("envTex", env_tex)
+    sh.uniform_sampler("lightTex", light_tex)
+
+
 def pair_texels(cosine_lobes: int, light_count: int) -> int:
     """Texels per flat point in the pair table: ceil(P / 4) angles, then P (w, k)."""
     pairs = cosine_lobes * light_count
@@ -237,7 +248,6 @@ def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_coun
     :func:`pair_texels` per point).  Eq. 39's per-pair work that a flat triangle's pixels
     share, done once per point."""
     import gpu
-    import mathutils
     from gpu_extras.batch import batch_for_shader
     coeff_tex, eigen_tex, _ = field_textures(field)
     normals = st.points.normals[flat_points]
@@ -257,12 +267,8 @@ def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_coun
             gpu.state.depth_test_set("NONE")
             gpu.state.blend_set("NONE")
             sh.bind()
-            sh.uniform_float("envRot", mathutils.Matrix(rotation))
+            _bind_field_and_lighting(sh, rotation, (coeff_tex, eigen_tex), env_tex, light_tex)
             sh.uniform_int("flatCount", count)
-            sh.uniform_sampler("coeffTex", coeff_tex)
-            sh.uniform_sampler("eigenTex", eigen_tex)
-            sh.uniform_sampler("envTex", env_tex)
-            sh.uniform_sampler("lightTex", light_tex)
             sh.uniform_sampler("paramTex", param_tex)
             sh.uniform_sampler("flatTex", flat_tex)
             quad.draw(sh)
@@ -310,7 +316,6 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
 
         def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
                  eigen_tex=eigen_tex, pair_tex=pair_tex, side=float(st.closed_side)):
-            import mathutils
             for flat in (False, True):
                 todo = [(slot, batch) for slot, f, batch in batches.draws if f == flat]
                 if not todo:
@@ -318,12 +323,8 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
                 sh = _gpu_shader(flat)
                 sh.bind()
                 sh.uniform_float("viewProjection", view_projection)
-                sh.uniform_float("envRot", mathutils.Matrix(rot))
                 sh.uniform_float("closedSide", side)
-                sh.uniform_sampler("coeffTex", coeff_tex)
-                sh.uniform_sampler("eigenTex", eigen_tex)
-                sh.uniform_sampler("envTex", env_tex)
-                sh.uniform_sampler("lightTex", light_tex)
+                _bind_field_and_lighting(sh, rot, (coeff_tex, eigen_tex), env_tex, light_tex)
                 if flat:
                     sh.uniform_sampler("pairTex", pair_tex)
                 for slot, batch in todo:
