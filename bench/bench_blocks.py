@@ -86,7 +86,7 @@ def main(argv=None):
     r.resolution_x, r.resolution_y, r.resolution_percentage = w, h, 100
     pre = scenes.precompute(resolution=args.directions, method="BLOCKS")
 
-    from prt_relight.addon import runtime
+    from prt_relight.addon import keys, runtime
     from prt_relight.addon.methods import blocks as method, reference as ref_method
     from prt_relight.core import blocks as B, blocks_encoding, directions, reference
 
@@ -180,7 +180,7 @@ def main(argv=None):
     # ---------------------------------------------------------------- core per object
     res = state.resolution
     cube = directions.cubemap(res)
-    L = runtime.environment_cubemap(state.world, res)
+    L = keys.environment_cubemap(state.world, res)
     tables = B.light_tables(L, res)
     say("")
     say("core shade_points per object (camera moved; REFERENCE with its cached irradiance, "

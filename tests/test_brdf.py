@@ -635,3 +635,21 @@ def test_specular_terms_sum_to_specular_cosine():
                     for l, w in brdf.specular_terms(mat, normals, views, dirs))
         np.testing.assert_allclose(total, brdf.specular_cosine(mat, normals, views, dirs),
                                    rtol=1e-6, atol=1e-9)
+
+
+def test_lambda_of_t2_is_smith_lambda_in_the_dtype_given():
+    """One Lambda for REFERENCE (float64) and BLOCKS' float32 evaluator: the same values,
+    float32 in stays float32; Beckmann is 0 below t2 = 0.39 (a > 1.6)."""
+    from prt_relight.core import microfacet
+    c = np.linspace(0.05, 1.0, 40)
+    for dist, alpha in (("GGX", 0.3), ("BECKMANN", 0.3), ("BECKMANN", 0.05)):
+        t2 = alpha ** 2 * (1.0 / (c * c) - 1.0)
+        np.testing.assert_allclose(microfacet.lambda_of_t2(dist, t2),
+                                   brdf.smith_lambda(dist, alpha, c), rtol=1e-12)
+        lam32 = microfacet.lambda_of_t2(dist, t2.astype(np.float32))
+        assert lam32.dtype == np.float32
+        np.testing.assert_allclose(lam32, brdf.smith_lambda(dist, alpha, c), rtol=2e-6, atol=1e-7)
+    assert microfacet.lambda_of_t2("BECKMANN", np.array([0.389]))[0] == 0.0
+    a = 1.0 / np.sqrt(0.5)
+    assert microfacet.lambda_of_t2("BECKMANN", np.array([0.5]))[0] == pytest.approx(
+        (1 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a))

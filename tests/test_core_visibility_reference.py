@@ -605,3 +605,33 @@ def test_closed_side_of_open_closed_and_mirrored_meshes():
     open_box.triangles = open_box.triangles[2:]              # one face missing
     assert mesh.closed_side(open_box) == 0
     assert mesh.closed_side(mesh.grid()) == 0
+
+
+def test_coarse_edge_share_counts_edges_across_a_shadow_edge():
+    """A 4 x 4 grid whose points at x < 0 see no sky and the others all of it: the edges
+    that join the two halves jump by 1, the others by 0; counted by hand."""
+    g = mesh.grid(2.0, 4)
+    pts = mesh.shading_points(g)
+    cube = directions.cubemap(8)
+    open_bits = np.packbits(visibility.hemisphere_mask(pts.normals, cube), axis=1)
+    bits = np.where((pts.positions[:, 0] < -1e-9)[:, None], 0, open_bits).astype(np.uint8)
+    tri_points = pts.point_of_corner[g.triangles]
+    shaded = pts.positions[:, 0] < -1e-9
+    edges = np.concatenate([tri_points[:, [0, 1]], tri_points[:, [1, 2]], tri_points[:, [2, 0]]])
+    want = float(np.mean(shaded[edges[:, 0]] != shaded[edges[:, 1]]))
+    assert 0.0 < want < 1.0
+    got = reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner, g.triangles, cube)
+    assert got == pytest.approx(want)
+    # a jump of exactly the whole sky is over any threshold below 1, none at 1
+    assert reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner, g.triangles,
+                                       cube, jump=1.0) == 0.0
+    assert reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner,
+                                       np.zeros((0, 3), np.int64), cube) == 0.0
+
+
+def test_point_views():
+    pos = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 2.0]])
+    np.testing.assert_allclose(reference.point_views(pos, eye=np.array([0.0, 0.0, 3.0])),
+                               [[0.0, 0.0, 1.0], np.array([-1.0, -2.0, 1.0]) / np.sqrt(6.0)])
+    ortho = reference.point_views(pos, eye=None, view_dir=np.array([0.0, 1.0, 0.0]))
+    assert ortho.shape == (2, 3) and np.all(ortho == [0.0, 1.0, 0.0])
