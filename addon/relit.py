@@ -37,12 +37,14 @@ def rotated_world(world: envmap.WorldLighting, angle: float) -> envmap.WorldLigh
     return out
 
 
-def relit_times(states, frame, rounds: int, warmup: bool = True) -> list:
+def relit_times(states, frame, rounds: int, warmup: bool = True,
+                clock=time.perf_counter) -> list:
     """Seconds of ``rounds`` relit frames per frame state (after one untimed round when
     ``warmup``): ``frame(state)`` draws or shades one frame after the state's world is
     turned to :func:`next_angle`.  With several states the frames are interleaved (one
     each per round), so the machine's load weighs on each alike.  The background texture
-    is kept (same pixels); every state's world is put back afterwards."""
+    is kept (same pixels); every state's world is put back afterwards.  ``clock``: the
+    seconds read around each frame (tests give a virtual one)."""
     times = [[] for _ in states]
     saved = [(st.world, st.background) for st in states]
     try:
@@ -52,10 +54,10 @@ def relit_times(states, frame, rounds: int, warmup: bool = True) -> list:
                 st.world = rotated_world(world, next_angle())
                 if background is not None:
                     st.background = (st.world, background[1])
-                t0 = time.perf_counter()
+                t0 = clock()
                 frame(st)
                 if k >= int(warmup):
-                    times[i].append(time.perf_counter() - t0)
+                    times[i].append(clock() - t0)
     finally:
         for st, (world, background) in zip(states, saved):
             st.world, st.background = world, background

@@ -75,6 +75,7 @@ import copy
 import hashlib
 import json
 import math
+import time
 
 import numpy as np
 
@@ -457,7 +458,8 @@ class AutoMethod(Method):
 
         def relit_seconds(m, sub):
             return min(relit.relit_times([sub], lambda s: m.shade(s, eyes[0], None),
-                                         TIMED_FRAMES, warmup=False)[0])
+                                         TIMED_FRAMES, warmup=False,
+                                         clock=time.perf_counter)[0])
 
         def measure(m, prop, value, timed=True) -> bool:
             """Adds the option ``(m.id, prop, value)`` (error at the probes, relit time
@@ -682,7 +684,7 @@ class AutoMethod(Method):
                     seen[tkey] = min(relit.relit_times(
                         [copy.copy(state)],
                         lambda s: self._shade_assigned(s, assignment, eye, None),
-                        TIMED_FRAMES + 1, warmup=False)[0])
+                        TIMED_FRAMES + 1, warmup=False, clock=time.perf_counter)[0])
                 timed[name] = seen[tkey]
         best = min(timed, key=timed.get) if timed else "mix"
         assignment = options[best]
