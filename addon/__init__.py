@@ -4,7 +4,7 @@ import atexit
 
 import bpy
 
-from . import drawing, engine, operators, panels, properties, report, runtime, sg_material
+from . import drawing, engine, keys, operators, panels, properties, report, runtime, sg_material
 
 _MODULES = (properties, sg_material, operators, report, engine, panels)
 
@@ -30,4 +30,5 @@ def unregister():
     for m in reversed(_MODULES):
         m.unregister()
     drawing.free_gpu_resources()
+    keys.free()                      # every other cache (docs/README.md lists them)
     atexit.unregister(drawing.free_gpu_resources)

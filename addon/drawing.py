@@ -15,15 +15,18 @@ import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
 
+from ..core.cache import Cache, clear_all
+
 SHADER_DIR = Path(__file__).resolve().parent.parent / "shaders"
-#: dicts holding GPU objects (shaders, batches, textures) of this module and of the
-#: per-pixel methods: emptied by :func:`free_gpu_resources`
-_GPU_CACHES: list = []
 
 
-def gpu_cache(cache: dict) -> dict:
-    """Register ``cache`` as holding GPU objects (returns it)."""
-    _GPU_CACHES.append(cache)
+def gpu_cache(initial: dict | None = None, limit: int = 64, name: str = "") -> Cache:
+    """A cache of GPU objects (shaders, batches, textures; ``addon.keys``' policy: at most
+    ``limit`` entries, least recently used dropped), emptied by :func:`free_gpu_resources`
+    (``initial``: entries to start with)."""
+    import sys
+    cache = Cache(limit, name, gpu=True, module=sys._getframe(1).f_globals.get("__name__", ""))
+    cache.update(initial or {})
     return cache
 
 
@@ -31,16 +34,44 @@ def free_gpu_resources():
     """Drop every cached GPU object while Blender's GPU context still exists: on
     unregister, and at interpreter exit before Blender's own exit handler frees the
     context (Python collecting a texture or shader after that crashes)."""
-    global _QUAD, _WHITE
-    _QUAD = None
-    _WHITE = None
-    for cache in _GPU_CACHES:
-        cache.clear()
+    clear_all(gpu=True)
     import gc
     gc.collect()
 
 
-_SHADERS = gpu_cache({})
+#: the shaders of this module (per name) and the background's quad ("quad")
+_SHADERS = gpu_cache({}, limit=8)
+
+
+# whether the gpu module has been readied in -b (:func:`ensure_gpu`)
+_GPU_READY = False
+
+
+def ensure_gpu(scene):
+    """In ``-b`` the gpu module needs one Workbench render before offscreen drawing."""
+    global _GPU_READY
+    if _GPU_READY or not bpy.app.background:
+        return
+    r = scene.render
+    saved = (r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage)
+    try:
+        r.engine = "BLENDER_WORKBENCH"
+        r.resolution_x = r.resolution_y = 8
+        r.resolution_percentage = 100
+        with bpy.context.temp_override(scene=scene):
+            bpy.ops.render.render()
+        _GPU_READY = True
+    finally:
+        r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
+
+
+def redraw_viewports(self=None, context=None):
+    """Property update callback: redraw every 3D viewport."""
+    wm = bpy.context.window_manager if context is None else context.window_manager
+    for window in getattr(wm, "windows", []):
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
 
 
 def _source(name):
@@ -102,8 +133,8 @@ def textured_shader():
     return _SHADERS["surface_tex"]
 
 
-# GPU textures of colour inputs, per image content (keys.image_key)
-_ALBEDO_TEXTURES = gpu_cache({})
+# GPU textures of colour inputs, per image content (keys.image_key), and "white"
+_ALBEDO_TEXTURES = gpu_cache({}, limit=16, name="albedo textures")
 
 
 def albedo_texture(pixels: np.ndarray):
@@ -112,8 +143,6 @@ def albedo_texture(pixels: np.ndarray):
     key = image_key(pixels)
     tex = _ALBEDO_TEXTURES.get(key)
     if tex is None:
-        if len(_ALBEDO_TEXTURES) >= 16:
-            _ALBEDO_TEXTURES.pop(next(iter(_ALBEDO_TEXTURES)))
         tex = _ALBEDO_TEXTURES[key] = float_texture(pixels)
     return tex
 
@@ -140,15 +169,12 @@ def source_uniforms(source) -> dict:
                 texMap1=map1, mixColor=mix_colour)
 
 
-_WHITE = None
-
-
 def white_texture():
     """A 1x1 white RGBA texture (the colour of a slot without one)."""
-    global _WHITE
-    if _WHITE is None:
-        _WHITE = float_texture(np.ones((1, 1, 4), np.float32))
-    return _WHITE
+    tex = _ALBEDO_TEXTURES.get("white")
+    if tex is None:
+        tex = _ALBEDO_TEXTURES["white"] = float_texture(np.ones((1, 1, 4), np.float32))
+    return tex
 
 
 def textured_draws(positions, radiance, triangles, closed_side, textures, corner_slots):
@@ -230,16 +256,13 @@ def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles: np.nda
                             indices=np.ascontiguousarray(triangles, dtype=np.int32))
 
 
-_QUAD = None
-
-
 def _quad_batch():
-    global _QUAD
-    if _QUAD is None:
-        _QUAD = batch_for_shader(background_shader(), "TRIS",
-                                 {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
-                                 indices=[(0, 1, 2), (0, 2, 3)])
-    return _QUAD
+    quad = _SHADERS.get("quad")
+    if quad is None:
+        quad = _SHADERS["quad"] = batch_for_shader(
+            background_shader(), "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+            indices=[(0, 1, 2), (0, 2, 3)])
+    return quad
 
 
 def draw_frame(batches, background, view_projection, transparent: bool, object_draws=(),

@@ -85,18 +85,13 @@ class PrecomputeJob:
 def coarse_receiver_warning(job: ObjectJob, cube) -> str:
     """A note when shadows change faster than the tessellation can show.
 
-    For each mesh edge we compare the endpoints' sky visibility (cosine-weighted
-    fraction of the hemisphere that is open).  If more than 5 % of the edges
-    jump by over 0.25, per-vertex shading will blur or alias the shadows.
+    When more than 5 % of the mesh's edges join points whose sky visibility differs by
+    over a quarter (:func:`core.reference.coarse_edge_share`), per-vertex shading blurs
+    or aliases the shadows.
     """
-    sky = reference.sky_visibility(job.bits, job.points.normals, cube)
-    tri_points = job.points.point_of_corner[job.arrays.triangles]
-    edges = np.concatenate([tri_points[:, [0, 1]], tri_points[:, [1, 2]], tri_points[:, [2, 0]]])
-    if len(edges) == 0:
-        return ""
-    jump = np.abs(sky[edges[:, 0]] - sky[edges[:, 1]])
-    frac = float((jump > 0.25).mean())
-    if frac > 0.05:
+    frac = reference.coarse_edge_share(job.bits, job.points.normals, job.points.point_of_corner,
+                                       job.arrays.triangles, cube)
+    if frac > reference.COARSE_SHARE:
         return (f"'{job.name}' is too coarse for its shadows ({frac:.0%} of edges jump by more "
                 "than a quarter of the sky): subdivide it for sharper per-vertex shadows")
     return ""
@@ -123,7 +118,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
             empty.append(ob.original.name)
             continue
         fixed = core_mesh.repair_normals(arrays)
-        degenerate = int(core_mesh.degenerate_triangles(arrays).sum())
+        occluders, degenerate = core_mesh.occluder_triangles(arrays)
         if degenerate:
             warnings.append(f"'{ob.original.name}': {degenerate} zero-area face(s) ignored as "
                             "occluders")
@@ -131,7 +126,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
             warnings.append(f"'{ob.original.name}': {fixed} corner normal(s) repaired")
         points = core_mesh.shading_points(arrays)
         objects.append(ObjectJob(ob.original.name, arrays, points, core_mesh.fingerprint(arrays)))
-        tri_blocks.append(arrays.triangle_positions)
+        tri_blocks.append(occluders)
     if empty:
         warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
     warnings += scene_export.instance_warning(skipped)

@@ -5,7 +5,8 @@ from bpy.props import (EnumProperty, FloatProperty, IntProperty, PointerProperty
                        StringProperty)
 
 from . import methods
-from .runtime import redraw_viewports
+from .drawing import redraw_viewports
+from .methods import catalog  # noqa: F401  (registers every method before the enum is built)
 
 RESOLUTION_ITEMS = [
     ("32", "6×32×32", "6144 directions: the default"),

@@ -1,6 +1,7 @@
 """``prt.report``: every registered method over a sweep of its budget, timed and measured
 against REFERENCE (and Cycles when asked), written as an HTML report; and the stability
-table of hard cases × methods (:func:`stability_table`, also run by the tests).
+table of hard cases × methods (:func:`stability_table`, also run by the tests; the
+cases' scenes are built by :mod:`.report_cases`).
 
 The numerics and the HTML live in :mod:`..core.report`; this module drives Blender:
 precompute, per-method derive/store, offscreen drawing through the engine's
@@ -32,30 +33,10 @@ from bpy.props import BoolProperty, IntProperty, StringProperty
 
 from ..core import report as core_report
 from ..core import visibility
-from . import methods, precompute, scene_build, scene_export, storage
+from . import methods, precompute, relit, report_cases, scene_export, storage
+from .drawing import ensure_gpu
 from .operators import RUNNING, end_modal
-from .runtime import FrameState, rotated_world
-
-_GPU_READY = False
-
-
-def ensure_gpu(scene):
-    """In ``-b`` the gpu module needs one Workbench render before offscreen drawing."""
-    global _GPU_READY
-    if _GPU_READY or not bpy.app.background:
-        return
-    r = scene.render
-    saved = (r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage)
-    try:
-        r.engine = "BLENDER_WORKBENCH"
-        r.resolution_x = r.resolution_y = 8
-        r.resolution_percentage = 100
-        with bpy.context.temp_override(scene=scene):
-            bpy.ops.render.render()
-        _GPU_READY = True
-    finally:
-        r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
-
+from .runtime import FrameState
 
 def sweep(method_ids=None, budgets_per_method=None):
     """(method, budget property or None, value or None) for every registered method and
@@ -190,6 +171,26 @@ def render_cycles(scene, path, samples: int) -> np.ndarray:
     return _read_exr_pixels(path)
 
 
+def write_png(path, rgb: np.ndarray):
+    """An 8-bit PNG of uint8 RGB/RGBA (H, W, 3|4), top row first: ``core.report.write_png``
+    (OpenImageIO), or Blender's image API where OpenImageIO is missing (Blender 4.2)."""
+    if core_report.have_openimageio():
+        core_report.write_png(path, rgb)
+        return
+    px = np.ascontiguousarray(rgb, dtype=np.uint8)
+    h, w, c = px.shape
+    img = bpy.data.images.new("PRT report PNG", w, h, alpha=c == 4)
+    try:
+        rgba = np.ones((h, w, 4), np.float32)
+        rgba[..., :c] = px / np.float32(255.0)
+        img.pixels.foreach_set(rgba[::-1].reshape(-1))       # Blender: bottom row first
+        img.filepath_raw = str(path)
+        img.file_format = "PNG"
+        img.save()
+    finally:
+        bpy.data.images.remove(img)
+
+
 def default_output_dir() -> pathlib.Path:
     if bpy.data.filepath:
         return pathlib.Path(bpy.path.abspath("//prt_report"))
@@ -232,7 +233,6 @@ class ReportRun:
         self.steps_total = (len(sweep(method_ids, budgets_per_method)) + 3 + int(self._has_auto)
                             + int(include_cycles) + int(stability))
         self.steps_done = 0
-        self._frames = 0
 
     # -------------------------------------------------------------- helpers
     def _frame(self, depsgraph, view, projection, w, h, persp, supersampling, filter_width):
@@ -249,27 +249,13 @@ class ReportRun:
         return self._relit_times([state], self.repeats, view, projection, w, h, persp)[0]
 
     def _relit_times(self, states, rounds, view, projection, w, h, persp):
-        """Seconds of ``rounds`` relit frames per state, after a warm-up round; with
-        several states the frames are *interleaved* (one each per round), so the
-        machine's load weighs on each alike (the AUTO check).  Every frame turns the
-        environment to an angle not drawn before."""
+        """Seconds of ``rounds`` relit frames per state (:func:`.relit.relit_times`: a
+        warm-up round first; several states interleaved, the AUTO check): the full
+        ``render_pixels`` call at the camera's view."""
         from .engine import render_pixels
-        times = [[] for _ in states]
-        saved = [(st.world, st.background) for st in states]
-        for k in range(rounds + 1):                       # the first round warms up
-            for i, st in enumerate(states):
-                world, background = saved[i]
-                self._frames += 1
-                st.world = rotated_world(world, 0.05 + 0.37 * self._frames)
-                if background is not None:                # same pixels: no texture upload
-                    st.background = (st.world, background[1])
-                t0 = time.perf_counter()
-                render_pixels(st, view, projection, w, h, True, persp, 1)
-                if k:
-                    times[i].append(time.perf_counter() - t0)
-        for st, (world, background) in zip(states, saved):
-            st.world, st.background = world, background
-        return times
+        return relit.relit_times(
+            states, lambda st: render_pixels(st, view, projection, w, h, True, persp, 1),
+            rounds)
 
     def _auto_check(self, auto_state, target, view, projection, w, h, persp):
         """AUTO against the fastest fixed method/budget that meets AUTO's target: the
@@ -371,7 +357,7 @@ class ReportRun:
                     images[len(self.rows)] = img
                 self.rows.append(row)
                 if method.id == "AUTO" and img is not None:
-                    self.auto_rows = list(getattr(method, "last_choices", lambda: [])())
+                    self.auto_rows = list(method.last_choices())
                     auto_frame = (state, view, projection, persp)
                 pm = per_method.setdefault(method.id, dict(
                     id=method.id, label=method.label, precompute_seconds=trace_seconds,
@@ -412,22 +398,22 @@ class ReportRun:
             ref_name = None
             if ref_img is not None:
                 ref_name = "reference.png"
-                core_report.write_png(staging / ref_name,
+                write_png(staging / ref_name,
                                       core_report.display_rgb(ref_img, exposure))
             cycles_name = None
             if cycles_img is not None:
                 cycles_name = "cycles.png"
-                core_report.write_png(staging / cycles_name,
+                write_png(staging / cycles_name,
                                       core_report.display_rgb(cycles_img, exposure))
             for i, img in images.items():
                 row = self.rows[i]
                 stem = "".join(c if c.isalnum() else "_" for c in
                                f"{row['method']}_{row['label']}".lower()).strip("_")
                 row["image"] = f"{stem}.png"
-                core_report.write_png(staging / row["image"],
+                write_png(staging / row["image"],
                                       core_report.display_rgb(img, exposure))
                 row["heatmap"] = f"{stem}_error.png"
-                core_report.write_png(staging / row["heatmap"], core_report.heatmap_rgb(
+                write_png(staging / row["heatmap"], core_report.heatmap_rgb(
                     core_report.error_map(img, ref_img, mask), heat_max, mask))
             for pm in per_method.values():
                 derive = pm.pop("derive")
@@ -517,190 +503,6 @@ def _clear_objects(job):
 
 
 # ---------------------------------------------------------------------------- stability
-
-def _equirect_world(name, pixels):
-    world = bpy.data.worlds.new(name)
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    nt = world.node_tree
-    h, w = pixels.shape[:2]
-    img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True, is_data=True)
-    rgba = np.ones((h, w, 4), dtype=np.float32)
-    rgba[..., :3] = pixels
-    img.pixels.foreach_set(rgba[::-1].reshape(-1))
-    img.pack()
-    env = nt.nodes.new("ShaderNodeTexEnvironment")
-    env.image = img
-    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
-    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
-    return world
-
-
-def _hdri_world(name, hdri="forest"):
-    world = bpy.data.worlds.new(name)
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    nt = world.node_tree
-    folder = bpy.utils.system_resource("DATAFILES", path="studiolights/world")
-    env = nt.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(f"{folder}/{hdri}.exr", check_existing=True)
-    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
-    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
-    return world
-
-
-def _sun_pixels(direction, radiance, width=64, height=32):
-    d = np.asarray(direction, dtype=np.float64)
-    d /= np.linalg.norm(d)
-    u = (0.5 - math.atan2(d[1], d[0]) / (2 * math.pi)) % 1.0
-    v = math.acos(d[2]) / math.pi
-    img = np.zeros((height, width, 3), dtype=np.float32)
-    img[min(int(v * height), height - 1), min(int(u * width), width - 1)] = radiance
-    return img
-
-
-def _mesh_object(scene, name, build, location=(0.0, 0.0, 0.0), scale=1.0, smooth=True):
-    import bmesh
-    me = bpy.data.meshes.new(name)
-    bm = bmesh.new()
-    build(bm)
-    bm.to_mesh(me)
-    bm.free()
-    if smooth:
-        for poly in me.polygons:
-            poly.use_smooth = True
-    ob = bpy.data.objects.new(name, me)
-    ob.location = location
-    ob.scale = (scale, scale, scale)
-    scene.collection.objects.link(ob)
-    return ob
-
-
-def _grid(scene, size=4.0, cuts=8):
-    import bmesh
-    return _mesh_object(scene, "Grid", lambda bm: bmesh.ops.create_grid(
-        bm, x_segments=cuts, y_segments=cuts, size=size / 2), smooth=False)
-
-
-def _suzanne(scene, location=(0.0, 0.0, 1.0), scale=0.8):
-    import bmesh
-    return _mesh_object(scene, "Suzanne", lambda bm: bmesh.ops.create_monkey(bm),
-                        location=location, scale=scale)
-
-
-def _ball(scene, location=(0.0, 0.0, 1.0), radius=0.8):
-    import bmesh
-    return _mesh_object(scene, "Ball", lambda bm: bmesh.ops.create_uvsphere(
-        bm, u_segments=16, v_segments=8, radius=radius), location=location)
-
-
-def _glossy(name, roughness, colour=(0.8, 0.8, 0.8, 1.0), distribution="GGX"):
-    return scene_build.bsdf_material(name, "ShaderNodeBsdfGlossy", distribution=distribution,
-                                     Roughness=roughness, Color=colour)
-
-def _camera(scene, eye, target=(0.0, 0.0, 0.5)):
-    from mathutils import Vector
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    cam.location = eye
-    cam.rotation_euler = (Vector(target) - Vector(eye)).to_track_quat("-Z", "Y").to_euler()
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    scene.render.resolution_x, scene.render.resolution_y = 48, 36
-    scene.render.resolution_percentage = 100
-    return cam
-
-
-def _case_scene(scene, world, eye=(0.0, -6.0, 3.0)):
-    scene.world = world
-    _camera(scene, eye)
-    return dict(eye=np.asarray(eye, dtype=np.float64))
-
-
-def _build_open(scene):
-    _grid(scene, cuts=6)
-    return _case_scene(scene, _hdri_world("PRT stability open"))
-
-
-def _build_occluded(scene):
-    import bmesh
-    _suzanne(scene, location=(0.0, 0.0, 1.0), scale=0.5)
-    _mesh_object(scene, "Box", lambda bm: bmesh.ops.create_cube(bm, size=3.0),
-                 location=(0.0, 0.0, 1.0), smooth=False)
-    return _case_scene(scene, _hdri_world("PRT stability occluded"), eye=(0.0, -0.5, 1.2))
-
-
-def _build_sun(scene):
-    _grid(scene)
-    _ball(scene)
-    world = _equirect_world("PRT stability sun", _sun_pixels((0.4, -0.5, 0.77), 1e6))
-    return _case_scene(scene, world)
-
-
-def _build_black(scene):
-    _grid(scene)
-    _ball(scene)
-    return _case_scene(scene, _equirect_world("PRT stability black",
-                                              np.zeros((16, 32, 3), np.float32)))
-
-
-def _build_bad_pixels():
-    def build(scene):
-        _grid(scene)
-        _ball(scene)
-        px = np.full((16, 32, 3), 0.5, dtype=np.float32)
-        px[3, 7, 1] = np.nan
-        px[9, 20, :] = np.inf
-        return _case_scene(scene, _equirect_world("PRT stability NaN/Inf", px))
-    return build
-
-
-def _build_mirror(scene):
-    _grid(scene)
-    ob = _ball(scene)
-    ob.data.materials.append(_glossy("PRT stability mirror", 0.0))
-    return _case_scene(scene, _hdri_world("PRT stability mirror"))
-
-
-def _build_grazing(scene):
-    ob = _grid(scene, cuts=8)
-    ob.data.materials.append(_glossy("PRT stability grazing", 0.15))
-    _ball(scene, radius=0.5)
-    return _case_scene(scene, _hdri_world("PRT stability grazing"), eye=(0.0, -12.0, 0.03))
-
-
-#: The hard cases every method is run through: (name, description, build(scene) -> dict
-#: with ``eye``; ``expect_error`` marks input the export must refuse with a message).
-BASE_CASES = [
-    dict(name="fully open", description="a lone grid: every vertex sees the whole hemisphere",
-         build=_build_open),
-    dict(name="fully occluded", description="Suzanne inside a closed box, camera inside",
-         build=_build_occluded),
-    dict(name="1-pixel sun 1e6", description="black world with one pixel of radiance 1e6",
-         build=_build_sun),
-    dict(name="black world", description="all-zero environment", build=_build_black),
-    dict(name="NaN/Inf pixels", description="environment with NaN and +Inf pixels (must "
-         "be refused with a message)", build=_build_bad_pixels(), expect_error="NaN/Inf"),
-    dict(name="roughness → 0", description="Glossy GGX roughness 0 on a ball",
-         build=_build_mirror),
-    dict(name="grazing view", description="glossy grid seen from 0.25° above its plane",
-         build=_build_grazing),
-]
-
-
-def stability_cases(method_ids=None):
-    """:data:`BASE_CASES` plus the cases methods declare with an optional
-    ``Method.stability_cases()`` (same dict form; e.g. SG sharpness 1e-3…1e5 or
-    anisotropy 1:16 for a method with spherical Gaussians)."""
-    cases = list(BASE_CASES)
-    for m in methods.REGISTRY.values():
-        if method_ids is not None and m.id not in method_ids:
-            continue
-        extra = getattr(m, "stability_cases", None)
-        if extra is not None:
-            for case in extra():
-                cases.append(dict(case, name=f"{case['name']} [{m.id}]"))
-    return cases
-
 
 def _flat(radiance_per_object):
     if not radiance_per_object:
@@ -830,7 +632,7 @@ def stability_table(resolution=16, method_ids=None, cases=None, progress=None) -
     seen = set()
     method_list = [m for m in method_list if not (m.id in seen or seen.add(m.id))]
     table = dict(methods=[m.id for m in method_list], cases=[])
-    for case in (cases if cases is not None else stability_cases(method_ids)):
+    for case in (cases if cases is not None else report_cases.stability_cases(method_ids)):
         cells = _run_case(case, method_list, resolution, progress)
         table["cases"].append(dict(name=case["name"], description=case.get("description", ""),
                                    cells=cells))

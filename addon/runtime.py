@@ -14,55 +14,12 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import brdf as core_brdf, directions, envmap, mesh as core_mesh, visibility
-from . import lights, scene_export, storage, texture_export
-from .keys import held, image_key, per_visibility  # noqa: F401  (methods use runtime.held)
+from . import keys, lights, methods, scene_export, storage, texture_export
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
 LAST_MESSAGES: list = []
-# Decoded visibility per stored blob (storage.key); small LRU.
-_VIS_CACHE: dict = {}
-_VIS_CACHE_MAX = 16
-# Area-resampled environment per (world key, resolution).
-_ENV_CACHE: dict = {}
-
-
-def env_key(world: envmap.WorldLighting, resolution: int):
-    """Key of the lighting: its content (the image's pixels hashed once per array),
-    strength, rotation and the cubemap resolution."""
-    img = world.image
-    ident = (("color",) + tuple(float(c) for c in world.color) if img is None
-             else image_key(img))
-    return (ident, float(world.strength), world.rotation.round(9).tobytes(), resolution)
-
-
-def rotated_world(world: envmap.WorldLighting, angle: float) -> envmap.WorldLighting:
-    """``world`` turned by ``angle`` about +Z (same pixels, a new lighting key): the
-    relit frames of the report and of AUTO's timings."""
-    c, s = np.cos(angle), np.sin(angle)
-    out = copy.copy(world)
-    out.rotation = np.asarray(world.rotation) @ np.array([[c, -s, 0.0], [s, c, 0.0],
-                                                           [0.0, 0.0, 1.0]])
-    return out
-
-
-def redraw_viewports(self=None, context=None):
-    """Property update callback: redraw every 3D viewport."""
-    import bpy
-    wm = bpy.context.window_manager if context is None else context.window_manager
-    for window in getattr(wm, "windows", []):
-        for area in window.screen.areas:
-            if area.type == "VIEW_3D":
-                area.tag_redraw()
-
-
-def environment_cubemap(world: envmap.WorldLighting, resolution: int) -> envmap.CubeLighting:
-    key = env_key(world, resolution)
-    cube = _ENV_CACHE.get(key)
-    if cube is None:
-        cube = world.to_cubemap(resolution)
-        _ENV_CACHE.clear()
-        _ENV_CACHE[key] = cube
-    return cube
+# Decoded visibility per stored blob (storage.key).
+_VIS_CACHE = keys.cache(16)
 
 
 def stored_visibility(ob_orig, points: int, nbytes: int, note=None):
@@ -70,8 +27,7 @@ def stored_visibility(ob_orig, points: int, nbytes: int, note=None):
     told why a stored blob cannot be read)."""
     if ob_orig.prt.point_count != points:
         return None
-    stored = storage.load(ob_orig, storage.VISIBILITY, _VIS_CACHE, note=note,
-                          limit=_VIS_CACHE_MAX)
+    stored = storage.load(ob_orig, storage.VISIBILITY, _VIS_CACHE, note=note)
     bits = None if stored is None else stored[0].get("bits")
     if bits is None or bits.shape != (points, nbytes):
         return None
@@ -92,17 +48,11 @@ def _traced_objects(scene, run: str) -> int:
 
 
 # core.mesh.closed_side per geometry fingerprint (a cheap key: every sync exports anew)
-_CLOSED_SIDE: dict = {}
+_CLOSED_SIDE = keys.cache(256)
 
 
 def closed_side(arrays, fingerprint: str) -> int:
-    side = _CLOSED_SIDE.get(fingerprint)
-    if side is None:
-        side = core_mesh.closed_side(arrays)
-        if len(_CLOSED_SIDE) >= 256:
-            _CLOSED_SIDE.pop(next(iter(_CLOSED_SIDE)))
-        _CLOSED_SIDE[fingerprint] = side
-    return side
+    return keys.held(_CLOSED_SIDE, fingerprint, (), lambda: core_mesh.closed_side(arrays))
 
 
 class TexturedRadiance(np.ndarray):
@@ -197,7 +147,6 @@ class FrameState:
                                                       lights.extraction_settings(scene.prt))
         self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
         self.method = scene.prt.method
-        from . import methods
         self.settings = {name: getattr(scene.prt, name) for name in methods.scene_properties()}
         cube = directions.cubemap(self.resolution)
         nbytes = cube.size // 8
@@ -281,12 +230,11 @@ class FrameState:
             self.warnings.append("Objects were removed or hidden from renders since the "
                                  "precompute: their shadows are stale, press Precompute")
         self.objects = objects
-        from . import sg_material
         lamp_warnings = []
-        lamps = sg_material.export_lamps(depsgraph, lamp_warnings)
+        lamps = scene_export.export_lamps(depsgraph, lamp_warnings)
         # lamps are drawn per pixel (addon/lights.py), except the point and spot lamps of a
         # method that draws them itself (SSDF_SG: its spherical Gaussians, eq. 32-33)
-        own = getattr(self.method_impl, "draws_lamps", False)
+        own = self.method_impl.draws_lamps
         self.lamps = [lamp for lamp in lamps if lamp.kind != "SUN"] if own else []
         self.drawn_lamps = [lamp for lamp in lamps if lamp.kind == "SUN" or not own]
         self.warnings += lamp_warnings
@@ -301,7 +249,6 @@ class FrameState:
 
     @property
     def method_impl(self):
-        from . import methods
         return methods.get(self.method)
 
     @property

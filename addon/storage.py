@@ -23,6 +23,7 @@ import bpy
 import numpy as np
 
 from ..core import codec
+from . import keys
 
 STORE = "prt_store"
 #: the bit-packed visibility of every precomputed object (what all methods start from)
@@ -88,27 +89,25 @@ def get(ob, name: str):
     return codec.unpack(blob)
 
 
-def load(ob, name: str, cache: dict, convert=None, note=None, limit: int = 16):
+def load(ob, name: str, cache, convert=None, note=None):
     """``convert(arrays, meta)`` of ``ob``'s blob ``name`` (``(arrays, meta)`` without
-    ``convert``), made once per blob and kept in ``cache`` (oldest dropped past
-    ``limit``).  None when there is no blob of the current precompute, or when it is
+    ``convert``), made once per blob and kept in ``cache`` (a :func:`.keys.cache`: its
+    bound applies).  None when there is no blob of the current precompute, or when it is
     unreadable: then ``note`` (a callable) is told why."""
     k = key(ob, name)
     if k is None:
         return None
-    if k in cache:
-        return cache[k]
-    try:
+
+    def read():
         arrays, meta = get(ob, name)
-        value = (arrays, meta) if convert is None else convert(arrays, meta)
+        return (arrays, meta) if convert is None else convert(arrays, meta)
+
+    try:
+        return keys.held(cache, k, (), read)
     except Unreadable as exc:
         if note is not None:
             note(f"'{ob.name}': {exc}: precompute again")
         return None
-    if len(cache) >= limit:
-        cache.pop(next(iter(cache)))
-    cache[k] = value
-    return value
 
 
 def stored_bytes(ob, name: str | None = None) -> int:

@@ -86,9 +86,9 @@ def main(argv=None):
     r.resolution_x, r.resolution_y, r.resolution_percentage = w, h, 100
     pre = scenes.precompute(resolution=args.directions, method="BLOCKS")
 
-    from prt_relight.addon import runtime
+    from prt_relight.addon import keys, runtime
     from prt_relight.addon.methods import blocks as method, reference as ref_method
-    from prt_relight.core import blocks as B, directions, reference
+    from prt_relight.core import blocks as B, blocks_encoding, directions, reference
 
     say(f"BLOCKS vs REFERENCE: {args.mesh.stem} (Glossy BSDF, Beckmann, roughness "
         f"{args.roughness}) on a diffuse 96^2 grid, HDRI {args.hdri} rotated 0.6 rad, cubemap "
@@ -180,7 +180,7 @@ def main(argv=None):
     # ---------------------------------------------------------------- core per object
     res = state.resolution
     cube = directions.cubemap(res)
-    L = runtime.environment_cubemap(state.world, res)
+    L = keys.environment_cubemap(state.world, res)
     tables = B.light_tables(L, res)
     say("")
     say("core shade_points per object (camera moved; REFERENCE with its cached irradiance, "
@@ -259,9 +259,9 @@ def main(argv=None):
     say(f"  {'object':16s} {'points':>7s} {'coeffs/block':>12s} {'bit-packed':>11s} "
         f"{'varint':>10s} {'ratio':>6s} {'zero/one/mixed blocks %':>24s}")
     for st, dv, pairs, stats, _ in per_object:
-        stream = B.serialize_visibility(dv).size
+        stream = blocks_encoding.serialize_visibility(dv).size
         kinds = np.bincount(dv.kind.reshape(-1), minlength=3) / dv.kind.size * 100
-        mixed = max(int((dv.kind == B.MIXED).sum()), 1)
+        mixed = max(int((dv.kind == blocks_encoding.MIXED).sum()), 1)
         say(f"  {st.name:16s} {dv.count:7d} {dv.indices.size / mixed:12.1f} "
             f"{st.bits.nbytes / 1e6:9.2f}MB {stream / 1e6:8.2f}MB {st.bits.nbytes / stream:5.1f}x "
             f"{kinds[0]:7.1f}/{kinds[1]:.1f}/{kinds[2]:.1f}")

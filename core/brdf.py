@@ -104,7 +104,7 @@ exponent; ``Fss_diel`` is Cycles' ``fresnel_dielectric_Fss`` fit) and
 and ``E_avg`` from 32 x 32 / 32 tables (``scene/shader.tables``) with
 node-aligned linear interpolation (``lookup_table_read_2D``; grid value =
 index / 31, roughness ``r`` on x, ``mu`` on y).  We build the *same grids* from
-our own quadrature of the GGX lobe (:func:`ggx_E_table_column`, lazily, cached
+our own quadrature of the GGX lobe (:func:`.brdf_tables.ggx_E_table_column`, lazily, cached
 per roughness node) and interpolate the same way, so the tables are never
 copied; the tests compare them against Cycles' values.
 
@@ -180,9 +180,14 @@ Differences from Cycles that callers should know about
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import lru_cache
 
 import numpy as np
+
+from .brdf_tables import dielectric_albedo_s, ggx_E, ggx_E_avg
+from .microfacet import (_DISTRIBUTIONS, ALPHA_MIN, F0_from_ior, _check_distribution,
+                         _dielectric_s, f82_tint_B, fresnel_dielectric, fresnel_dielectric_Fss,
+                         fresnel_f82, ior_from_F0, microfacet_D, roughness_to_alpha, smith_G1,
+                         smith_lambda)
 
 __all__ = [
     "ALPHA_MIN",
@@ -208,23 +213,18 @@ __all__ = [
     "multiscatter_factor",
     "specular_albedo_estimate",
     "principled_material",
+    "DEFAULT_MATERIAL",
+    "slot_material",
     "sharp_alpha_limit",
     "is_sharp",
     "with_sharp_lobe",
     "sharp_lobes",
 ]
 
-#: Smallest microfacet alpha used anywhere (roughness ~ 0.0316).
-ALPHA_MIN = 1e-3
 #: Views with ``n.wo`` below this are bent up to (about) this cosine.
 COS_VIEW_MIN = 1e-4
 
-_DISTRIBUTIONS = ("BECKMANN", "GGX", "MULTI_GGX")
 _FRESNELS = ("NONE", "SCHLICK", "DIELECTRIC", "F82")
-# Floor for cosines inside Lambda (keeps tan^2 finite: <= 1e24).
-_COS_FLOOR = 1e-12
-# Floor for cos^2 inside the Beckmann NDF (exp(-huge) -> 0, no 0/0).
-_COS2_FLOOR = 1e-30
 # Threshold on |wi + wo|^2 under which the half vector is undefined (wi = -wo).
 _HALF_LEN2_FLOOR = 1e-20
 
@@ -413,339 +413,6 @@ def sharp_lobes(material: Material) -> list:
                       m.ior))
     return lobes
 
-
-def roughness_to_alpha(roughness: float) -> float:
-    """Blender roughness -> microfacet alpha: ``max(clamp(r, 0, 1)**2, ALPHA_MIN)``."""
-    r = float(roughness)
-    if not np.isfinite(r):
-        r = 0.0
-    r = min(max(r, 0.0), 1.0)
-    return max(r * r, ALPHA_MIN)
-
-
-def _check_distribution(distribution: str) -> str:
-    d = str(distribution).upper()
-    if d == "MULTI_GGX":
-        return "GGX"
-    if d not in _DISTRIBUTIONS:
-        raise ValueError(f"distribution must be one of {_DISTRIBUTIONS}, got {distribution!r}")
-    return d
-
-
-def _clamp_alpha(alpha) -> np.ndarray:
-    a = np.asarray(alpha, dtype=np.float64)
-    return np.clip(np.nan_to_num(a, nan=ALPHA_MIN), ALPHA_MIN, None)
-
-
-def microfacet_D(distribution, alpha, cos_theta_m) -> np.ndarray:
-    r"""Normalised isotropic NDF ``D(m)`` evaluated at ``cos_theta_m = n.m``.
-
-    ``integral_{hemisphere} D(m) (n.m) dm = 1``.  With ``a2 = alpha^2`` and
-    ``c = cos_theta_m``::
-
-        BECKMANN: D = exp(-(1 - c^2) / (c^2 a2)) / (pi a2 c^4)
-        GGX:      D = a2 / (pi ((1 - c^2) + a2 c^2)^2)
-
-    (Cycles ``bsdf_D``.)  ``alpha`` is floored at :data:`ALPHA_MIN`; ``D = 0``
-    for ``c <= 0``.  Returns ``float64`` with the broadcast shape of the inputs.
-    """
-    dist = _check_distribution(distribution)
-    a2 = _clamp_alpha(alpha) ** 2
-    c = np.asarray(cos_theta_m, dtype=np.float64)
-    c2 = np.clip(c * c, 0.0, 1.0)
-    s2 = 1.0 - c2
-    with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
-        if dist == "BECKMANN":
-            c2s = np.maximum(c2, _COS2_FLOOR)
-            d = np.exp(-s2 / (c2s * a2)) / (np.pi * a2 * c2s * c2s)
-        else:
-            den = s2 + a2 * c2
-            d = a2 / (np.pi * den * den)
-    return np.where(c > 0.0, d, 0.0)
-
-
-def _lambda_raw(dist: str, a2, cos_theta) -> np.ndarray:
-    """Smith Lambda for ``a2 = alpha^2`` *without* the ALPHA_MIN floor."""
-    c = np.maximum(np.nan_to_num(np.asarray(cos_theta, dtype=np.float64), nan=0.0), _COS_FLOOR)
-    c = np.minimum(c, 1.0)
-    t2 = a2 * np.maximum(1.0 / (c * c) - 1.0, 0.0)
-    if dist == "GGX":
-        return 0.5 * (np.sqrt(1.0 + t2) - 1.0)
-    a = 1.0 / np.sqrt(np.maximum(t2, 0.39))
-    lam = ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a)
-    return np.where(t2 < 0.39, 0.0, lam)
-
-
-def smith_lambda(distribution, alpha, cos_theta) -> np.ndarray:
-    r"""Cycles' Smith ``Lambda`` for a direction at ``cos_theta = n.w``.
-
-    With ``t2 = alpha^2 tan^2(theta)``::
-
-        GGX:      Lambda = (sqrt(1 + t2) - 1) / 2                   (exact)
-        BECKMANN: a = 1/sqrt(t2);
-                  Lambda = (1 - 1.259 a + 0.396 a^2) / (3.535 a + 2.181 a^2)
-                  if t2 >= 0.39 (a <~ 1.6), else 0                 (approximation)
-
-    (Cycles ``bsdf_lambda`` / ``bsdf_lambda_from_sqr_alpha_tan_n``.)  The
-    masking function is ``G1 = 1 / (1 + Lambda)``.  ``cos_theta`` is floored at
-    ``1e-12`` (so directions at or below the horizon get a huge but finite
-    Lambda, i.e. ``G1 ~ 0``).  Returns ``float64``.
-    """
-    dist = _check_distribution(distribution)
-    return _lambda_raw(dist, _clamp_alpha(alpha) ** 2, cos_theta)
-
-
-def smith_G1(distribution, alpha, cos_theta) -> np.ndarray:
-    """Smith masking ``G1 = 1 / (1 + Lambda(cos_theta))`` (Cycles ``bsdf_G``, 2-arg form)."""
-    return 1.0 / (1.0 + smith_lambda(distribution, alpha, cos_theta))
-
-
-# --------------------------------------------------------------------------- #
-# Fresnel terms (Cycles kernel/closure/bsdf_util.h)
-# --------------------------------------------------------------------------- #
-
-def fresnel_dielectric(cos_i, eta) -> np.ndarray:
-    """Unpolarised dielectric Fresnel reflectance (Cycles ``fresnel_dielectric_cos``).
-
-    ``eta`` is the relative IOR (transmitted over incident side); total
-    internal reflection gives 1.  Uses ``|cos_i|``.  Returns ``float64``, or
-    ``float32`` for a ``float32`` array input (the per-direction hot path).
-    """
-    c = np.abs(np.asarray(cos_i))
-    if c.dtype != np.float32:
-        c = c.astype(np.float64)
-    shape = c.shape
-    c = c.reshape(-1)
-    dt = c.dtype.type
-    eta = float(eta)
-    g = c * c
-    g += dt(eta * eta - 1.0)
-    ok = g > 0.0
-    np.maximum(g, dt(1e-30), out=g)
-    np.sqrt(g, out=g)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        A = (g - c) / (g + c)
-        gc = g * c
-        B = (gc + c * c - 1.0) / (gc - c * c + 1.0)
-        A *= A
-        B *= B
-        B += dt(1.0)
-        A *= B
-        A *= dt(0.5)
-    A = np.nan_to_num(A, nan=1.0, copy=False)
-    A[~ok] = 1.0
-    return A.reshape(shape)
-
-
-def F0_from_ior(ior: float) -> float:
-    """``((ior - 1) / (ior + 1))^2`` (Cycles ``F0_from_ior``)."""
-    ior = float(ior)
-    return ((ior - 1.0) / (ior + 1.0)) ** 2
-
-
-def ior_from_F0(f0: float) -> float:
-    """Inverse of :func:`F0_from_ior` for ``ior >= 1``, ``f0`` clamped to ``[0, 0.99]``."""
-    s = np.sqrt(min(max(float(f0), 0.0), 0.99))
-    return float((1.0 + s) / (1.0 - s))
-
-
-def fresnel_dielectric_Fss(eta: float) -> float:
-    """Cycles' fit of ``2 int_0^1 F_diel(mu, eta) mu dmu`` (Kulla & Conty 2017)."""
-    eta = float(eta)
-    if eta < 1.0:
-        return 0.997118 + eta * (0.1014 - eta * (0.965241 + eta * 0.130607))
-    return (eta - 1.0) / (4.08567 + 1.00071 * eta)
-
-
-def f82_tint_B(f0, tint) -> np.ndarray:
-    """Cycles' ``fresnel_f82tint_B``: the ``B`` of ``F82Tint = Schlick - B cos (1-cos)^6``
-    such that ``F(acos(1/7)) = Schlick(acos(1/7)) * tint``."""
-    f0 = np.asarray(f0, dtype=np.float64)
-    tint = np.asarray(tint, dtype=np.float64)
-    f = 6.0 / 7.0
-    f5 = f ** 5
-    schlick = f0 + (1.0 - f0) * f5
-    return schlick * (7.0 / (f5 * f)) * (1.0 - tint)
-
-
-def fresnel_f82(cos_i, f0, B) -> np.ndarray:
-    """``saturate(mix(F0, 1, (1-c)^5) - B c (1-c)^6)`` (Cycles ``fresnel_f82``);
-    ``cos_i`` (...,) with ``f0``/``B`` broadcasting against ``cos_i[..., None]``."""
-    c = np.asarray(cos_i, dtype=np.float64)[..., None]
-    s = np.clip(1.0 - c, 0.0, 1.0)
-    s5 = s ** 5
-    f0 = np.asarray(f0, dtype=np.float64)
-    return np.clip(f0 + (1.0 - f0) * s5 - np.asarray(B, dtype=np.float64) * c * s5 * s, 0.0, 1.0)
-
-
-def _dielectric_s(cos_i, eta: float) -> np.ndarray:
-    """Principled remap factor ``saturate((F_diel(cos, eta) - F0) / (1 - F0))``
-    (keeps a ``float32`` input's dtype)."""
-    F0 = F0_from_ior(eta)
-    F = fresnel_dielectric(cos_i, eta)
-    if F0 >= 1.0 - 1e-12:
-        return np.ones_like(F)
-    dt = F.dtype.type
-    F -= dt(F0)
-    F *= dt(1.0 / (1.0 - F0))
-    return np.clip(F, 0.0, 1.0, out=F)
-
-
-# --------------------------------------------------------------------------- #
-# Tables: Cycles' grids, our own quadrature
-# --------------------------------------------------------------------------- #
-
-#: samples per axis of the deterministic VNDF quadrature (n*n per table node).
-QUADRATURE_N = 256
-_E_SIZE = 32          # ggx_E: 32 x 32 (rough, mu); ggx_Eavg: 32 (rough)
-_S_SIZE = 16          # ggx_gen_schlick_ior_s: 16^3 (rough, mu, z)
-_GL_MU = 32           # Gauss-Legendre nodes for E_avg
-
-
-def _grid_value(i: int, n: int, hi: float = 1.0) -> float:
-    """Cycles' precompute grid: ``clamp(i / (n - 1), 1e-4, hi)``."""
-    return min(max(i / (n - 1), 1e-4), hi)
-
-
-@lru_cache(maxsize=8)
-def _unit_disk_grid(n: int, alpha: float):
-    """Quadrature on the unit disk for the VNDF mapping: ``(x, y, weight)``.
-
-    Polar, ``rho^2 = u``; ``u`` is graded towards the rim as
-    ``u = 1 - exp(-w)`` with ``w`` on a midpoint grid over ``[0, W]``,
-    ``W = ln(1 / alpha^2) + 14``, because the GGX tails that matter (steep
-    microfacets, ``tan(theta_m) ~ 1``) sit at ``1 - u ~ alpha^2``; ``phi`` is a
-    periodic midpoint grid.  Weights sum to 1.
-    """
-    W = np.log(1.0 / (alpha * alpha)) + 14.0
-    w = (np.arange(n) + 0.5) * (W / n)
-    u = -np.expm1(-w)
-    wu = np.exp(-w)
-    wu /= wu.sum()
-    r = np.sqrt(u)[:, None]
-    phi = 2.0 * np.pi * (np.arange(n) + 0.5)[None, :] / n
-    weight = np.repeat(wu[:, None] / n, n, axis=1)
-    return ((r * np.cos(phi)).reshape(-1), (r * np.sin(phi)).reshape(-1),
-            weight.reshape(-1))
-
-
-def _vndf_reflect(rough: float, mus: np.ndarray, n: int = QUADRATURE_N):
-    """Deterministic quadrature over Cycles' GGX VNDF sampling
-    (``microfacet_ggx_sample_vndf``, Heitz 2018) for views at ``mus``.
-
-    Returns ``(cos_HI, cos_NO, weights)``: ``(M, n*n)`` microfacet/view cosines,
-    cosines of the mirrored directions and ``(n*n,)`` quadrature weights (sum 1)
-    with respect to the VNDF of the view.
-    """
-    alpha = max(rough * rough, 1e-7)
-    mu = np.clip(np.asarray(mus, dtype=np.float64), 1e-6, 1.0)[:, None]
-    wx = np.sqrt(np.maximum(1.0 - mu * mu, 0.0))
-    wz = mu
-    # stretched view (x-z plane); basis T1 = y, T2 = cross(wi_, T1)
-    ln = np.sqrt((alpha * wx) ** 2 + wz * wz)
-    vx, vz = alpha * wx / ln, wz / ln
-    t1, t2, weights = _unit_disk_grid(n, alpha)
-    t1 = t1[None, :]
-    a = 0.5 * (1.0 + vz)
-    t2 = (1.0 - a) * np.sqrt(np.maximum(1.0 - t1 * t1, 0.0)) + a * t2[None, :]
-    tz = np.sqrt(np.maximum(1.0 - t1 * t1 - t2 * t2, 0.0))
-    # H_ = t1 * (0,1,0) + t2 * (-vz, 0, vx) + tz * (vx, 0, vz)
-    hx = -t2 * vz + tz * vx
-    hy = t1
-    hz = t2 * vx + tz * vz
-    hx, hy, hz = alpha * hx, alpha * hy, np.maximum(hz, 0.0)
-    hl = np.sqrt(hx * hx + hy * hy + hz * hz)
-    hl = np.where(hl > 0.0, hl, 1.0)
-    hx, hy, hz = hx / hl, hy / hl, hz / hl
-    cos_hi = np.clip(hx * wx + hz * wz, 0.0, 1.0)
-    cos_no = 2.0 * cos_hi * hz - wz
-    return cos_hi, cos_no, weights
-
-
-def _ggx_E_quadrature(rough: float, mus) -> np.ndarray:
-    """Single-scatter GGX directional albedo ``E(rough, mu)`` (F = 1), i.e.
-    the VNDF mean of ``G2 / G1 = (1 + L_i) / (1 + L_i + L_o)`` over samples
-    reflected above the horizon (what Cycles' ``precompute_ggx_E`` averages)."""
-    mus = np.asarray(mus, dtype=np.float64)
-    a2 = max(rough * rough, 1e-7) ** 2
-    _, cos_no, wq = _vndf_reflect(rough, mus)
-    lam_i = _lambda_raw("GGX", a2, np.clip(mus, 1e-6, 1.0))[:, None]
-    lam_o = _lambda_raw("GGX", a2, cos_no)
-    w = np.where(cos_no > 0.0, (1.0 + lam_i) / (1.0 + lam_i + lam_o), 0.0)
-    return w @ wq
-
-
-@lru_cache(maxsize=64)
-def ggx_E_table_column(ix: int) -> np.ndarray:
-    """``E`` at roughness node ``ix`` of Cycles' 32 x 32 ``ggx_E`` grid, all 32 mu nodes."""
-    rough = _grid_value(ix, _E_SIZE)
-    mus = np.array([_grid_value(j, _E_SIZE) for j in range(_E_SIZE)])
-    return np.clip(_ggx_E_quadrature(rough, mus), 0.0, 1.0)
-
-
-@lru_cache(maxsize=64)
-def ggx_E_avg_node(ix: int) -> float:
-    """``E_avg = 2 int_0^1 E(mu) mu dmu`` at roughness node ``ix`` (Gauss-Legendre in mu)."""
-    rough = _grid_value(ix, _E_SIZE) if ix > 0 else 0.0
-    x, w = np.polynomial.legendre.leggauss(_GL_MU)
-    mu = 0.5 * (x + 1.0)
-    return float(np.clip(np.sum(w * mu * _ggx_E_quadrature(max(rough, 1e-4), mu)), 0.0, 1.0))
-
-
-@lru_cache(maxsize=512)
-def dielectric_s_table_column(ix: int, iz: int) -> np.ndarray:
-    """``S`` of Cycles' 16^3 ``ggx_gen_schlick_ior_s`` grid at (rough node ``ix``,
-    z node ``iz``), all 16 mu nodes: VNDF mean of ``s(h.wi)`` (0 below horizon)."""
-    rough = _grid_value(ix, _S_SIZE)
-    z = _grid_value(iz, _S_SIZE, 0.99)
-    eta = ior_from_F0(z ** 4)
-    mus = np.array([_grid_value(j, _S_SIZE) for j in range(_S_SIZE)])
-    cos_hi, cos_no, wq = _vndf_reflect(rough, mus)
-    s = np.where(cos_no >= 0.0, _dielectric_s(cos_hi, eta), 0.0)
-    return np.clip(s @ wq, 0.0, 1.0)
-
-
-def _lerp_index(x: float, n: int):
-    """Cycles ``lookup_table_read`` indexing: (index, next index, t)."""
-    x = min(max(float(x), 0.0), 1.0) * (n - 1)
-    i = min(int(x), n - 1)
-    return i, min(i + 1, n - 1), x - i
-
-
-def _interp_mu(column: np.ndarray, mu) -> np.ndarray:
-    n = len(column)
-    x = np.clip(np.nan_to_num(np.asarray(mu, dtype=np.float64), nan=0.0), 0.0, 1.0) * (n - 1)
-    i = np.minimum(x.astype(np.int64), n - 1)
-    j = np.minimum(i + 1, n - 1)
-    t = x - i
-    return (1.0 - t) * column[i] + t * column[j]
-
-
-def ggx_E(roughness: float, mu) -> np.ndarray:
-    """Single-scatter GGX directional albedo at ``mu = n.wo`` (Cycles' grid and
-    bilinear interpolation, our quadrature)."""
-    i0, i1, t = _lerp_index(roughness, _E_SIZE)
-    col = (1.0 - t) * ggx_E_table_column(i0) + t * ggx_E_table_column(i1)
-    return _interp_mu(col, mu)
-
-
-def ggx_E_avg(roughness: float) -> float:
-    """Cosine-weighted average of :func:`ggx_E` over views (Cycles' ``ggx_Eavg`` grid)."""
-    i0, i1, t = _lerp_index(roughness, _E_SIZE)
-    return (1.0 - t) * ggx_E_avg_node(i0) + t * ggx_E_avg_node(i1)
-
-
-def dielectric_albedo_s(roughness: float, mu, eta: float) -> np.ndarray:
-    """Cycles' ``S(r, mu, z)`` (``ggx_gen_schlick_ior_s``, trilinear), so that the
-    Principled specular albedo estimate is ``mix(f0, 1, S)``."""
-    z = np.sqrt(abs((float(eta) - 1.0) / (float(eta) + 1.0)))
-    i0, i1, t = _lerp_index(roughness, _S_SIZE)
-    k0, k1, u = _lerp_index(z, _S_SIZE)
-    col = ((1.0 - u) * ((1.0 - t) * dielectric_s_table_column(i0, k0)
-                        + t * dielectric_s_table_column(i1, k0))
-           + u * ((1.0 - t) * dielectric_s_table_column(i0, k1)
-                  + t * dielectric_s_table_column(i1, k1)))
-    return _interp_mu(col, mu)
 
 
 # --------------------------------------------------------------------------- #
@@ -1086,3 +753,21 @@ def principled_material(base_color=(0.8, 0.8, 0.8), metallic=0.0, roughness=0.5,
     return Material(diffuse_albedo=base, specular_color=tuple(np.clip(f0 * tint, 0.0, 1.0)),
                     roughness=roughness, distribution=dist, fresnel="DIELECTRIC", ior=eta,
                     f82_tint=tuple(np.minimum(tint, 1.0)), metallic=metallic)
+
+
+#: What Cycles uses for a surface without a material: a Principled BSDF with the node
+#: defaults (``ShaderManager::add_default`` in ``intern/cycles/scene/shader.cpp``: base 0.8,
+#: metallic 0, roughness 0.5, IOR 1.5, specular IOR level 0.5, specular tint 1,
+#: Multiscatter GGX) -- not a Lambert 0.8, which is ~1-4 % off depending on the view (the
+#: specular layer takes energy from the base at grazing angles).
+DEFAULT_MATERIAL = principled_material()
+
+
+def slot_material(table, slot):
+    """The material a face of material index ``slot`` is drawn with, from the per-slot
+    ``table`` of its object, as Cycles assigns it: the index clamped into the object's
+    slots (``clamp_material_index`` in ``intern/cycles/blender/mesh.cc``); an object
+    without slots has the default surface :data:`DEFAULT_MATERIAL`."""
+    if len(table) == 0:
+        return DEFAULT_MATERIAL
+    return table[min(max(int(slot), 0), len(table) - 1)]

@@ -18,9 +18,10 @@ add up to 4*pi to rounding.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
+
+from .cache import memo
 
 #: (major axis, U, V) per face, in world coordinates.
 FACE_AXES = np.array(
@@ -63,7 +64,7 @@ class Cubemap:
         return direction_to_texel(np.asarray(dirs, dtype=np.float64), self.resolution)
 
 
-@lru_cache(maxsize=8)
+@memo(8)
 def cubemap(resolution: int = 32) -> Cubemap:
     """The cubemap direction set of ``resolution`` texels per face edge."""
     n = int(resolution)

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .cache import Cache
 from .directions import Cubemap, cubemap
 from .resample import LUMINANCE, ImageSums, texel_sums
 
@@ -239,7 +240,7 @@ class CubeLighting:
 # What the resampling keeps of the newest image (:class:`ImageSums`: per-column sums, at
 # most resample.SUMS_BUDGET bytes): a turned world (Mapping rotation: relit frames) only
 # redoes the geometry.
-_RESAMPLE_CACHE: dict = {}
+_RESAMPLE_CACHE = Cache(1)
 
 
 def _image_sums(img: np.ndarray) -> ImageSums:
@@ -248,9 +249,7 @@ def _image_sums(img: np.ndarray) -> ImageSums:
     got = _RESAMPLE_CACHE.get(key)
     if got is not None and got.image is img:
         return got
-    sums = ImageSums(img)
-    _RESAMPLE_CACHE.clear()
-    _RESAMPLE_CACHE[key] = sums
+    sums = _RESAMPLE_CACHE[key] = ImageSums(img)
     return sums
 
 

@@ -87,9 +87,9 @@ pixel-basis REFERENCE: ``O(6 N^2)`` per point.
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
+
+from .cache import memo
 
 __all__ = [
     "forward", "inverse", "cube_forward", "cube_inverse", "transform_matrix",
@@ -199,7 +199,7 @@ def transform_matrix(n: int) -> np.ndarray:
 # Index bookkeeping
 
 
-@lru_cache(maxsize=16)
+@memo(16)
 def _tables(n: int):
     """Per-face lookup tables indexed by the face-local coefficient index."""
     n = _check_resolution(n)

@@ -62,6 +62,15 @@ def degenerate_triangles(mesh: MeshArrays, scale: float | None = None) -> np.nda
     return ~np.isfinite(area) | (area <= (1e-12 * max(scale, 1e-30) ** 2))
 
 
+def occluder_triangles(mesh: MeshArrays) -> tuple[np.ndarray, int]:
+    """``(triangle positions (T', 3, 3), ignored)``: the triangles that cast shadows --
+    all but the zero-area ones of :func:`degenerate_triangles` -- and how many were left
+    out (the count the precompute's warning reports: the faces it calls ignored are
+    exactly the faces the occluder scene does not hold)."""
+    degenerate = degenerate_triangles(mesh)
+    return mesh.triangle_positions[~degenerate], int(degenerate.sum())
+
+
 def corner_areas(mesh: MeshArrays) -> np.ndarray:
     """Surface area each corner stands for (a third of each triangle it is in), (C,):
     ``sum_c w_c |x_c|^2`` is the surface L2 norm that an image's error approximates
@@ -153,20 +162,27 @@ class ShadingPoints:
         return len(self.positions)
 
 
+def point_keys(normals: np.ndarray, materials: np.ndarray) -> np.ndarray:
+    """One int64 per (normal, material slot): the normal quantised to 1/4096 per component
+    (14 bits each) and the slot (20 bits) packed, so that sorting by (vertex, key) orders
+    shading points (:func:`shading_points`) and equal keys are the same point."""
+    q = np.clip(np.round(np.asarray(normals) * 4096.0).astype(np.int64) + 4096, 0, 8192)
+    mat = np.clip(np.asarray(materials, dtype=np.int64), 0, (1 << 20) - 1)
+    return (((q[:, 0] << 14) | q[:, 1]) << 14 | q[:, 2]) << 20 | mat
+
+
 def shading_points(mesh: MeshArrays) -> ShadingPoints:
     """Group corners into shading points, ordered by (vertex, normal, material).
 
     Normals are compared quantised to 1/4096 per component; the three components
-    and the material slot are packed into one integer key so a two-key stable
-    sort groups the corners (much faster than ``np.unique(axis=0)``).
+    and the material slot are packed into one integer key (:func:`point_keys`) so a
+    two-key stable sort groups the corners (much faster than ``np.unique(axis=0)``).
     """
     count = len(mesh.corner_verts)
     if count == 0:
         empty = np.zeros((0, 3))
         return ShadingPoints(np.zeros(0, np.int64), empty, empty, np.zeros(0, np.int64))
-    q = np.clip(np.round(mesh.corner_normals * 4096.0).astype(np.int64) + 4096, 0, 8192)  # 14 bits
-    mat = np.clip(mesh.corner_materials, 0, (1 << 20) - 1)
-    key = (((q[:, 0] << 14) | q[:, 1]) << 14 | q[:, 2]) << 20 | mat
+    key = point_keys(mesh.corner_normals, mesh.corner_materials)
     order = np.lexsort((key, mesh.corner_verts))
     v_sorted, k_sorted = mesh.corner_verts[order], key[order]
     new = np.ones(count, dtype=bool)

@@ -23,7 +23,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .brdf import Material, diffuse_view_weight, specular_cosine, specular_terms
+from .brdf import Material, diffuse_view_weight, slot_material, specular_cosine, specular_terms
 from .directions import Cubemap
 from .envmap import CubeLighting
 from .visibility import unpack_visibility
@@ -96,10 +96,38 @@ def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> 
     return out
 
 
+#: an edge "jumps" when its endpoints' sky visibility differs by more than this
+COARSE_JUMP = 0.25
+#: a mesh is too coarse for its shadows when more than this share of its edges jump
+COARSE_SHARE = 0.05
+
+
+def coarse_edge_share(vis_bits: np.ndarray, normals: np.ndarray, point_of_corner: np.ndarray,
+                      triangles: np.ndarray, cube: Cubemap, jump: float = COARSE_JUMP) -> float:
+    """Share of a mesh's edges (the three of every triangle) whose endpoints' sky
+    visibility (:func:`sky_visibility` of their shading points) differs by more than
+    ``jump``: where shadows change faster than the tessellation can show, so per-vertex
+    shading blurs or aliases them.  0 for a mesh without triangles."""
+    tri_points = np.asarray(point_of_corner)[np.asarray(triangles)].reshape(-1, 3)
+    if len(tri_points) == 0:
+        return 0.0
+    sky = sky_visibility(vis_bits, normals, cube)
+    edges = np.concatenate([tri_points[:, [0, 1]], tri_points[:, [1, 2]], tri_points[:, [2, 0]]])
+    return float((np.abs(sky[edges[:, 0]] - sky[edges[:, 1]]) > jump).mean())
+
+
 def view_directions(positions, eye) -> np.ndarray:
     """Unit directions from each point toward the (perspective) eye, (P, 3) float64."""
     v = np.asarray(eye, dtype=np.float64)[None, :] - np.asarray(positions, dtype=np.float64)
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
+
+
+def point_views(positions, eye=None, view_dir=None) -> np.ndarray:
+    """Unit directions toward the viewer, (P, 3) float64: the orthographic camera's
+    ``view_dir`` at every point when given, else toward the perspective ``eye``."""
+    if view_dir is not None:
+        return np.broadcast_to(np.asarray(view_dir, np.float64), (len(positions), 3))
+    return view_directions(positions, eye)
 
 
 def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.ndarray,
@@ -157,7 +185,8 @@ def lambert_layer(material: Material, irradiance: np.ndarray, normals: np.ndarra
 
 def shade_points(vis_bits, positions, normals, materials, material_table, eye, cube, lighting,
                  irradiance=None, view_dirs=None) -> np.ndarray:
-    """Outgoing radiance (P, 3) of every point, each with ``material_table[materials[p]]``.
+    """Outgoing radiance (P, 3) of every point, each with its slot's material
+    (``materials[p]`` in ``material_table``, :func:`.brdf.slot_material`).
 
     ``irradiance`` (from :func:`diffuse_irradiance`) may be passed in when cached.
     The diffuse part is ``irradiance * albedo / pi * diffuse_view_weight(n, v)``
@@ -170,7 +199,7 @@ def shade_points(vis_bits, positions, normals, materials, material_table, eye, c
     materials = np.asarray(materials)
     for slot in np.unique(materials):
         sel = np.nonzero(materials == slot)[0]
-        mat = material_table[int(slot)] if 0 <= int(slot) < len(material_table) else Material()
+        mat = slot_material(material_table, slot)
         needs_view = mat.fresnel == "DIELECTRIC" or not mat.is_diffuse_only
         vd = None
         if needs_view:

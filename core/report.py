@@ -1,7 +1,8 @@
 """Speed-against-error report: metrics, images, Pareto frontier, SVG plot, HTML.
 
-Pure numpy + the standard library (PNG files are written with ``zlib``), so the
-same code serves the ``prt.report`` operator, ``bench/report.py`` and the tests.
+Numpy and the standard library, PNG files written with OpenImageIO (guarded as in
+:mod:`.envmap`: the add-on writes them with Blender's image API where it is missing), so
+the same code serves the ``prt.report`` operator, ``bench/report.py`` and the tests.
 
 Images handed to this module are linear RGBA float arrays, **top row first**;
 pixels with alpha > 0.5 in the reference image are the ones measured (the
@@ -13,10 +14,13 @@ from __future__ import annotations
 import html
 import math
 import pathlib
-import struct
-import zlib
 
 import numpy as np
+
+try:  # OpenImageIO ships inside Blender 4.5/5.0, not 4.2.
+    import OpenImageIO as _oiio
+except ImportError:  # pragma: no cover - depends on the Blender build
+    _oiio = None
 
 # --------------------------------------------------------------------- metrics
 
@@ -126,48 +130,34 @@ def display_rgb(image: np.ndarray, exposure: float,
     return (srgb_encode(rgb) * 255.0 + 0.5).astype(np.uint8)
 
 
+def have_openimageio() -> bool:
+    """Whether :func:`write_png` can write (OpenImageIO ships inside Blender 4.5+; the
+    add-on falls back to Blender's image API without it)."""
+    return _oiio is not None
+
+
 def write_png(path, rgb: np.ndarray):
-    """Write uint8 RGB/RGBA (H, W, 3|4), top row first, as an 8-bit PNG (zlib only)."""
+    """Write uint8 RGB/RGBA (H, W, 3|4), top row first, as an 8-bit PNG with OpenImageIO
+    (alpha as given: unassociated)."""
     px = np.ascontiguousarray(rgb, dtype=np.uint8)
     if px.ndim == 2:
         px = np.repeat(px[..., None], 3, axis=-1)
     h, w, c = px.shape
     if c not in (3, 4):
         raise ValueError(f"PNG needs 3 or 4 channels, got {c}")
-    raw = np.concatenate([np.zeros((h, 1), np.uint8), px.reshape(h, w * c)], axis=1)
-
-    def chunk(tag, data):
-        return (struct.pack(">I", len(data)) + tag + data
-                + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF))
-
-    header = struct.pack(">IIBBBBB", w, h, 8, 6 if c == 4 else 2, 0, 0, 0)
-    data = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
-            + chunk(b"IDAT", zlib.compress(raw.tobytes(), 9)) + chunk(b"IEND", b""))
-    pathlib.Path(path).write_bytes(data)
-
-
-def read_png(path) -> np.ndarray:
-    """Read back an 8-bit, non-interlaced RGB/RGBA PNG written by :func:`write_png`
-    (filter type 0 on every row)."""
-    data = pathlib.Path(path).read_bytes()
-    if data[:8] != b"\x89PNG\r\n\x1a\n":
-        raise ValueError(f"{path} is not a PNG")
-    pos, idat, w, h, c = 8, b"", 0, 0, 3
-    while pos < len(data):
-        (length,) = struct.unpack(">I", data[pos:pos + 4])
-        tag, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + length]
-        if tag == b"IHDR":
-            w, h, depth, ctype = struct.unpack(">IIBB", body[:10])
-            if depth != 8 or ctype not in (2, 6):
-                raise ValueError("only 8-bit RGB/RGBA PNGs are read")
-            c = 4 if ctype == 6 else 3
-        elif tag == b"IDAT":
-            idat += body
-        pos += 12 + length
-    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + w * c)
-    if raw[:, 0].any():
-        raise ValueError("only unfiltered PNG rows are read")
-    return raw[:, 1:].reshape(h, w, c)
+    if _oiio is None:
+        raise RuntimeError("OpenImageIO is not available: write the PNG with Blender's "
+                           "image API (addon/report.py)")
+    out = _oiio.ImageOutput.create(str(path))
+    if out is None:
+        raise OSError(f"cannot write {path}: {_oiio.geterror()}")
+    spec = _oiio.ImageSpec(w, h, c, _oiio.UINT8)
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    try:
+        if not (out.open(str(path), spec) and out.write_image(px)):
+            raise OSError(f"cannot write {path}: {out.geterror()}")
+    finally:
+        out.close()
 
 
 # --------------------------------------------------------------------- Pareto

@@ -39,10 +39,9 @@ through it and vertices within ``1e-10`` are put on it (errors below 1e-8 there)
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 
+from .cache import memo
 from .directions import FACE_AXES
 
 _TWO_PI = 2.0 * np.pi
@@ -60,7 +59,7 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 # --------------------------------------------------------------------------- geometry
-@lru_cache(maxsize=4)
+@memo(4)
 def cube_topology(n: int):
     """The texel grid of a ``6 n^2`` cubemap as a mesh on the sphere (world frame).
 

@@ -88,14 +88,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
 from . import brdf as core_brdf
+from .cache import memo
 from .directions import orthonormal_frame
 from .fitting import levenberg_marquardt
+from .microfacet import _lambda_raw
 
 __all__ = [
     "MODELS", "ISOTROPIC_MODELS", "FRESNEL_MODES", "MAX_LOBES", "ALPHA_MIN",
@@ -480,7 +481,7 @@ def fit_anisotropic_ndf(model, p, q, n_pairs=None, iterations=60):
     return best
 
 
-@lru_cache(maxsize=64)
+@memo(64)
 def _aniso_cached(model, p, q):
     return fit_anisotropic_ndf(model, p, q)
 
@@ -510,7 +511,7 @@ def ndf_lobes(material: SGMaterial) -> NDFLobes:
     return _iso_cached(material.model, _round_sig(a, 6))
 
 
-@lru_cache(maxsize=256)
+@memo(256)
 def _iso_cached(model, a):
     lam, mu = iso_ndf_sg(model, a)
     lam, mu = float(lam), float(mu)
@@ -584,8 +585,8 @@ def _m_factor(model, roughness, cos_i, cos_o, h_dot_i):
         ci = np.maximum(cos_i, COS_MIN)
         co = np.maximum(cos_o, COS_MIN)
         a2 = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN) ** 2
-        li = core_brdf._lambda_raw("BECKMANN", a2, ci)
-        lo = core_brdf._lambda_raw("BECKMANN", a2, co)
+        li = _lambda_raw("BECKMANN", a2, ci)
+        lo = _lambda_raw("BECKMANN", a2, co)
         return 1.0 / ((1.0 + li + lo) * 4.0 * ci * co)
     if model in ("WARD", "WARD_ANISO"):
         ci = np.maximum(cos_i, COS_MIN_SINGULAR)

@@ -55,10 +55,10 @@ import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from functools import lru_cache
 
 import numpy as np
 
+from .cache import memo
 from .directions import shirley_chiu_to_hemisphere, texel_of_components
 from .visibility import unpack_visibility
 
@@ -110,7 +110,7 @@ def square_centres(n: int) -> np.ndarray:
     return shirley_chiu_to_hemisphere(a, b)
 
 
-@lru_cache(maxsize=8)
+@memo(8)
 def _boundary_candidates(h: int):
     """Midpoint directions of all 4-neighbour pairs of the ``h x h`` square, and pair indices."""
     d = square_centres(h).reshape(-1, 3)

@@ -25,6 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from .cache import Cache
 from .directions import Cubemap
 
 try:
@@ -44,14 +45,14 @@ def have_embree() -> bool:
 
 
 def build_occluder_scene(triangle_positions: np.ndarray):
-    """An Embree scene of (T, 3, 3) world triangles (degenerate ones dropped)."""
+    """An Embree scene of (T, 3, 3) world triangles: every one given, but those with a
+    non-finite corner (Embree cannot hold them).  Which faces cast shadows is the
+    caller's choice -- the precompute leaves out the zero-area faces it warns about
+    (:func:`.mesh.occluder_triangles`); a face of zero area in float32 is never hit."""
     if _rtcs is None:
         raise RuntimeError("embreex is not installed; it ships as a wheel with the extension")
     tri = np.ascontiguousarray(triangle_positions, dtype=np.float32).reshape(-1, 3, 3)
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
-    keep = np.isfinite(area2) & (area2 > 0)
-    tri = np.ascontiguousarray(tri[keep])
+    tri = np.ascontiguousarray(tri[np.isfinite(tri).all(axis=(1, 2))])
     scene = _rtcs.EmbreeScene()
     if len(tri):
         _TriangleMesh(scene, tri)
@@ -107,7 +108,8 @@ def hemisphere_rays(points: np.ndarray, normals: np.ndarray, cube: Cubemap, offs
     return origins, directions, mask
 
 
-_DIRS32 = {}
+# float32 texel directions per cubemap resolution
+_DIRS32 = Cache(8)
 
 
 def _directions32(cube: Cubemap) -> np.ndarray:

@@ -290,12 +290,12 @@ def test_view_draw_path_draws_the_same_frame_as_f12(method):
     draws per pixel, and runs its ground's pair pass (an offscreen of its own) inside the
     viewport's bound framebuffer."""
     from prt_relight.addon.engine import render_pixels
-    from prt_relight.addon.methods import ssdf_sg
+    from prt_relight.addon.methods import ssdf_sg_gpu
 
     _small_scene()
     bpy.context.scene.prt.method = method
     bpy.ops.prt.precompute()
-    ssdf_sg._PAIR_TABLES.clear()
+    ssdf_sg_gpu._PAIR_TABLES.clear()
     scene = bpy.context.scene
     scene.render.engine = "BLENDER_WORKBENCH"
     bpy.ops.render.render()                      # gives the gpu module a context in -b
@@ -310,7 +310,7 @@ def test_view_draw_path_draws_the_same_frame_as_f12(method):
                            scene.render.film_transparent, True)
     np.testing.assert_array_equal(shown, direct)
     assert np.isfinite(shown).all() and shown[..., :3].max() > 0.05
-    assert bool(ssdf_sg._PAIR_TABLES) == (method == "SSDF_SG")
+    assert bool(ssdf_sg_gpu._PAIR_TABLES) == (method == "SSDF_SG")
 
 
 def test_modal_precompute_esc_cancels_and_timer_finishes():

@@ -3,8 +3,10 @@
 import numpy as np
 import pytest
 
-from prt_relight.core import blocks as B
+from prt_relight.core import blocks_encoding as E
 from prt_relight.core.directions import cubemap
+
+from . import blocks_oracle as O
 
 
 def _structured_bits(n, rng, P=6):
@@ -24,27 +26,27 @@ def _structured_bits(n, rng, P=6):
 
 @pytest.mark.parametrize("n", [32, 64, 128])
 def test_block_layout_is_a_bijection(n):
-    perm = B.block_permutation(n)
-    assert perm.shape == (B.block_count(n), 256)
+    perm = E.block_permutation(n)
+    assert perm.shape == (E.block_count(n), 256)
     assert np.array_equal(np.sort(perm.reshape(-1)), np.arange(6 * n * n))
     x = np.random.default_rng(0).random((6 * n * n, 3))
-    assert np.array_equal(B.from_blocks(B.to_blocks(x, n), n), x)
+    assert np.array_equal(E.from_blocks(E.to_blocks(x, n), n), x)
     # second block of face 0 = columns 16..31 of rows 0..15
     assert perm[1, 0] == 16 and perm[1, 17] == n + 17
     t = np.arange(0, 6 * n * n, 37)
-    blk, k = B.texel_to_block(t, n)
-    assert np.array_equal(B.block_to_texel(blk, k, n), t)
+    blk, k = E.texel_to_block(t, n)
+    assert np.array_equal(E.block_to_texel(blk, k, n), t)
 
 
 def test_dct_orthonormal_and_nested_order():
-    c = B.dct_matrix()
+    c = E.dct_matrix()
     assert np.allclose(c @ c.T, np.eye(16), atol=1e-13)
-    phi = B.dct_basis()
+    phi = E.dct_basis()
     assert np.allclose(phi @ phi.T, np.eye(16), atol=1e-13)
-    assert B.DCT_ORDER[0] == (0, 0)
-    assert set(B.DCT_ORDER[:4]) == {(0, 0), (0, 1), (1, 0), (1, 1)}
+    assert E.DCT_ORDER[0] == (0, 0)
+    assert set(E.DCT_ORDER[:4]) == {(0, 0), (0, 1), (1, 0), (1, 1)}
     for l in (1, 2, 4):
-        pix, inv = B.projection_system(l)
+        pix, inv = E.projection_system(l)
         S = phi[: l * l][:, pix].T
         assert np.allclose(inv @ S, np.eye(l * l), atol=1e-10)
 
@@ -53,143 +55,143 @@ def test_varint_round_trip():
     rng = np.random.default_rng(1)
     v = np.concatenate([np.arange(300), rng.integers(0, 2 ** 62, 500, dtype=np.int64),
                         [127, 128, 16383, 16384, 2 ** 63 - 1]]).astype(np.uint64)
-    buf = B.varint_encode(v)
+    buf = E.varint_encode(v)
     assert buf.dtype == np.uint8
-    assert np.array_equal(B.varint_decode(buf), v)
-    assert np.array_equal(B.varint_decode(buf.tobytes()), v)
-    assert list(B.varint_encode([0, 1, 127, 128, 300])) == [0, 1, 127, 0x80, 1, 0xAC, 2]
+    assert np.array_equal(E.varint_decode(buf), v)
+    assert np.array_equal(E.varint_decode(buf.tobytes()), v)
+    assert list(E.varint_encode([0, 1, 127, 128, 300])) == [0, 1, 127, 0x80, 1, 0xAC, 2]
     with pytest.raises(ValueError):
-        B.varint_decode(np.array([0x80], np.uint8))
+        E.varint_decode(np.array([0x80], np.uint8))
 
 
 @pytest.mark.parametrize("n", [32, 64])
 def test_differential_visibility_round_trip(n):
     rng = np.random.default_rng(n)
     v, bits = _structured_bits(n, rng, P=9)
-    dv = B.encode_visibility(bits, n)
-    assert dv.binary and dv.kind.shape == (9, B.block_count(n))
-    assert (dv.kind[0] == B.ZERO).all() and (dv.kind[1] == B.ONE).all()
-    assert (dv.kind[2] == B.MIXED).all()
+    dv = E.encode_visibility(bits, n)
+    assert dv.binary and dv.kind.shape == (9, E.block_count(n))
+    assert (dv.kind[0] == E.ZERO).all() and (dv.kind[1] == E.ONE).all()
+    assert (dv.kind[2] == E.MIXED).all()
     assert np.diff(dv.offsets)[: 2 * dv.blocks].sum() == 0      # constants store nothing
     # checkerboard: a change at every pixel except the 15 row starts, where the
     # concatenated rows repeat the previous value (pixel 0 is a 0 -> 1 change)
     assert (np.diff(dv.offsets)[2 * dv.blocks:3 * dv.blocks] == 241).all()
-    assert np.array_equal(B.decode_visibility(dv), bits)
-    assert np.array_equal(B.decode_levels(dv).astype(bool), v)
+    assert np.array_equal(E.decode_visibility(dv), bits)
+    assert np.array_equal(E.decode_levels(dv).astype(bool), v)
     # indices are the nonzeros of D V (eq. 5), per block
-    vb = B.to_blocks(v[5].astype(np.int16), n, axis=0)
+    vb = E.to_blocks(v[5].astype(np.int16), n, axis=0)
     d = np.diff(vb, axis=1, prepend=0)
     one = dv.vertex(5)
-    for b in np.nonzero(one.kind[0] == B.MIXED)[0][:5]:
+    for b in np.nonzero(one.kind[0] == E.MIXED)[0][:5]:
         seg = one.indices[one.offsets[b]:one.offsets[b + 1]]
         assert np.array_equal(seg, np.nonzero(d[b])[0])
         assert np.array_equal(one.entry_values()[one.offsets[b]:one.offsets[b + 1]], d[b][seg])
     # varint serialization of the whole thing
-    buf = B.serialize_visibility(dv)
-    back = B.deserialize_visibility(buf.tobytes())
+    buf = E.serialize_visibility(dv)
+    back = E.deserialize_visibility(buf.tobytes())
     assert back.binary and back.resolution == n
     for name in ("kind", "offsets", "indices"):
         assert np.array_equal(getattr(back, name), getattr(dv, name)), name
-    assert np.array_equal(B.decode_visibility(back), bits)
+    assert np.array_equal(E.decode_visibility(back), bits)
 
 
 def test_single_run_and_edge_blocks():
     n = 32
     D = 6 * n * n
     v = np.zeros((3, D), bool)
-    perm = B.block_permutation(n)
+    perm = E.block_permutation(n)
     v[0, perm[3, 200:]] = True            # one change, at 200: mixed, 1 index
     v[1, perm[3, :255]] = True            # changes at 0 and 255
     v[2, perm[3, 255]] = True             # single last pixel
-    dv = B.encode_visibility(np.packbits(v, axis=1), n)
-    assert dv.kind[0, 3] == B.MIXED and list(dv.vertex(0).indices) == [200]
+    dv = E.encode_visibility(np.packbits(v, axis=1), n)
+    assert dv.kind[0, 3] == E.MIXED and list(dv.vertex(0).indices) == [200]
     assert list(dv.vertex(1).indices) == [0, 255]
     assert list(dv.vertex(2).indices) == [255]
-    back = B.deserialize_visibility(B.serialize_visibility(dv))
-    assert np.array_equal(B.decode_levels(back).astype(bool), v)
+    back = E.deserialize_visibility(E.serialize_visibility(dv))
+    assert np.array_equal(E.decode_levels(back).astype(bool), v)
 
 
 def test_quantized_visibility_round_trip():
     n, rng = 32, np.random.default_rng(3)
     fine = np.stack([rng.random(6 * 128 * 128) < 0.5,
                      np.repeat(cubemap(128).directions[:, 2] > 0.1, 1)])
-    gray = B.downsample_visibility(np.packbits(fine, axis=1), 128, 4)
+    gray = E.downsample_visibility(np.packbits(fine, axis=1), 128, 4)
     gray = np.concatenate([gray, np.zeros((1, gray.shape[1])), np.ones((1, gray.shape[1])),
                            np.full((1, gray.shape[1]), 0.5), rng.random((1, gray.shape[1]))])
-    dv = B.encode_quantized_visibility(gray, n, bits=6)
+    dv = E.encode_quantized_visibility(gray, n, bits=6)
     assert not dv.binary and dv.levels == 63
-    q = B.quantize_visibility(gray, 6)
-    assert np.array_equal(B.decode_levels(dv), q)
-    assert (dv.kind[2] == B.ZERO).all() and (dv.kind[3] == B.ONE).all()
-    assert (dv.kind[4] == B.MIXED).all()       # constant 0.5: one index, value 32
+    q = E.quantize_visibility(gray, 6)
+    assert np.array_equal(E.decode_levels(dv), q)
+    assert (dv.kind[2] == E.ZERO).all() and (dv.kind[3] == E.ONE).all()
+    assert (dv.kind[4] == E.MIXED).all()       # constant 0.5: one index, value 32
     assert np.abs(q / 63 - gray).max() <= 0.5 / 63 + 1e-12
-    back = B.deserialize_visibility(B.serialize_visibility(dv))
+    back = E.deserialize_visibility(E.serialize_visibility(dv))
     assert back.levels == 63 and np.array_equal(back.values, dv.values)
-    assert np.array_equal(B.decode_levels(back), q)
+    assert np.array_equal(E.decode_levels(back), q)
     with pytest.raises(ValueError):
-        B.decode_visibility(dv)
+        E.decode_visibility(dv)
 
 
 @pytest.mark.parametrize("grey", [False, True])
 def test_light_vis_product_equals_pixel_sum(grey):
     n, rng = 32, np.random.default_rng(4)
     L = rng.random((6 * n * n, 3)) * np.where(rng.random((6 * n * n, 1)) < 0.01, 100.0, 1.0)
-    light = B.block_lighting(L, n)
+    light = O.block_lighting(L, n)
     v, bits = _structured_bits(n, rng, P=7)
     if grey:
         g = np.where(v, rng.random(v.shape), 0.0)
-        dv = B.encode_quantized_visibility(g, n)
-        vis = B.decode_levels(dv) / 63.0
+        dv = E.encode_quantized_visibility(g, n)
+        vis = E.decode_levels(dv) / 63.0
     else:
-        dv = B.encode_visibility(bits, n)
+        dv = E.encode_visibility(bits, n)
         vis = v.astype(float)
     dw = cubemap(n).solid_angles
     for p in range(len(vis)):
-        got = B.light_vis_product(light, dv.vertex(p))
-        want = np.einsum("bk,bkc->bc", B.to_blocks(vis[p] * dw, n), B.to_blocks(L, n))
+        got = O.light_vis_product(light, dv.vertex(p))
+        want = np.einsum("bk,bkc->bc", E.to_blocks(vis[p] * dw, n), E.to_blocks(L, n))
         np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-14)
 
 
 def test_lighting_representations():
     n, rng = 32, np.random.default_rng(5)
     L = rng.random((6 * n * n, 3))
-    light = B.block_lighting(L, n)
+    light = O.block_lighting(L, n)
     cube = cubemap(n)
-    pix = B.to_blocks(L * cube.solid_angles[:, None], n)
+    pix = E.to_blocks(L * cube.solid_angles[:, None], n)
     np.testing.assert_allclose(light.pixel, pix)                    # solid-angle corrected
     np.testing.assert_allclose(light.integral[:, 0], pix.sum(axis=1))
     np.testing.assert_allclose(light.integral[:, 255], pix[:, 255])
     # DCT coefficients: projection on the orthonormal basis
-    np.testing.assert_allclose(light.dct, np.einsum("kp,bpc->bkc", B.dct_basis(), pix))
+    np.testing.assert_allclose(light.dct, np.einsum("kp,bpc->bkc", E.dct_basis(), pix))
 
 
 def test_projection_exact_for_band_limited_brdf():
     n, rng = 32, np.random.default_rng(6)
-    nb = B.block_count(n)
+    nb = E.block_count(n)
     for l in (1, 2, 4):
         A = np.zeros((nb, 16, 3))
         A[:, : l * l] = rng.normal(size=(nb, l * l, 3))
-        rho = B.from_blocks(np.einsum("bkc,kp->bpc", A, B.dct_basis()), n)
-        levels, coeffs, _ = B.project_brdf(rho, np.arange(nb), n, mode="adaptive", rel_tol=1e-9,
+        rho = E.from_blocks(np.einsum("bkc,kp->bpc", A, E.dct_basis()), n)
+        levels, coeffs, _ = O.project_brdf(rho, np.arange(nb), n, mode="adaptive", rel_tol=1e-9,
                                            abs_tol=1e-12)
         assert (levels == l * l).all()
         np.testing.assert_allclose(coeffs, A, atol=1e-10)
     # a lobe a few pixels wide is not band limited -> pixel basis; constant -> 1
-    perm = B.block_permutation(n)
+    perm = E.block_permutation(n)
     yy, xx = np.divmod(np.arange(256), 16)
     rho = np.zeros((6 * n * n, 1))
     rho[perm[7], 0] = np.exp(-((yy - 6.3) ** 2 + (xx - 9.6) ** 2) / 4.0)
     rho[perm[8]] = 0.5
     rho[perm[9, 100]] = 1.0                      # one-pixel spike between the check samples
-    levels, _, pixels = B.project_brdf(rho, np.array([7, 8, 9]), n)
+    levels, _, pixels = O.project_brdf(rho, np.array([7, 8, 9]), n)
     assert list(levels) == [256, 1, 1]           # the spike is missed by sampling alone ...
     d = cubemap(n).directions[perm[9, 100]]
-    force = B.highlight_blocks(d, n)
+    force = O.highlight_blocks(d, n)
     assert force.sum() == 1 and force[9]
-    levels, _, pixels = B.project_brdf(rho, np.array([7, 8, 9]), n, force_pixel=force)
+    levels, _, pixels = O.project_brdf(rho, np.array([7, 8, 9]), n, force_pixel=force)
     assert list(levels) == [256, 1, 256]         # ... and caught by the highlight hint
     assert pixels[2, 100, 0] == 1.0
-    assert B.highlight_blocks(d, n, angle=0.3).sum() > 1
+    assert O.highlight_blocks(d, n, angle=0.3).sum() > 1
 
 
 def _random_scene(n, rng, P=4):
@@ -208,49 +210,49 @@ def _random_scene(n, rng, P=4):
 def test_integrate_vertex_pixel_basis_equals_reference(n):
     rng = np.random.default_rng(10 + n)
     L, v, bits, rho = _random_scene(n, rng)
-    light = B.block_lighting(L, n)
-    dv = B.encode_visibility(bits, n)
+    light = O.block_lighting(L, n)
+    dv = E.encode_visibility(bits, n)
     dw = cubemap(n).solid_angles
     for p in range(dv.count):
-        res = B.integrate_vertex(dv.vertex(p), light, rho, mode="pixel")
+        res = O.integrate_vertex(dv.vertex(p), light, rho, mode="pixel")
         want = np.einsum("k,kc,kc->c", v[p] * dw, L, rho)
         np.testing.assert_allclose(res.radiance, want, rtol=1e-6, atol=1e-12)
         counts = res.case_counts()
-        assert sum(counts.values()) == B.block_count(n)
+        assert sum(counts.values()) == E.block_count(n)
         assert counts["light-vis (line 9)"] == 0                  # pixel BRDF is never constant
         if p == 0:
-            assert counts["zero (line 2)"] == B.block_count(n)
+            assert counts["zero (line 2)"] == E.block_count(n)
         if p == 1:
-            assert counts["light-brdf (line 6)"] == B.block_count(n)
+            assert counts["light-brdf (line 6)"] == E.block_count(n)
         if p == 2:
-            assert counts["triple (line 11)"] == B.block_count(n)
+            assert counts["triple (line 11)"] == E.block_count(n)
 
 
 def test_integrate_vertex_all_cases_exact_for_blockwise_bandlimited_brdf():
     """Adaptive path: a BRDF that is exactly constant / 4- / 16-DCT / arbitrary per
     block reproduces the triple product exactly and uses all four cases."""
     n, rng = 32, np.random.default_rng(11)
-    nb = B.block_count(n)
+    nb = E.block_count(n)
     L, v, bits, _ = _random_scene(n, rng)
     lv = rng.integers(0, 4, nb)
     A = rng.normal(size=(nb, 16, 3)) * 0.1
     A[:, 0] += 5.0
     for i, k in enumerate((1, 4, 16)):
         A[lv == i, k:] = 0
-    pix = np.einsum("bkc,kp->bpc", A, B.dct_basis())
+    pix = np.einsum("bkc,kp->bpc", A, E.dct_basis())
     pix[lv == 3] = rng.random((int((lv == 3).sum()), 256, 3))
-    rho = B.from_blocks(pix, n)
-    light = B.block_lighting(L, n)
-    dv = B.encode_visibility(bits, n)
+    rho = E.from_blocks(pix, n)
+    light = O.block_lighting(L, n)
+    dv = E.encode_visibility(bits, n)
     dw = cubemap(n).solid_angles
     seen = np.zeros(4, int)
     for p in range(dv.count):
-        res = B.integrate_vertex(dv.vertex(p), light, rho, rel_tol=1e-9, abs_tol=1e-12)
+        res = O.integrate_vertex(dv.vertex(p), light, rho, rel_tol=1e-9, abs_tol=1e-12)
         want = np.einsum("k,kc,kc->c", v[p] * dw, L, rho)
         np.testing.assert_allclose(res.radiance, want, rtol=1e-9)
-        np.testing.assert_allclose(res.values, np.einsum("bk,bkc,bkc->bc", B.to_blocks(v[p] * dw, n),
-                                                         B.to_blocks(L, n), pix), rtol=1e-8, atol=1e-13)
-        active = dv.kind[p] != B.ZERO
+        np.testing.assert_allclose(res.values, np.einsum("bk,bkc,bkc->bc", E.to_blocks(v[p] * dw, n),
+                                                         E.to_blocks(L, n), pix), rtol=1e-8, atol=1e-13)
+        active = dv.kind[p] != E.ZERO
         assert np.array_equal(res.levels[active], np.array([1, 4, 16, 256])[lv[active]])
         seen += np.bincount(res.cases, minlength=4)
     assert (seen > 0).all(), seen
@@ -260,19 +262,19 @@ def test_integrate_vertex_material_adaptive_close_to_reference():
     from prt_relight.core.brdf import Material, reflectance_cosine
     n, rng = 32, np.random.default_rng(12)
     L, v, bits, _ = _random_scene(n, rng)
-    light = B.block_lighting(L, n)
-    dv = B.encode_visibility(bits, n)
+    light = O.block_lighting(L, n)
+    dv = E.encode_visibility(bits, n)
     mat = Material()
     nrm, view = np.array([0.0, 0.3, 1.0]), np.array([0.5, 0.0, 1.0])
     nrm /= np.linalg.norm(nrm)
     view /= np.linalg.norm(view)
-    f = B.material_sampler(mat, nrm, view, n)
+    f = O.material_sampler(mat, nrm, view, n)
     rho = reflectance_cosine(mat, nrm[None], view[None], cubemap(n).directions)[0].astype(float)
     dw = cubemap(n).solid_angles
     p = 4
-    res = B.integrate_vertex(dv.vertex(p), light, f)
+    res = O.integrate_vertex(dv.vertex(p), light, f)
     want = np.einsum("k,kc,kc->c", v[p] * dw, L, rho)
     np.testing.assert_allclose(res.radiance, want, rtol=0.02)
-    exact = B.integrate_vertex(dv.vertex(p), light, f, mode="pixel")
+    exact = O.integrate_vertex(dv.vertex(p), light, f, mode="pixel")
     np.testing.assert_allclose(exact.radiance, want, rtol=1e-6)
-    assert sum(res.level_counts().values()) == int((dv.kind[p] != B.ZERO).sum())
+    assert sum(res.level_counts().values()) == int((dv.kind[p] != E.ZERO).sum())

@@ -6,10 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from prt_relight.core import blocks as B, brdf, reference
+from prt_relight.core import blocks as B
+from prt_relight.core import blocks_encoding as E
+from prt_relight.core import blocks_lobe as Lobe
+from prt_relight.core import brdf, reference
 from prt_relight.core.directions import cubemap
 from prt_relight.core.envmap import CubeLighting
 from prt_relight.core.visibility import unpack_visibility
+
+from . import blocks_oracle as O
 
 
 def _scene(n, rng, P=40):
@@ -51,7 +56,7 @@ def test_pixel_basis_equals_reference(name):
     eye = np.array([0.3, -4.0, 2.0])
     cube = cubemap(n)
     ref = reference.shade_points(bits, pos, nrm, np.zeros(len(pos), int), mats, eye, cube, light)
-    dv = B.encode_visibility(bits, n)
+    dv = E.encode_visibility(bits, n)
     pairs = B.active_pairs(dv)
     tables = B.light_tables(light, n)
     ours = B.shade_points(pairs, None, tables, pos, nrm, np.zeros(len(pos), int), mats, eye,
@@ -62,7 +67,7 @@ def test_pixel_basis_equals_reference(name):
     np.testing.assert_allclose(B.lambert_irradiance(lv, nrm),
                                reference.diffuse_irradiance(bits, nrm, cube, light), rtol=2e-3)
     errors = []
-    for thresholds in (B.DEFAULT_LEVEL_THRESHOLDS, (1e-4, 1e-5, 1e-6, 1e-12)):
+    for thresholds in (Lobe.DEFAULT_LEVEL_THRESHOLDS, (1e-4, 1e-5, 1e-6, 1e-12)):
         st = B.BlocksStats()
         fast = B.shade_points(pairs, lv, tables, pos, nrm, np.zeros(len(pos), int), mats, eye,
                               thresholds=thresholds, stats=st)
@@ -82,32 +87,32 @@ def test_batched_equals_per_vertex_integrator(mode, material):
     pos, nrm, bits, light = _scene(n, rng, P=12)
     mat = MATERIALS[material]
     views = reference.view_directions(pos, np.array([0.0, -3.0, 1.5]))
-    dv = B.encode_visibility(bits, n)
+    dv = E.encode_visibility(bits, n)
     pairs = B.active_pairs(dv)
     tables = B.light_tables(light, n)
     lv = B.light_vis_sums(pairs, tables)
-    lobe = B.GlossyLobe(mat, np.float64).prepare(nrm, views)
+    lobe = Lobe.GlossyLobe(mat, np.float64).prepare(nrm, views)
     st = B.BlocksStats()
     batched = B.glossy_blocks(pairs, lv, tables, lobe, np.arange(len(pos)), mode=mode, stats=st)
-    fast = B.glossy_blocks(pairs, lv, tables, B.GlossyLobe(mat).prepare(nrm, views),
+    fast = B.glossy_blocks(pairs, lv, tables, Lobe.GlossyLobe(mat).prepare(nrm, views),
                            np.arange(len(pos)), mode=mode)             # float32 frame path
     assert np.linalg.norm(fast - batched) <= 2e-3 * np.linalg.norm(batched)
     some = np.arange(1, len(pos), 3)                   # vertices that are not one run
-    part = B.glossy_blocks(pairs, lv, tables, B.GlossyLobe(mat, np.float64).prepare(
+    part = B.glossy_blocks(pairs, lv, tables, Lobe.GlossyLobe(mat, np.float64).prepare(
         nrm[some], views[some]), some, mode=mode)
     np.testing.assert_allclose(part, batched[some], rtol=1e-9, atol=1e-12 * np.abs(batched).max())
-    block_light = B.block_lighting(light.radiance, n)
+    block_light = O.block_lighting(light.radiance, n)
     unit = light.unit_directions
     for p in range(len(pos)):
         rho = brdf.specular_cosine(mat, nrm[p:p + 1], views[p:p + 1], unit)[0].astype(np.float64)
         if rho.ndim == 1:                   # scalar lobe (no Fresnel): colour not included
             rho = rho[:, None] * np.asarray(mat.specular_color)[None, :]
-        want = B.integrate_vertex(dv.vertex(p), block_light, rho, mode=mode)
+        want = O.integrate_vertex(dv.vertex(p), block_light, rho, mode=mode)
         np.testing.assert_allclose(batched[p], want.radiance, rtol=1e-6,
                                    atol=1e-9 * np.abs(batched).max())
-    active = int((dv.kind != B.ZERO).sum())
+    active = int((dv.kind != E.ZERO).sum())
     assert st.cases[1:].sum() == active
-    assert st.levels[B.PIXEL if mode == "pixel" else mode] == active
+    assert st.levels[E.PIXEL if mode == "pixel" else mode] == active
 
 
 @pytest.mark.parametrize("roughness", [0.1, 0.25, 0.6, 1.0])
@@ -128,9 +133,9 @@ def test_fused_beckmann_lobe_equals_the_general_formula(roughness):
     d[:P // 4] = -views[:P // 4]                              # wi = -wo for a few vertices
     mat = brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 0.9, 0.8),
                         roughness=roughness, distribution="BECKMANN")
-    fast = B.GlossyLobe(mat).prepare(nrm, views)
+    fast = Lobe.GlossyLobe(mat).prepare(nrm, views)
     assert fast._fused is not None
-    slow = B.GlossyLobe(mat, np.float64).prepare(nrm, views)
+    slow = Lobe.GlossyLobe(mat, np.float64).prepare(nrm, views)
     with np.errstate(all="ignore"):
         got = sum(f[:, :, None] * w[:, None, :] for f, w in fast.dense(np.arange(P), d))
         want = sum(f[:, :, None] * w[:, None, :] for f, w in slow.dense(np.arange(P), d))
@@ -139,7 +144,7 @@ def test_fused_beckmann_lobe_equals_the_general_formula(roughness):
     # float32 rounding of 1 / cos_h^2 moves the exponent by ~3e-7 / alpha^2; where
     # |wo + wi|^2 < 0.05 (wi ~ -wo, grazing views) float32 cannot resolve the half-vector,
     # nor the horizon at |cos_i| < 1e-5: only finite there
-    v = B.GlossyLobe(mat).prepare(nrm, views).v
+    v = Lobe.GlossyLobe(mat).prepare(nrm, views).v
     resolved = ((2.0 + 2.0 * v @ d.T) > 0.05) & (np.abs(nrm @ d.T) > 1e-5)
     np.testing.assert_allclose(got[resolved], want[resolved], rtol=2e-4 + 1e-6 / mat.alpha ** 2,
                                atol=1e-6 * scale)
@@ -157,16 +162,16 @@ def test_pairs_off_the_horizon_have_every_direction_above_the_cut(n):
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     mat = brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 1.0, 1.0),
                         roughness=0.25, distribution="BECKMANN")
-    lobe = B.GlossyLobe(mat).prepare(nrm, nrm)
+    lobe = Lobe.GlossyLobe(mat).prepare(nrm, nrm)
     cube = cubemap(n)
     light = CubeLighting(np.ones((cube.size, 3), np.float32),
                          cube.directions * rng.uniform(0.9, 1.0, (cube.size, 1)))
     tables = B.light_tables(light, n)
-    geometry = B.block_geometry(n)
+    geometry = E.block_geometry(n)
     nb = geometry.centre.shape[0]
     p = np.repeat(np.arange(P), nb)
     b = np.tile(np.arange(nb), P)
-    edge = B.near_horizon(lobe, p, b, geometry)
+    edge = Lobe.near_horizon(lobe, p, b, geometry)
     cos_min = np.einsum("kc,kjc->kj", lobe.n32[p], tables.unit_dirs32[b]).min(axis=1)
     assert (cos_min[~edge] > lobe.horizon_cos()).all()
     assert (~edge[cos_min > 0.5]).mean() > 0.9
@@ -177,13 +182,13 @@ def test_cached_decoded_blocks_equal_the_differential_decode():
     rng = np.random.default_rng(11)
     n = 32
     pos, nrm, bits, light = _scene(n, rng)
-    dv = B.encode_visibility(bits, n)
+    dv = E.encode_visibility(bits, n)
     pairs = B.active_pairs(dv)
     sel = np.arange(pairs.count)[::-1]
     fresh = B._decompress(pairs, sel, np.float32, cached=False)
     assert (~pairs.one).any() and pairs.decoded_bits()[0].shape[1] == 32
     np.testing.assert_array_equal(B._decompress(pairs, sel, np.float32), fresh)
-    dense = B.to_blocks(unpack_visibility(bits, 6 * n * n).T, n)       # (blocks, 256, P)
+    dense = E.to_blocks(unpack_visibility(bits, 6 * n * n).T, n)       # (blocks, 256, P)
     np.testing.assert_array_equal(fresh, dense[pairs.b[sel], :, pairs.p[sel]])
 
 
@@ -193,22 +198,22 @@ def test_level_rule_follows_the_lobe():
     nrm = np.array([[0.0, 0.0, 1.0]])
     view = np.array([[np.sin(0.5), 0.0, np.cos(0.5)]])
     mat = MATERIALS["glossy beckmann"]
-    lobe = B.GlossyLobe(mat).prepare(nrm, view)
-    geo = B.block_geometry(n)
-    blocks = np.arange(B.block_count(n))
-    levels = B.glossy_levels(lobe, np.zeros(blocks.size, int), blocks, geo,
-                             B.DEFAULT_LEVEL_THRESHOLDS)
+    lobe = Lobe.GlossyLobe(mat).prepare(nrm, view)
+    geo = E.block_geometry(n)
+    blocks = np.arange(E.block_count(n))
+    levels = Lobe.glossy_levels(lobe, np.zeros(blocks.size, int), blocks, geo,
+                             Lobe.DEFAULT_LEVEL_THRESHOLDS)
     mirror = np.array([-np.sin(0.5), 0.0, np.cos(0.5)])
     angle = np.arccos(np.clip(geo.centre @ mirror, -1, 1))
-    assert (levels[angle < 0.05] == B.PIXEL).all()
-    assert levels[np.argmin(angle)] == B.PIXEL
+    assert (levels[angle < 0.05] == E.PIXEL).all()
+    assert levels[np.argmin(angle)] == E.PIXEL
     # far from the lobe (and from -wo, where the half-vector of a nearby direction can
     # swing anywhere and the rule stays conservative) the block is skipped
     far = (angle > np.pi / 2) & (geo.centre @ view[0] > -0.5)
     assert far.sum() > 20 and (levels[far] == 0).all()
     # more coefficients closer to the lobe (monotone on average)
     front = geo.centre @ view[0] > -0.5
-    means = [angle[front & (levels == lv)].mean() for lv in (B.PIXEL, 16, 4, 1, 0)
+    means = [angle[front & (levels == lv)].mean() for lv in (E.PIXEL, 16, 4, 1, 0)
              if (front & (levels == lv)).any()]
     assert means == sorted(means)
     # the skipped blocks really are negligible: the lobe's largest value there
@@ -257,7 +262,7 @@ def test_addon_blocks_f12_matches_reference_and_survives_reload(tmp_path):
     ours = bs.render_exr(tmp_path / "blocks.exr")
     assert method.LAST_STATS["sources"] == ["stored", "stored"]
     stats = method.LAST_STATS["stats"]
-    assert stats.levels[B.PIXEL] > 0 and stats.cases[3] > 0 and stats.cases[2] > 0
+    assert stats.levels[E.PIXEL] > 0 and stats.cases[3] > 0 and stats.cases[2] > 0
     scene.prt.method = "REFERENCE"
     ref = bs.render_exr(tmp_path / "ref.exr")
     assert np.isfinite(ours).all()
@@ -273,8 +278,8 @@ def test_addon_blocks_f12_matches_reference_and_survives_reload(tmp_path):
     for name in ("Suzanne", "Grid"):
         st = by_name[name]
         stored = storage.get(bpy.data.objects[name], method.BLOB)[0]["stream"]
-        dv = B.deserialize_visibility(stored.tobytes())
-        assert np.array_equal(B.decode_visibility(dv), st.bits)
+        dv = E.deserialize_visibility(stored.tobytes())
+        assert np.array_equal(E.decode_visibility(dv), st.bits)
         assert stored.size < st.bits.nbytes / 2          # compressed
 
     blend = tmp_path / "blocks.blend"

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf
+from prt_relight.core import brdf, brdf_tables
 
 DISTS = ("BECKMANN", "GGX")
 N_UP = np.array([[0.0, 0.0, 1.0]])
@@ -402,19 +402,19 @@ CYCLES_TABLE_GEN_SCHLICK_IOR_S = {
 def test_own_tables_match_cycles_tables():
     """Our quadrature on Cycles' grids reproduces Cycles' Monte-Carlo tables."""
     for (row, col), ref in CYCLES_TABLE_GGX_E.items():
-        assert brdf.ggx_E_table_column(col)[row] == pytest.approx(ref, abs=5e-4), (row, col)
+        assert brdf_tables.ggx_E_table_column(col)[row] == pytest.approx(ref, abs=5e-4), (row, col)
     for col, ref in CYCLES_TABLE_GGX_EAVG.items():
-        assert brdf.ggx_E_avg_node(col) == pytest.approx(ref, abs=5e-4), col
+        assert brdf_tables.ggx_E_avg_node(col) == pytest.approx(ref, abs=5e-4), col
     for iz, rows in CYCLES_TABLE_GEN_SCHLICK_IOR_S.items():
         for row, refs in rows.items():
             for ix, ref in zip((0, 2, 4, 8, 15), refs):
-                got = brdf.dielectric_s_table_column(ix, iz)[row]
+                got = brdf_tables.dielectric_s_table_column(ix, iz)[row]
                 assert got == pytest.approx(ref, abs=1e-3), (iz, row, ix, got, ref)
 
 
 def test_table_interpolation_is_cycles_lookup():
     # node values are returned exactly, midpoints are linear blends (lookup_table_read)
-    col = brdf.ggx_E_table_column(10)
+    col = brdf_tables.ggx_E_table_column(10)
     assert brdf.ggx_E(10 / 31, 7 / 31)[()] == pytest.approx(col[7], abs=1e-12)
     mid = brdf.ggx_E(10 / 31, 7.5 / 31)[()]
     assert mid == pytest.approx(0.5 * (col[7] + col[8]), abs=1e-12)
@@ -441,7 +441,7 @@ def test_multiscatter_glossy_white_furnace(col, row):
     ss = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=r,
                        distribution="GGX")
     assert _albedo(ss, np.degrees(np.arccos(mu)))[0] == pytest.approx(
-        brdf.ggx_E_table_column(col)[row], abs=1e-3)
+        brdf_tables.ggx_E_table_column(col)[row], abs=1e-3)
 
 
 def test_multiscatter_glossy_colour_saturates():
@@ -635,3 +635,21 @@ def test_specular_terms_sum_to_specular_cosine():
                     for l, w in brdf.specular_terms(mat, normals, views, dirs))
         np.testing.assert_allclose(total, brdf.specular_cosine(mat, normals, views, dirs),
                                    rtol=1e-6, atol=1e-9)
+
+
+def test_lambda_of_t2_is_smith_lambda_in_the_dtype_given():
+    """One Lambda for REFERENCE (float64) and BLOCKS' float32 evaluator: the same values,
+    float32 in stays float32; Beckmann is 0 below t2 = 0.39 (a > 1.6)."""
+    from prt_relight.core import microfacet
+    c = np.linspace(0.05, 1.0, 40)
+    for dist, alpha in (("GGX", 0.3), ("BECKMANN", 0.3), ("BECKMANN", 0.05)):
+        t2 = alpha ** 2 * (1.0 / (c * c) - 1.0)
+        np.testing.assert_allclose(microfacet.lambda_of_t2(dist, t2),
+                                   brdf.smith_lambda(dist, alpha, c), rtol=1e-12)
+        lam32 = microfacet.lambda_of_t2(dist, t2.astype(np.float32))
+        assert lam32.dtype == np.float32
+        np.testing.assert_allclose(lam32, brdf.smith_lambda(dist, alpha, c), rtol=2e-6, atol=1e-7)
+    assert microfacet.lambda_of_t2("BECKMANN", np.array([0.389]))[0] == 0.0
+    a = 1.0 / np.sqrt(0.5)
+    assert microfacet.lambda_of_t2("BECKMANN", np.array([0.5]))[0] == pytest.approx(
+        (1 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a))

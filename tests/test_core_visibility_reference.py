@@ -381,7 +381,8 @@ def test_reference_material_slots_and_view_dirs():
                                  np.array([0, 0, 5.0]), cube, light)
     np.testing.assert_allclose(out[0], m0.diffuse_albedo, atol=1e-3)
     np.testing.assert_allclose(out[1], m1.diffuse_albedo, atol=1e-3)
-    np.testing.assert_allclose(out[3], brdf.Material().diffuse_albedo, atol=1e-3)  # unknown slot
+    # a slot past the table is the last one (Cycles clamps the material index)
+    np.testing.assert_allclose(out[3], m1.diffuse_albedo, atol=1e-3)
     # view_dirs overrides eye
     glossy = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.5)
     vd = np.tile([0.0, 0.0, 1.0], (4, 1))
@@ -527,6 +528,32 @@ def test_degenerate_triangles():
     assert mesh.degenerate_triangles(m2, scale=1e-6).tolist() == [False, False]
 
 
+def test_occluders_are_the_faces_the_warning_keeps():
+    """The precompute's warning counts the zero-area faces it ignores; the occluder scene
+    holds exactly the others.  A face that is zero-area relative to its mesh but not in
+    float32 (a 0.02 x 0.01 triangle on a mesh 1e4 across) is ignored by both: a ray
+    through it is not blocked, while a ray through a kept face of the same mesh is."""
+    small = [[0.0, 0.0, 1.0], [0.02, 0.0, 1.0], [0.0, 0.01, 1.0]]        # area 1e-4
+    big = [[3.0, -1.0, 1.0], [5.0, -1.0, 1.0], [4.0, 1.0, 1.0]]
+    far = [[1e4, 0.0, 0.0], [1e4, 1.0, 0.0], [1e4, 0.0, 1.0]]
+    collapsed = [[5.0, 5.0, 5.0], [5.0, 5.0, 5.0], [6.0, 5.0, 5.0]]
+    tris = np.array([small, big, far, collapsed])
+    m = mesh.MeshArrays(tris.reshape(-1, 3), np.arange(12), np.tile([0, 0, 1.0], (12, 1)),
+                        np.arange(12).reshape(-1, 3))
+    kept, ignored = mesh.occluder_triangles(m)
+    assert ignored == int(mesh.degenerate_triangles(m).sum()) == 2
+    np.testing.assert_array_equal(kept, tris[[1, 2]])
+    up = np.array([[0.0, 0.0, 1.0]], np.float32)
+    through_small = np.array([[0.005, 0.0025, 0.0]], np.float32)
+    through_big = np.array([[4.0, -0.5, 0.0]], np.float32)
+    scene = visibility.build_occluder_scene(kept)
+    assert scene.run(through_big, up, query="OCCLUDED")[0] != -1
+    assert scene.run(through_small, up, query="OCCLUDED")[0] == -1
+    # every face handed to Embree (what its own float32 area test would keep) blocks it
+    every = visibility.build_occluder_scene(tris)
+    assert every.run(through_small, up, query="OCCLUDED")[0] != -1
+
+
 def test_fingerprint():
     a, b = flat_cube(), flat_cube()
     assert mesh.fingerprint(a) == mesh.fingerprint(b)
@@ -578,3 +605,33 @@ def test_closed_side_of_open_closed_and_mirrored_meshes():
     open_box.triangles = open_box.triangles[2:]              # one face missing
     assert mesh.closed_side(open_box) == 0
     assert mesh.closed_side(mesh.grid()) == 0
+
+
+def test_coarse_edge_share_counts_edges_across_a_shadow_edge():
+    """A 4 x 4 grid whose points at x < 0 see no sky and the others all of it: the edges
+    that join the two halves jump by 1, the others by 0; counted by hand."""
+    g = mesh.grid(2.0, 4)
+    pts = mesh.shading_points(g)
+    cube = directions.cubemap(8)
+    open_bits = np.packbits(visibility.hemisphere_mask(pts.normals, cube), axis=1)
+    bits = np.where((pts.positions[:, 0] < -1e-9)[:, None], 0, open_bits).astype(np.uint8)
+    tri_points = pts.point_of_corner[g.triangles]
+    shaded = pts.positions[:, 0] < -1e-9
+    edges = np.concatenate([tri_points[:, [0, 1]], tri_points[:, [1, 2]], tri_points[:, [2, 0]]])
+    want = float(np.mean(shaded[edges[:, 0]] != shaded[edges[:, 1]]))
+    assert 0.0 < want < 1.0
+    got = reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner, g.triangles, cube)
+    assert got == pytest.approx(want)
+    # a jump of exactly the whole sky is over any threshold below 1, none at 1
+    assert reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner, g.triangles,
+                                       cube, jump=1.0) == 0.0
+    assert reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner,
+                                       np.zeros((0, 3), np.int64), cube) == 0.0
+
+
+def test_point_views():
+    pos = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 2.0]])
+    np.testing.assert_allclose(reference.point_views(pos, eye=np.array([0.0, 0.0, 3.0])),
+                               [[0.0, 0.0, 1.0], np.array([-1.0, -2.0, 1.0]) / np.sqrt(6.0)])
+    ortho = reference.point_views(pos, eye=None, view_dir=np.array([0.0, 1.0, 0.0]))
+    assert ortho.shape == (2, 3) and np.all(ortho == [0.0, 1.0, 0.0])

@@ -77,18 +77,34 @@ def test_fastest_candidates_are_the_fast_rows_meeting_the_target():
     assert core_report.fastest_candidates(rows, -1.0) == []
 
 
-def test_png_round_trip_and_heatmap_ramp(tmp_path):
-    rng = np.random.default_rng(3)
-    rgb = rng.integers(0, 256, (5, 11, 3), dtype=np.uint8)
-    core_report.write_png(tmp_path / "a.png", rgb)
-    np.testing.assert_array_equal(core_report.read_png(tmp_path / "a.png"), rgb)
+def _read_png(path) -> np.ndarray:
+    """The 8-bit pixels of a PNG, top row first, alpha as stored (OpenImageIO)."""
+    import OpenImageIO as oiio
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(str(path), config)
     try:
-        import OpenImageIO as oiio
-    except ImportError:          # pragma: no cover
-        oiio = None
-    if oiio is not None:         # an independent decoder reads the same pixels
-        buf = oiio.ImageBuf(str(tmp_path / "a.png"))
-        np.testing.assert_array_equal(np.asarray(buf.get_pixels(oiio.UINT8)), rgb)
+        return np.asarray(inp.read_image(oiio.UINT8))
+    finally:
+        inp.close()
+
+
+@pytest.mark.parametrize("channels", [3, 4])
+def test_png_round_trip_and_heatmap_ramp(tmp_path, channels):
+    """The PNG written (OpenImageIO, and Blender's image API where it is missing) holds the
+    pixels given, alpha unpremultiplied."""
+    from prt_relight.addon import report
+    rng = np.random.default_rng(3)
+    rgb = rng.integers(0, 256, (5, 11, channels), dtype=np.uint8)
+    core_report.write_png(tmp_path / "a.png", rgb)
+    np.testing.assert_array_equal(_read_png(tmp_path / "a.png"), rgb)
+    saved = core_report._oiio
+    try:
+        core_report._oiio = None
+        report.write_png(tmp_path / "b.png", rgb)
+    finally:
+        core_report._oiio = saved
+    np.testing.assert_array_equal(_read_png(tmp_path / "b.png"), rgb)
     heat = core_report.heatmap_rgb(np.array([[0.0, 0.1, 0.2, 5.0, np.nan]]), 0.2)
     assert tuple(heat[0, 0]) == (0, 0, 5)                        # ramp start
     assert tuple(heat[0, 2]) == tuple(heat[0, 3])                # saturates at vmax
@@ -199,7 +215,7 @@ def test_report_measures_each_method_and_restores_the_scene(tmp_path):
     # every image the page names exists
     for name in re.findall(r"src='([^']+)'", text):
         assert (out / name).is_file(), name
-    img = core_report.read_png(out / "reference.png")
+    img = _read_png(out / "reference.png")
     assert img.shape == (30, 40, 3) and img.max() > 50
     # the scene is as it was: method, budgets, no stored data (it had none)
     assert scene.prt.method == "SH" and scene.prt.sh_order == 3

@@ -89,6 +89,9 @@ def test_method_renders_and_follows_world_rotation(registered_addon):
     scene.render.resolution_x, scene.render.resolution_y = 48, 36
     scene.prt.method = "RSL"
     scene.prt.rsl_lights = 30
+    # RSL shades the whole world here: the sun is not split off as a compact source drawn
+    # per pixel (addon/lights.py), so turning the world turns RSL's own lights
+    scene.prt.light_sources = 0
     bpy.ops.prt.precompute()
     scene.render.engine = "BLENDER_WORKBENCH"
     bpy.ops.render.render()

@@ -511,7 +511,7 @@ def test_tangent_space_normal_map_identity_and_tilt():
 def test_blender_material_export_textures_and_tangents():
     import bpy
 
-    from prt_relight.addon import sg_material
+    from prt_relight.addon import scene_export, sg_material
 
     from . import blender_scene as bs
 
@@ -539,7 +539,7 @@ def test_blender_material_export_textures_and_tangents():
     sgm = sg_material.export_sg_material(mat, [])
     assert sgm.model == "COOK_TORRANCE" and sgm.fresnel == "PRINCIPLED"
     assert np.isclose(float(sgm.metallic), 0.2) and np.isclose(float(sgm.ior), 1.45)
-    texs = sg_material.export_material_textures(mat)
+    texs = scene_export.export_material_textures(mat)
     assert set(texs) == {"base_color", "roughness", "normal"}
     px, uvname = texs["base_color"]
     assert px.shape == (2, 4, 4) and np.allclose(px[0, :, 0], np.linspace(0, 1, 4))
@@ -564,7 +564,7 @@ def test_blender_material_export_textures_and_tangents():
     bpy.ops.mesh.primitive_plane_add(size=2.0, rotation=(0.0, 0.0, 0.5))
     ob = bpy.context.object
     dg = bpy.context.evaluated_depsgraph_get()
-    uv, tan, sign = sg_material.mesh_uv_tangents(ob.evaluated_get(dg))
+    uv, tan, sign = scene_export.mesh_uv_tangents(ob.evaluated_get(dg))
     assert uv.shape == (4, 2) and tan.shape == (4, 3) and sign.shape == (4,)
     assert np.allclose(tan, [math.cos(0.5), math.sin(0.5), 0.0], atol=1e-5)
     assert np.allclose(np.abs(sign), 1.0)

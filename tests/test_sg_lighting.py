@@ -288,7 +288,7 @@ def _add_light(kind, location=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), **props
 def test_export_lamps_reads_blender_lights():
     import bpy
 
-    from prt_relight.addon import sg_material
+    from prt_relight.addon import scene_export
 
     _lamp_scene()
     _add_light("POINT", (1.0, 2.0, 3.0), energy=50.0, shadow_soft_size=0.2, color=(1.0, 0.5, 0.25))
@@ -296,7 +296,7 @@ def test_export_lamps_reads_blender_lights():
     _add_light("SPOT", (0.0, 0.0, 4.0), energy=30.0, spot_size=1.0, spot_blend=0.3)
     _add_light("AREA", (0.0, 0.0, 4.0), energy=30.0)
     warnings = []
-    lamps = sg_material.export_lamps(bpy.context.evaluated_depsgraph_get(), warnings)
+    lamps = scene_export.export_lamps(bpy.context.evaluated_depsgraph_get(), warnings)
     kinds = sorted(l.kind for l in lamps)
     assert kinds == ["POINT", "SPOT", "SUN"] and len(warnings) == 1 and "AREA" in warnings[0]
     point = [l for l in lamps if l.kind == "POINT"][0]
@@ -316,7 +316,7 @@ def test_lamp_sg_units_match_cycles(kind, tmp_path):
     cosine), the cosine integral done by quadrature -- checks the power/strength units."""
     import bpy
 
-    from prt_relight.addon import sg_material
+    from prt_relight.addon import scene_export
 
     from . import blender_scene as bs
 
@@ -328,7 +328,7 @@ def test_lamp_sg_units_match_cycles(kind, tmp_path):
     else:
         _add_light("SPOT", (0.0, 0.0, 1.5), rotation=(0.2, 0.0, 0.0), energy=80.0,
                    spot_size=1.2, spot_blend=1.0, shadow_soft_size=0.05)  # edge wider than a pixel
-    lamps = sg_material.export_lamps(bpy.context.evaluated_depsgraph_get())
+    lamps = scene_export.export_lamps(bpy.context.evaluated_depsgraph_get())
     img = bs.render_exr(tmp_path / "lamp.exr", engine="CYCLES", samples=16)
     h, w = img.shape[:2]
     # pixel centres on the plane (top row first: +y at the top)

@@ -161,11 +161,12 @@ def test_open_field_equals_computed_open_ssdf():
     computed from fully visible cubemap bits."""
     import importlib
     method = importlib.import_module("prt_relight.addon.methods.ssdf_sg")
+    stored = importlib.import_module("prt_relight.addon.methods.ssdf_sg_storage")
     cube = directions.cubemap(16)
     normals = _unit([[0.2, 0.1, 1.0], [-1.0, 0.3, 0.0]])
     bits = np.packbits(np.ones((2, cube.size), bool), axis=1)
     computed = ssdf.compute_ssdf(bits, normals, cube, method.method_grid(8))
-    field = method.open_field(2, 8)
+    field = stored.open_field(2, 8)
     assert np.allclose(field.numpy.images[0][None, :], computed, atol=1e-5)
 
 

@@ -9,6 +9,8 @@ import pytest
 
 from prt_relight.addon import drawing, runtime, storage
 from prt_relight.addon.methods import ssdf_sg as method
+from prt_relight.addon.methods import ssdf_sg_gpu, ssdf_sg_storage
+from prt_relight.core import ssdf_sg as core_ssdf_sg, ssdf_sg_scene
 
 from . import blender_scene as bs
 
@@ -69,14 +71,14 @@ def test_glsl_equals_numpy_per_pixel():
     assert draws is not None and len(draws) == len(state.objects)
     # the ground's triangles are flat: drawn by the FLAT_PAIRS shader from the pair table
     ground = next(st for st in state.objects if st.name == "Grid")
-    assert method.flat_triangles(ground.arrays, ground.points).all()
-    batches = method.object_batches(ground, ground.data["ssdf_sg"])
+    assert ssdf_sg_scene.flat_triangles(ground.arrays, ground.points).all()
+    batches = ssdf_sg_gpu.object_batches(ground, ground.data["ssdf_sg"])
     assert batches.draws and all(flat for _, flat, _ in batches.draws)
     assert len(batches.flat_points) == ground.points.count
     gpu_px = drawing.render_offscreen([], None, vp, W, H, True, draws)        # bottom row first
 
     # numpy: a ray through every pixel centre, the hit triangle's barycentrics, and the
-    # same formulas (method.shade_object) at the interpolated normal / PCA coefficients
+    # same formulas (core.ssdf_sg_scene.shade_points) at the interpolated normal / PCA coefficients
     inv = np.array(vp.inverted())
     jj, ii = np.meshgrid(np.arange(H), np.arange(W), indexing="ij")
     ndc = np.stack([(ii + 0.5) / W * 2 - 1, (jj + 0.5) / H * 2 - 1], -1).reshape(-1, 2)
@@ -111,11 +113,11 @@ def test_glsl_equals_numpy_per_pixel():
         field = st.data["ssdf_sg"]
         pts = st.points.point_of_corner[corners]
         coeffs = np.einsum("mk,mkj->mj", beta, field.coefficients[pts].astype(np.float64))
-        px_field = method.ssdf_sg.PCAField(field.mean, field.eigen, coeffs, field.resolution)
+        px_field = core_ssdf_sg.PCAField(field.mean, field.eigen, coeffs, field.resolution)
         mats = st.points.materials[pts[:, 0]]
-        numpy_px[sel] = method.shade_object(px_field, nrm, pos, mats, st.materials, state.world,
-                                            fit, pre, eye=eye,
-                                            cosine=method.cosine_of(state.settings))
+        numpy_px[sel] = ssdf_sg_scene.shade_points(px_field, nrm, pos, mats, st.materials,
+                                                   state.world, fit, pre, eye=eye,
+                                                   cosine=method.cosine_of(state.settings))
     gpu = gpu_px.reshape(-1, 4)
     mask = ok & (gpu[:, 3] > 0.5)
     assert mask.sum() > 0.3 * W * H
@@ -129,22 +131,22 @@ def test_pair_table_holds_eq39_at_the_flat_points():
     """The pair pass (shaders/ssdf_sg_pairs_frag.glsl) read back from the GPU: per point of
     the ground's flat triangles, sum_p w_p sigma(theta_p, k_p) over the (cosine lobe, light
     lobe) pairs equals numpy's eq. 39 (core.ssdf_sg.diffuse_transfer_per_cosine) there."""
-    from prt_relight.core import sg as core_sg, ssdf_sg as core_ssdf_sg
+    from prt_relight.core import sg as core_sg
     scene = _scene()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     _gpu_ready()
     state = _state()
     _, _, eye = _camera_matrices()
-    method._PAIR_TABLES.clear()
+    ssdf_sg_gpu._PAIR_TABLES.clear()
     assert state.draw_objects(eye, None) is not None
     ground = next(st for st in state.objects if st.name == "Grid")
     field = ground.data["ssdf_sg"]
-    flat_points = method.object_batches(ground, field).flat_points
-    tex = next(v[1] for k, v in method._PAIR_TABLES.items() if k[0] == "Grid")
+    flat_points = ssdf_sg_gpu.object_batches(ground, field).flat_points
+    tex = next(v[1] for k, v in ssdf_sg_gpu._PAIR_TABLES.items() if k[0] == "Grid")
     fit, _ = state.method_impl._lighting(state)
     cosine = method.cosine_of(state.settings)
     M, J = len(cosine.amplitudes), len(fit[1])
-    pairs, stride = M * J, method.pair_texels(M, J)
+    pairs, stride = M * J, ssdf_sg_gpu.pair_texels(M, J)
     theta_texels = stride - pairs
     buf = tex.read()
     buf.dimensions = tex.width * tex.height * 4             # (numpy reads a 3D Buffer wrongly)
@@ -158,7 +160,7 @@ def test_pair_table_holds_eq39_at_the_flat_points():
     normals = ground.points.normals[flat_points]
     numpy_rd = core_ssdf_sg.diffuse_transfer_per_cosine(
         field.numpy, flat_points, normals, fit[0] @ state.world.rotation, fit[1],
-        method.cosine_amplitudes(fit[2], M), cosine=cosine)
+        ssdf_sg_scene.cosine_amplitudes(fit[2], M), cosine=cosine)
     rel = np.linalg.norm(gpu_rd - numpy_rd, axis=1) / np.maximum(
         np.linalg.norm(numpy_rd, axis=1), 1e-6)
     assert np.median(rel) < 1e-4 and rel.max() < 2e-3, np.sort(rel)[-5:]
@@ -168,7 +170,7 @@ def test_f12_close_to_reference_and_sliders_need_no_recompute(tmp_path):
     scene = _scene()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     ids = {ob.name: ob.prt.precompute_id for ob in bpy.data.objects if ob.type == "MESH"}
-    assert len(storage.get(bpy.data.objects["Suzanne"], method.BLOB)[0]["eigen"]) >= 4
+    assert len(storage.get(bpy.data.objects["Suzanne"], ssdf_sg_storage.BLOB)[0]["eigen"]) >= 4
     ours = bs.render_exr(tmp_path / "ssdf.exr")
     scene.prt.method = "REFERENCE"
     ref = bs.render_exr(tmp_path / "ref.exr")
@@ -282,7 +284,7 @@ def test_scene_fitted_lighting_is_closer_to_reference_than_the_environment_fit(t
     state = _state()
     fit, _ = state.method_impl._lighting(state)
     before, after, count = fit[4]
-    assert 0 < count <= method.SCENE_FIT_POINTS and after < before
+    assert 0 < count <= ssdf_sg_scene.SCENE_FIT_POINTS and after < before
     assert any("SSDF_SG lighting" in w for w in state.warnings)
     # every F12 syncs a new state (new mesh arrays): the same geometry reuses the fit, an
     # edited mesh is fitted again
@@ -315,7 +317,7 @@ def test_pca_tells_how_much_occlusion_it_keeps():
     for budget in (0.05, 0.005):
         scene.prt.ssdf_error_budget = budget
         assert bpy.ops.prt.precompute() == {"FINISHED"}
-        kept[budget] = storage.get(bpy.data.objects["Grid"], method.BLOB)[1]["occlusion_kept"]
+        kept[budget] = storage.get(bpy.data.objects["Grid"], ssdf_sg_storage.BLOB)[1]["occlusion_kept"]
         state = _state()
         grid = next(st for st in state.objects if st.name == "Grid")
         field = state.method_impl._field(state, grid)
@@ -334,10 +336,10 @@ def test_pca_tells_how_much_occlusion_it_keeps():
     state = _state()
     field = state.method_impl._field(state, next(st for st in state.objects if st.name == "Grid"))
     assert field.occlusion_kept >= 0.9 or field.terms == scene.prt.ssdf_max_terms
-    meta = storage.get(bpy.data.objects["Grid"], method.BLOB)[1]
+    meta = storage.get(bpy.data.objects["Grid"], ssdf_sg_storage.BLOB)[1]
     assert meta["occlusion_target"] == pytest.approx(0.9)
     assert not any("blocked directions: shadows" in w for w in state.warnings)
     # a stored field made for another target is not used: the setting needs a precompute
     scene.prt.ssdf_occlusion_target = 0.0
-    assert method.read_field(bpy.data.objects["Grid"], field.coefficients.shape[0], 32, 32, 0.05,
+    assert ssdf_sg_storage.read_field(bpy.data.objects["Grid"], field.coefficients.shape[0], 32, 32, 0.05,
                              48, 0.0) is None

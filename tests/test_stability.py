@@ -36,10 +36,10 @@ def _case(table, name):
 
 
 def test_every_method_and_case_is_in_the_table(table):
-    from prt_relight.addon import report
+    from prt_relight.addon import report_cases
     assert table["methods"][0] == "REFERENCE"
     assert set(table["methods"]) == set(methods.REGISTRY)
-    assert [c["name"] for c in table["cases"]] == [c["name"] for c in report.stability_cases()]
+    assert [c["name"] for c in table["cases"]] == [c["name"] for c in report_cases.stability_cases()]
     for case in table["cases"]:
         assert set(case["cells"]) == set(methods.REGISTRY), case["name"]
 
@@ -76,7 +76,7 @@ def test_one_pixel_sun_stays_finite_and_bright(table):
 
 
 def test_method_declared_cases_are_included(monkeypatch):
-    from prt_relight.addon import report
+    from prt_relight.addon import report_cases
 
     class Declares(methods.Method):
         id = "DECLARES"
@@ -88,6 +88,6 @@ def test_method_declared_cases_are_included(monkeypatch):
             return [dict(name="sharp lobe", description="λ = 1e5", build=lambda s: None)]
 
     monkeypatch.setitem(methods.REGISTRY, "DECLARES", Declares())
-    names = [c["name"] for c in report.stability_cases()]
+    names = [c["name"] for c in report_cases.stability_cases()]
     assert "sharp lobe [DECLARES]" in names
-    assert names[:len(report.BASE_CASES)] == [c["name"] for c in report.BASE_CASES]
+    assert names[:len(report_cases.BASE_CASES)] == [c["name"] for c in report_cases.BASE_CASES]

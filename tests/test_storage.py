@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from prt_relight.addon import methods, precompute, runtime, storage
-from prt_relight.addon.methods import blocks, rsl, ssdf_sg
+from prt_relight.addon.methods import blocks, rsl, ssdf_sg_storage
 from prt_relight.core import codec
 
 from . import blender_scene as bs
@@ -20,7 +20,7 @@ pytestmark = pytest.mark.usefixtures("registered_addon")
 
 #: the blob each storing method writes, and how a synced object shows it was loaded
 BLOBS = {"REFERENCE": storage.VISIBILITY, "BLOCKS": blocks.BLOB, "RSL": rsl.BLOB,
-         "SSDF_SG": ssdf_sg.BLOB}
+         "SSDF_SG": ssdf_sg_storage.BLOB}
 LOADED = {"REFERENCE": lambda st: st.status == "ok",
           "BLOCKS": lambda st: "blocks_dv" in st.data,
           "RSL": lambda st: "rsl" in st.data,

@@ -4,7 +4,10 @@ A method turns the synced scene (:class:`..runtime.FrameState`: world, objects,
 their stored visibility) into pixels.  Each module defines a :class:`Method`
 subclass and adds an instance to :data:`REGISTRY` with :func:`register`; the
 ``scene.prt.method`` enum, its settings, the panels and the benchmarks are built
-from the registry, so adding a method touches no other glue.
+from the registry, so adding a method touches no other glue but one import line in
+:mod:`.catalog` (which loads the method modules in their UI order).  This module is
+the contract alone: it imports no other module of the add-on, so the frame state, the
+operators and the method modules may all import it without an import cycle.
 
 The contract of a method:
 
@@ -30,6 +33,8 @@ The contract of a method:
   method only.  ``sync(state)`` (optional)
   loads stored data into ``state.objects[i].data`` each time a frame state is
   built.
+* Hooks read by the frame state and the report, with their defaults here:
+  ``draws_lamps``, ``last_choices()``, ``stability_cases()``; ``view_dependent(state)``.
 """
 
 from __future__ import annotations
@@ -81,6 +86,24 @@ class Method(ABC):
     def store(self, scene, job, derived):
         """Write ``derived`` into the .blend (main thread, precompute commit)."""
 
+    #: Whether ``shade``/``draw_objects`` draw Blender's point and spot lights
+    #: (``state.lamps``); the frame state notes for other methods that they light the
+    #: scene from the World and sun lamps only.
+    draws_lamps = False
+
+    def last_choices(self) -> list:
+        """What the method chose per object for the newest frame (AUTO: dicts with
+        ``object``, ``method``, ``setting``, ``value``, ``choice``, ``error``, ``seconds``,
+        ``reason``), shown by the panel and the report; [] for a fixed method."""
+        return []
+
+    def stability_cases(self) -> list:
+        """Hard cases of the stability table (``addon/report_cases.py``) that only concern
+        this method, in the form of ``report_cases.BASE_CASES`` (e.g. SG sharpness
+        1e-3...1e5 for a method with spherical Gaussians); the table names them
+        ``"<name> [<method id>]"``.  None by default ([])."""
+        return []
+
 
 def glossy_or_layered(state) -> bool:
     """Whether any synced material has a glossy lobe or Principled layering (its
@@ -108,11 +131,3 @@ def scene_properties() -> dict:
     for m in REGISTRY.values():
         props.update(m.scene_properties())
     return props
-
-
-# Registration order = order in the UI enum.
-from . import reference, sh, wavelet  # noqa: E402,F401
-from . import ssdf_sg  # noqa: E402,F401
-from . import rsl  # noqa: E402,F401
-from . import blocks  # noqa: E402,F401
-from . import auto  # noqa: E402,F401  (last: AUTO chooses among the methods above)

@@ -81,7 +81,8 @@ import numpy as np
 
 from ...core import directions, screen, visibility
 from ...core import mesh as core_mesh
-from .. import runtime
+from .. import drawing, relit, runtime
+from ..keys import cache, env_key, held, per_visibility
 from . import REGISTRY, Method, register
 
 #: Fraction of the target a candidate must reach at the probes: view-dependent objects
@@ -105,19 +106,18 @@ BETWEEN_STEPS = 3
 #: Relit shading passes timed per candidate (the fastest counts; each one resamples
 #: the environment for cubemap-based methods, the dominant cost of a selection).
 TIMED_FRAMES = 1
-_ANGLE = [0.0]
 # Per-object selections: (name, id(bits), lighting content, target, materials, candidates);
 # the same environment turned (Mapping rotation) keeps the choice.
-_CHOICE_CACHE: dict = {}
+_CHOICE_CACHE = cache(256)
 # The scene-level assignment for the newest tuple of per-object keys (and camera).
-_SCENE_CACHE: dict = {}
+_SCENE_CACHE = cache(1)
 # Whole-scene relit times of assignments, per tuple of per-object keys ({assignment:
 # seconds}, held with the objects' visibility arrays); a new camera picks among the same
 # options, so it times only assignments not timed before.
-_TIMED: dict = {}
+_TIMED = cache(16)
 # Embree scene of the frame's triangles for the camera weights, per the objects' mesh
 # fingerprints (made again for other geometry).
-_OCCLUDERS: dict = {}
+_OCCLUDERS = cache(1)
 #: The newest per-object choices (what the panel and the report show).
 LAST_CHOICES: list = []
 #: Number of selections run (tests check that unchanged objects are not re-selected).
@@ -125,7 +125,7 @@ SELECTIONS = [0]
 #: Layout of the stored choice (a record of another version is out of date).
 CHOICE_VERSION = 1
 # Stored choices parsed per JSON text (frames read the scene property each time).
-_PARSED: dict = {}
+_PARSED = cache(8)
 #: (stored JSON, why it is not used or "") as the newest AUTO frame found it: the panel
 #: shows whether the scene's stored choice is current.
 STORED_STATUS: list = ["", ""]
@@ -203,7 +203,7 @@ def _digest(*parts) -> str:
 
 
 # Names of the candidates' settings other than their budgets, per tuple of candidate ids.
-_SETTING_NAMES: dict = {}
+_SETTING_NAMES = cache(8)
 
 
 def _candidate_settings(state, candidates):
@@ -224,7 +224,7 @@ def choice_key(state) -> dict:
     the error target, the candidates' other settings.  The world's rotation is left out
     (the same environment turned keeps the choice, as the measurement cache does) and so
     is the camera (a stored choice does not flip as the view moves; Choose re-chooses)."""
-    env = runtime.env_key(state.world, state.resolution)
+    env = env_key(state.world, state.resolution)
     return dict(
         geometry=_digest(sorted((st.name, st.fingerprint) for st in state.objects)),
         directions=int(state.resolution),
@@ -309,12 +309,12 @@ class AutoMethod(Method):
         return {
             "auto_error_target": FloatProperty(
                 name="Error Target", default=0.02, min=0.0, max=1.0, precision=3,
-                subtype="FACTOR", update=runtime.redraw_viewports,
+                subtype="FACTOR", update=drawing.redraw_viewports,
                 description="AUTO: largest rel-L2 error against REFERENCE allowed per object "
                             "(0.02 = 2 %)"),
             "auto_choice": StringProperty(
                 name="Stored Choice", default="", options={"HIDDEN"},
-                update=runtime.redraw_viewports,
+                update=drawing.redraw_viewports,
                 description="AUTO: the method and budget per object chosen by Precompute or "
                             "Choose (JSON), with the key of what it depends on")}
 
@@ -400,7 +400,7 @@ class AutoMethod(Method):
     def _record(self, scene, depsgraph) -> dict:
         """The choice for ``scene`` as :meth:`choose` stores it (writes nothing)."""
         from ..engine import render_camera
-        from ..report import ensure_gpu
+        from ..drawing import ensure_gpu
         if scene.camera is None:
             ensure_gpu(scene)       # in -b: candidates' GPU passes are timed as frames run them
         state = runtime.FrameState()
@@ -457,14 +457,9 @@ class AutoMethod(Method):
         options = []
 
         def relit_seconds(m, sub):
-            times = []
-            for _ in range(TIMED_FRAMES):
-                _ANGLE[0] += 0.61
-                sub.world = runtime.rotated_world(state.world, _ANGLE[0])
-                t0 = time.perf_counter()
-                m.shade(sub, eyes[0], None)
-                times.append(time.perf_counter() - t0)
-            return min(times)
+            return min(relit.relit_times([sub], lambda s: m.shade(s, eyes[0], None),
+                                         TIMED_FRAMES, warmup=False,
+                                         clock=time.perf_counter)[0])
 
         def measure(m, prop, value, timed=True) -> bool:
             """Adds the option ``(m.id, prop, value)`` (error at the probes, relit time
@@ -531,14 +526,14 @@ class AutoMethod(Method):
         """(choices, assignment, status note) of the frame; the per-frame work on a hit is
         the cache keys (the materials' repr is kept per synced object)."""
         target = float(state.settings.get("auto_error_target", 0.02))
-        key = runtime.env_key(state.world, state.resolution)
+        key = env_key(state.world, state.resolution)
         env = (key[0], key[1], key[3])      # content and strength: a rotation keeps the choice
         names = tuple((m.id, prop, v) for m, prop, v in self.candidates())
         measured, keys = [], []
         for st in state.objects:
             key = (st.name, id(st.bits), env, target, _materials_key(st), names)
             keys.append(key)
-            measured.append(runtime.per_visibility(
+            measured.append(per_visibility(
                 _CHOICE_CACHE, key, st.bits, lambda st=st: self._measure(state, st, target),
                 limit=256))
         camera = getattr(state, "camera", None)
@@ -611,7 +606,7 @@ class AutoMethod(Method):
         arrays = [st.arrays for st in state.objects]
         # keyed on the geometry's fingerprints, not the arrays: every sync (each F12, each
         # viewport update) exports new arrays of the same meshes
-        occluders = runtime.held(
+        occluders = held(
             _OCCLUDERS, tuple((st.name, st.fingerprint) for st in state.objects), (),
             lambda: (visibility.build_occluder_scene(
                 np.concatenate([a.triangle_positions for a in arrays]))
@@ -681,20 +676,15 @@ class AutoMethod(Method):
                               1)[0]
             # the timings of this scene's objects (their visibility arrays held with
             # them, so an id in the key is never another object's)
-            seen = runtime.held(_TIMED, objects_key, [st.bits for st in state.objects], dict,
+            seen = held(_TIMED, objects_key, [st.bits for st in state.objects], dict,
                                 limit=16)
             for name, assignment in options.items():
                 tkey = tuple(assignment)
                 if tkey not in seen:
-                    times = []
-                    for _ in range(TIMED_FRAMES + 1):
-                        _ANGLE[0] += 0.61
-                        sub = copy.copy(state)
-                        sub.world = runtime.rotated_world(state.world, _ANGLE[0])
-                        t0 = time.perf_counter()
-                        self._shade_assigned(sub, assignment, eye, None)
-                        times.append(time.perf_counter() - t0)
-                    seen[tkey] = min(times)
+                    seen[tkey] = min(relit.relit_times(
+                        [copy.copy(state)],
+                        lambda s: self._shade_assigned(s, assignment, eye, None),
+                        TIMED_FRAMES + 1, warmup=False, clock=time.perf_counter)[0])
                 timed[name] = seen[tkey]
         best = min(timed, key=timed.get) if timed else "mix"
         assignment = options[best]

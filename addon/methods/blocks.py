@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core import blocks as core_blocks, visibility
-from .. import runtime, storage
+from ...core import blocks as core_blocks, blocks_encoding, visibility
+from .. import drawing, keys, storage
 from . import Method, register
 
 #: name of the stored blob (addon.storage)
@@ -23,14 +23,14 @@ BLOB = "blocks"
 MIN_RESOLUTION = 64
 
 # Lighting tables per env key (one world at a time).
-_TABLES: dict = {}
+_TABLES = keys.cache(1)
 # Differential visibility read from the .blend per stored blob (storage.key).
-_STORED: dict = {}
+_STORED = keys.cache(16)
 # Encoded from the bit-packed visibility when nothing compressed is stored.
-_ENCODED: dict = {}
+_ENCODED = keys.cache(16)
 # Active pairs per differential visibility; line-9 products per (pairs, lighting).
-_PAIRS: dict = {}
-_LIGHT_VIS: dict = {}
+_PAIRS = keys.cache(16)
+_LIGHT_VIS = keys.cache(16)
 #: statistics of the last shade() (Tables 1-2 of the paper), for the bench and the UI
 LAST_STATS: dict = {}
 
@@ -47,7 +47,7 @@ def _stored_visibility(arrays, meta):
     if stream is None:
         raise storage.Unreadable("no BLOCKS stream in the stored data")
     try:
-        return core_blocks.deserialize_visibility(stream.tobytes()), int(stream.size)
+        return blocks_encoding.deserialize_visibility(stream.tobytes()), int(stream.size)
     except ValueError as exc:
         raise storage.Unreadable(f"BLOCKS stream unreadable ({exc})") from None
 
@@ -64,7 +64,7 @@ class BlocksMethod(Method):
         from bpy.props import FloatProperty
         return {"blocks_tolerance": FloatProperty(
             name="Block Tolerance", default=0.1, min=1e-6, max=1.0, precision=6,
-            update=runtime.redraw_viewports,
+            update=drawing.redraw_viewports,
             description="BLOCKS: a block is sampled at every pixel where the glossy lobe "
                         "reaches this fraction of its peak, with 16 / 4 / 1 DCT coefficients "
                         "down to 1/10, 1/100, 1e-7 of it (smaller: more accurate, slower)")}
@@ -80,8 +80,8 @@ class BlocksMethod(Method):
         for o in job.objects:
             if job.cancel_requested:
                 raise visibility.Cancelled()
-            dv = core_blocks.encode_visibility(o.bits, job.resolution)
-            out[o.name] = core_blocks.serialize_visibility(dv)
+            dv = blocks_encoding.encode_visibility(o.bits, job.resolution)
+            out[o.name] = blocks_encoding.serialize_visibility(dv)
         return out
 
     def store(self, scene, job, derived):
@@ -117,9 +117,8 @@ class BlocksMethod(Method):
         dv = st.data.get("blocks_dv")
         if dv is not None and dv.resolution == resolution:
             return dv, "stored"
-        dv = runtime.per_visibility(_ENCODED, (st.name, id(st.bits), resolution), st.bits,
-                                    lambda: core_blocks.encode_visibility(st.bits, resolution),
-                                    limit=16)
+        dv = keys.per_visibility(_ENCODED, (st.name, id(st.bits), resolution), st.bits,
+                                 lambda: blocks_encoding.encode_visibility(st.bits, resolution))
         return dv, "encoded"
 
     def shade(self, state, eye, view_dir):
@@ -128,13 +127,9 @@ class BlocksMethod(Method):
             state.note(f"BLOCKS works on 16x16 blocks: at 6x{res}x{res} a cube face has only "
                        f"{res // 16}x{res // 16} of them; precompute with Directions 6x64x64 "
                        "or 6x128x128 as in the paper")
-        L = runtime.environment_cubemap(state.world, res)
-        key = runtime.env_key(state.world, res)
-        tables = _TABLES.get(key)
-        if tables is None:
-            tables = core_blocks.light_tables(L, res)
-            _TABLES.clear()
-            _TABLES[key] = tables
+        L = keys.environment_cubemap(state.world, res)
+        key = keys.env_key(state.world, res)
+        tables = keys.held(_TABLES, key, (), lambda: core_blocks.light_tables(L, res))
         thresholds = thresholds_for(state.settings.get("blocks_tolerance", 0.1))
         stats = core_blocks.BlocksStats()
         sources = []
@@ -143,14 +138,14 @@ class BlocksMethod(Method):
             pts = st.points
             dv, source = self.visibility_of(st, res)
             sources.append(source)
-            pairs = runtime.per_visibility(_PAIRS, (st.name, id(dv)), dv,
-                                           lambda: core_blocks.active_pairs(dv), limit=16)
-            light_vis = runtime.per_visibility(
+            pairs = keys.per_visibility(_PAIRS, (st.name, id(dv)), dv,
+                                        lambda: core_blocks.active_pairs(dv))
+            light_vis = keys.per_visibility(
                 _LIGHT_VIS, (st.name, id(pairs), key), pairs,
-                lambda: core_blocks.light_vis_sums(pairs, tables), limit=16)
-            irradiance = runtime.per_visibility(
+                lambda: core_blocks.light_vis_sums(pairs, tables))
+            irradiance = keys.per_visibility(
                 _LIGHT_VIS, (st.name, id(pairs), key, "E"), pairs,
-                lambda: core_blocks.lambert_irradiance(light_vis, pts.normals), limit=16)
+                lambda: core_blocks.lambert_irradiance(light_vis, pts.normals))
             view_dirs = None
             if view_dir is not None:
                 view_dirs = np.broadcast_to(np.asarray(view_dir, dtype=np.float64),

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from ...core import directions, reference
-from .. import runtime
+from .. import keys
 from . import Method, glossy_or_layered, register
 
 # View-independent diffuse sums per (object, visibility, lighting).
-_IRRADIANCE_CACHE: dict = {}
+_IRRADIANCE_CACHE = keys.cache(64)
 
 
 class ReferenceMethod(Method):
@@ -24,12 +24,12 @@ class ReferenceMethod(Method):
 
     def shade(self, state, eye, view_dir):
         cube = directions.cubemap(state.resolution)
-        L = runtime.environment_cubemap(state.world, state.resolution)
-        env_key = runtime.env_key(state.world, state.resolution)
+        L = keys.environment_cubemap(state.world, state.resolution)
+        env_key = keys.env_key(state.world, state.resolution)
         out = []
         for st in state.objects:
             pts = st.points
-            irradiance = runtime.per_visibility(
+            irradiance = keys.per_visibility(
                 _IRRADIANCE_CACHE, (st.name, id(st.bits), env_key), st.bits,
                 lambda: reference.diffuse_irradiance(st.bits, pts.normals, cube, L))
             view_dirs = None

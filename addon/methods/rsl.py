@@ -8,8 +8,8 @@ import dataclasses
 
 import numpy as np
 
-from ...core import brdf, directions, envmap, reference, rsl
-from .. import drawing, runtime, storage
+from ...core import brdf, directions, envmap, reference, rigid, rsl
+from .. import drawing, keys, storage
 from . import Method, glossy_or_layered, register
 
 #: disk-map resolution of the BRDF SATs and visibility tables (§5.1: 32 x 32)
@@ -21,26 +21,21 @@ BRDF_SUBSAMPLES = 3
 #: sub-samples per disk texel edge when reading the visibility bits
 VISIBILITY_SUBSAMPLES = 2
 
-_LIGHTING: dict = {}        # unrotated cubemap lighting per (content, strength, resolution)
-_LIGHTS: dict = {}          # SquareLights per (lighting key, K / budget)
-_TABLES: dict = {}          # BrdfTables per material
-_VISIBILITY: dict = {}      # per-vertex VDT / SAT per (object, bits)
-_FACTORS: dict = {}         # view-independent (V, C) per (object, bits, lights, rotation)
-_STORED: dict = {}          # (VDT, pose) reconstructed per stored blob (storage.key)
+_LIGHTING = keys.cache(1)       # unrotated cubemap lighting per (content, strength, resolution)
+_LIGHTS = keys.cache(8)         # SquareLights per (lighting key, K / budget)
+_TABLES = keys.cache(32)        # BrdfTables per material
+_VISIBILITY = keys.cache(8)     # per-vertex VDT / SAT per (object, bits)
+_FACTORS = keys.cache(8)        # view-independent (V, C) per (object, bits, lights, rotation)
+_STORED = keys.cache(8)         # (VDT, pose) reconstructed per stored blob (storage.key)
 
 
 def _unrotated_lighting(world: envmap.WorldLighting, resolution: int):
     """The world's cubemap in texture space (no Mapping rotation): the decomposition
     does not change when the world rotates, only the light centres do."""
-    key = runtime.env_key(world, resolution)
+    key = keys.env_key(world, resolution)
     key = (key[0], key[1], resolution)
-    got = _LIGHTING.get(key)
-    if got is None:
-        flat = dataclasses.replace(world, rotation=np.eye(3))
-        got = flat.to_cubemap(resolution)
-        _LIGHTING.clear()
-        _LIGHTING[key] = got
-    return key, got
+    return key, keys.held(_LIGHTING, key, (), lambda: dataclasses.replace(
+        world, rotation=np.eye(3)).to_cubemap(resolution))
 
 
 def square_lights(state):
@@ -50,25 +45,14 @@ def square_lights(state):
     budget = s.get("rsl_error_budget") if s.get("rsl_mode", "COUNT") == "BUDGET" else None
     count = int(s.get("rsl_lights", 30))
     lkey = (key, count, budget)
-    got = _LIGHTS.get(lkey)
-    if got is None:
-        cube = directions.cubemap(state.resolution)
-        got = rsl.decompose(lighting, cube, count if budget is None else None,
-                            error_budget=budget)
-        if len(_LIGHTS) > 8:
-            _LIGHTS.pop(next(iter(_LIGHTS)))
-        _LIGHTS[lkey] = got
-    return lkey, got
+    return lkey, keys.held(_LIGHTS, lkey, (), lambda: rsl.decompose(
+        lighting, directions.cubemap(state.resolution), count if budget is None else None,
+        error_budget=budget))
 
 
 def brdf_tables(material: brdf.Material) -> rsl.BrdfTables:
-    got = _TABLES.get(material)
-    if got is None:
-        got = rsl.brdf_tables(material, DISK_RESOLUTION, VIEW_NODES, BRDF_SUBSAMPLES)
-        if len(_TABLES) > 32:
-            _TABLES.pop(next(iter(_TABLES)))
-        _TABLES[material] = got
-    return got
+    return keys.held(_TABLES, material, (), lambda: rsl.brdf_tables(
+        material, DISK_RESOLUTION, VIEW_NODES, BRDF_SUBSAMPLES))
 
 
 def derive_visibility(bits, normals, resolution: int) -> dict:
@@ -88,61 +72,13 @@ def object_visibility(st, resolution: int, kind: str, normals=None, rows=None) -
     if kind == "VDT" and stored is not None:
         if rows is None:
             return stored
-        return runtime.per_visibility(_VISIBILITY, (st.name, "rows", rows.tobytes()), stored,
-                                      lambda: stored[rows], limit=8)
+        return keys.per_visibility(_VISIBILITY, (st.name, "rows", rows.tobytes()), stored,
+                                   lambda: stored[rows])
     bits = st.bits if rows is None else st.bits[rows]
     key = (st.name, id(st.bits), resolution, None if rows is None else rows.tobytes())
-    return runtime.per_visibility(
+    return keys.per_visibility(
         _VISIBILITY, key, st.bits,
-        lambda: derive_visibility(bits, normals, resolution), limit=8)[kind]
-
-
-# ------------------------------------------------------------------ rigid motion
-
-def _rotation_part(M: np.ndarray) -> np.ndarray:
-    """Nearest rotation to the linear part of a 4x4 matrix (polar decomposition)."""
-    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=np.float64)[:3, :3])
-    R = U @ Vt
-    if np.linalg.det(R) < 0:
-        R = U @ np.diag([1.0, 1.0, -1.0]) @ Vt
-    return R
-
-
-def _local_probe(world_positions: np.ndarray, M: np.ndarray, count: int = 64) -> np.ndarray:
-    """A few vertices in object space (detects edits other than a rigid motion)."""
-    pos = np.asarray(world_positions, dtype=np.float64)
-    idx = np.linspace(0, len(pos) - 1, min(count, len(pos))).astype(np.int64)
-    return (pos[idx] - M[:3, 3]) @ np.linalg.inv(M[:3, :3]).T
-
-
-def _precompute_rows(st, turn):
-    """Stored row of each current shading point: points are ordered by (vertex,
-    quantised world normal, material), so after a turn the split normals of a vertex
-    may sort differently; the precompute order is the order of the turned-back
-    normals (as in :func:`..core.mesh.shading_points`)."""
-    pts, arrays = st.points, st.arrays
-    vert = np.empty(pts.count, dtype=np.int64)
-    vert[pts.point_of_corner] = arrays.corner_verts
-    n0 = np.asarray(pts.normals, np.float64) @ turn
-    q = np.clip(np.round(n0 * 4096.0).astype(np.int64) + 4096, 0, 8192)
-    mat = np.clip(pts.materials, 0, (1 << 20) - 1)
-    key = (((q[:, 0] << 14) | q[:, 1]) << 14 | q[:, 2]) << 20 | mat
-    order = np.lexsort((key, vert))          # order[i]: current point of stored row i
-    rows = np.empty(pts.count, dtype=np.int64)
-    rows[order] = np.arange(pts.count)
-    return rows
-
-
-def _rigid_rotation(ob, st, R0, probe):
-    """``R1 R0^T`` when the object only moved/turned since precompute (same object-space
-    vertices; ``R0`` and ``probe`` stored then), else None."""
-    M = np.array(ob.matrix_world, dtype=np.float64)
-    now = _local_probe(st.arrays.positions, M)
-    then = np.asarray(probe, dtype=np.float64).reshape(-1, 3)
-    scale = max(float(np.abs(then).max(initial=0.0)), 1e-9)
-    if now.shape != then.shape or np.abs(now - then).max() > 1e-4 * scale:
-        return None
-    return _rotation_part(M) @ np.asarray(R0, dtype=np.float64).reshape(3, 3).T
+        lambda: derive_visibility(bits, normals, resolution))[kind]
 
 
 # ------------------------------------------------------------------ storage (§5.1)
@@ -196,7 +132,7 @@ class RSLMethod(Method):
 
     def scene_properties(self):
         from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
-        upd = runtime.redraw_viewports
+        upd = drawing.redraw_viewports
         return {
             "rsl_lights": IntProperty(
                 name="Lights", default=30, min=1, max=2000, update=upd,
@@ -266,23 +202,24 @@ class RSLMethod(Method):
             # pose at precompute: the VDTs live in vertex frames that turn with the object
             job_ob = next(o for o in job.objects if o.name == name)
             M = np.array(ob.matrix_world, dtype=np.float64)
-            storage.put(ob, BLOB, cpca_blob(model, DISK_RESOLUTION, _rotation_part(M),
-                                            _local_probe(job_ob.arrays.positions, M)))
+            storage.put(ob, BLOB, cpca_blob(model, DISK_RESOLUTION, rigid.rotation_part(M),
+                                            rigid.local_probe(job_ob.arrays.positions, M)))
 
     def sync(self, state):
         import bpy
         for st in state.objects:
             ob = bpy.data.objects.get(st.name)
-            got = storage.load(ob, BLOB, _STORED, _stored_tables, state.note, limit=8)
+            got = storage.load(ob, BLOB, _STORED, _stored_tables, state.note)
             if got is None or len(got[0]) != st.points.count:
                 continue
             vdt, R0, probe = got
             if st.status != "ok":
-                turn = _rigid_rotation(ob, st, R0, probe)
+                turn = rigid.rigid_turn(np.array(ob.matrix_world, dtype=np.float64),
+                                        st.arrays.positions, R0, probe)
                 if turn is None:
                     continue
                 st.data["rsl_rotation"] = turn
-                st.data["rsl_rows"] = _precompute_rows(st, turn)
+                st.data["rsl_rows"] = rigid.stored_rows(st.points, st.arrays, turn)
                 state.note(f"RSL: {st.name} turned since precompute; its self-shadowing turns "
                            "with it (shadows on other objects are not updated)")
             st.data["rsl"] = vdt
@@ -318,9 +255,9 @@ class RSLMethod(Method):
                     state.note(f"RSL GPU pass failed ({exc}); shading with numpy")
                     use_gpu = False
             if radiance is None:
-                V, C = runtime.per_visibility(
+                V, C = keys.per_visibility(
                     _FACTORS, (st.name, id(st.bits), id(vis), kind, rkey), st.bits,
-                    lambda: ev.diffuse_factors(normals, kind, vis, cos_tables), limit=8)
+                    lambda: ev.diffuse_factors(normals, kind, vis, cos_tables))
                 radiance = np.zeros((pts.count, 3))
                 for mat, sel, vd in _groups(st, eye, view_dir, turn):
                     radiance[sel] = ev.shade(mat, brdf_tables(mat), normals[sel], vd,
@@ -331,28 +268,22 @@ class RSLMethod(Method):
 
     @staticmethod
     def _shade_gpu(st, evaluator, kind, vis, eye, view_dir, lighting_key, normals, turn):
-        key = ("vis", st.name, kind)
-        got = _GPU.get(key)
-        if got is None or got[0] is not vis:
-            _GPU[key] = got = (vis, _texture(_tiles(vis), "R32F"))
+        vis_texture = keys.held(_GPU, ("vis", st.name, kind), (vis,),
+                                lambda: _texture(_tiles(vis), "R32F"))
         pts = st.points
         radiance = np.zeros((pts.count, 3))
         for mat, sel, vd in _groups(st, eye, view_dir, turn):
-            group_normals = normals[sel]
+            def shade(mat=mat, sel=sel, vd=vd):
+                group_normals = normals[sel]
+                return gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
+                                 brdf_tables(mat), group_normals, vd,
+                                 rsl.point_weights(mat, group_normals, vd), kind, vis_texture,
+                                 vis.shape[-1] - (kind == "SAT"), sel)
             if vd is None:                  # view independent: once per lighting/rotation
-                rkey = (st.name, kind, mat, lighting_key)
-                done = _GPU_DIFFUSE.get(rkey)
-                if done is not None and done[0] is vis:
-                    radiance[sel] = done[1]
-                    continue
-            radiance[sel] = gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
-                                      brdf_tables(mat), group_normals, vd,
-                                      rsl.point_weights(mat, group_normals, vd), kind, got[1],
-                                      vis.shape[-1] - (kind == "SAT"), sel)
-            if vd is None:
-                if len(_GPU_DIFFUSE) > 16:
-                    _GPU_DIFFUSE.pop(next(iter(_GPU_DIFFUSE)))
-                _GPU_DIFFUSE[rkey] = (vis, radiance[sel])
+                radiance[sel] = keys.held(_GPU_DIFFUSE, (st.name, kind, mat, lighting_key),
+                                          (vis,), shade)
+            else:
+                radiance[sel] = shade()
         return radiance
 
 
@@ -362,13 +293,10 @@ def _groups(st, eye, view_dir, turn=None):
     pts = st.points
     for slot in np.unique(pts.materials):
         sel = np.nonzero(pts.materials == slot)[0]
-        mat = st.materials[int(slot)] if 0 <= slot < len(st.materials) else brdf.Material()
+        mat = brdf.slot_material(st.materials, slot)
         vd = None
         if not mat.is_diffuse_only or mat.fresnel == "DIELECTRIC":
-            if view_dir is not None:
-                vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
-            else:
-                vd = reference.view_directions(pts.positions[sel], eye)
+            vd = reference.point_views(pts.positions[sel], eye, view_dir)
             if turn is not None:
                 vd = vd @ turn
         yield mat, sel, vd
@@ -384,9 +312,9 @@ register(RSLMethod())
 MAX_TERMS = 8
 TEXTURE_WIDTH = 8192
 # shader, cached textures (per object tables, per material SATs)
-_GPU: dict = drawing.gpu_cache({})
+_GPU = drawing.gpu_cache({}, limit=64)
 # view-independent GPU results per (object, material, lighting)
-_GPU_DIFFUSE: dict = drawing.gpu_cache({})
+_GPU_DIFFUSE = drawing.gpu_cache({}, limit=16)
 
 
 def gpu_available() -> bool:
@@ -402,25 +330,25 @@ def gpu_available() -> bool:
 
 
 def _shader():
-    sh = _GPU.get("shader")
-    if sh is None:
-        import gpu
-        from .. import drawing
-        info = gpu.types.GPUShaderCreateInfo()
-        for ident in ("width", "pointCount", "lightCount", "termCount", "visMode", "visRes",
-                      "visTile", "brdfRes", "viewNodes"):
-            info.push_constant("INT", ident)
-        info.push_constant("FLOAT", "viewStep")
-        for slot, ident in enumerate(("pointData", "weights", "lights", "visTable",
-                                      "brdfTables")):
-            info.sampler(slot, "FLOAT_2D", ident)
-        info.vertex_in(0, "VEC2", "ndc")
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.define("MAX_TERMS", str(MAX_TERMS))
-        info.vertex_source(drawing._source("rsl_vertex_vert.glsl"))
-        info.fragment_source(drawing._source("rsl_vertex_frag.glsl"))
-        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
-    return sh
+    return keys.held(_GPU, "shader", (), _make_shader)
+
+
+def _make_shader():
+    import gpu
+    info = gpu.types.GPUShaderCreateInfo()
+    for ident in ("width", "pointCount", "lightCount", "termCount", "visMode", "visRes",
+                  "visTile", "brdfRes", "viewNodes"):
+        info.push_constant("INT", ident)
+    info.push_constant("FLOAT", "viewStep")
+    for slot, ident in enumerate(("pointData", "weights", "lights", "visTable",
+                                  "brdfTables")):
+        info.sampler(slot, "FLOAT_2D", ident)
+    info.vertex_in(0, "VEC2", "ndc")
+    info.fragment_out(0, "VEC4", "fragColor")
+    info.define("MAX_TERMS", str(MAX_TERMS))
+    info.vertex_source(drawing._source("rsl_vertex_vert.glsl"))
+    info.fragment_source(drawing._source("rsl_vertex_frag.glsl"))
+    return gpu.shader.create_from_info(info)
 
 
 def _texture(values: np.ndarray, fmt: str):
@@ -487,10 +415,8 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
     lt[0, :, :3] = lights_centres
     lt[0, :, 3] = lights_half
     lt[1, :, :3] = energy
-    key = ("brdf", id(tables))
-    got = _GPU.get(key)
-    if got is None or got[0] is not tables:
-        _GPU[key] = got = (tables, _texture(brdf_texture_blocks(tables), "R32F"))
+    brdf_texture = keys.held(_GPU, ("brdf", id(tables)), (tables,),
+                             lambda: _texture(brdf_texture_blocks(tables), "R32F"))
     sh = _shader()
     offscreen = gpu.types.GPUOffScreen(width, rows, format="RGBA32F")
     try:
@@ -515,7 +441,7 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
             sh.uniform_sampler("weights", weight_tex)
             sh.uniform_sampler("lights", light_tex)
             sh.uniform_sampler("visTable", vis_texture)
-            sh.uniform_sampler("brdfTables", got[1])
+            sh.uniform_sampler("brdfTables", brdf_texture)
             batch = batch_for_shader(sh, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
                                      indices=[(0, 1, 2), (0, 2, 3)])
             batch.draw(sh)

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from ...core import brdf, directions, reference, sh
-from .. import runtime
+from .. import drawing, keys
 from . import Method, register
 
 # SH transfer vectors per (object, visibility, order).
-_TRANSFER_CACHE: dict = {}
+_TRANSFER_CACHE = keys.cache(64)
 # SH lighting projectors per order (each caches its unrotated projection).
-_PROJECTORS: dict = {}
+_PROJECTORS = keys.cache(4)
 
 
 class SHMethod(Method):
@@ -24,33 +24,30 @@ class SHMethod(Method):
     def scene_properties(self):
         from bpy.props import IntProperty
         return {"sh_order": IntProperty(
-            name="SH Order", default=4, min=2, max=5, update=runtime.redraw_viewports,
+            name="SH Order", default=4, min=2, max=5, update=drawing.redraw_viewports,
             description="Spherical-harmonic bands kept by the SH method (order n: n*n "
                         "coefficients)")}
 
     def shade(self, state, eye, view_dir):
         order = int(state.settings["sh_order"])
         cube = directions.cubemap(state.resolution)
-        projector = _PROJECTORS.setdefault(order, sh.LightingProjector(order))
-        light = projector.coefficients(state.world, runtime.env_key(state.world, 0)[0])
+        projector = keys.held(_PROJECTORS, order, (), lambda: sh.LightingProjector(order))
+        light = projector.coefficients(state.world, keys.env_key(state.world, 0)[0])
         out = []
         glossy = []
         for st in state.objects:
             pts = st.points
-            transfer = runtime.per_visibility(
+            transfer = keys.per_visibility(
                 _TRANSFER_CACHE, (st.name, id(st.bits), order), st.bits,
                 lambda: sh.transfer(st.bits, pts.normals, cube, order))
             sums = sh.shade_diffuse(transfer, light)
             radiance = np.zeros_like(sums)
             for slot in np.unique(pts.materials):
                 sel = np.nonzero(pts.materials == slot)[0]
-                mat = st.materials[int(slot)] if 0 <= slot < len(st.materials) else brdf.Material()
+                mat = brdf.slot_material(st.materials, slot)
                 vd = None
                 if mat.fresnel == "DIELECTRIC":
-                    if view_dir is not None:
-                        vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
-                    else:
-                        vd = reference.view_directions(pts.positions[sel], eye)
+                    vd = reference.point_views(pts.positions[sel], eye, view_dir)
                 radiance[sel] = reference.lambert_layer(mat, sums[sel], pts.normals[sel], vd)
                 if not mat.is_diffuse_only:
                     glossy.append(st.name)

@@ -6,23 +6,19 @@ from __future__ import annotations
 import numpy as np
 
 from ...core import brdf, directions, haar, reference, wavelet
-from .. import runtime
+from .. import drawing, keys
 from . import Method, glossy_or_layered, register
 
 # Sparse Haar transport per (object, visibility, kept terms).
-_TRANSFER_CACHE: dict = {}
+_TRANSFER_CACHE = keys.cache(8)
 # Lighting approximations per (lighting key, kept terms); the newest few.
-_LIGHT_CACHE: dict = {}
+_LIGHT_CACHE = keys.cache(4)
 
 
 def _lighting(state, cube_lighting, terms: int) -> wavelet.LightingApproximation:
-    key = (runtime.env_key(state.world, state.resolution), int(terms))
-    light = _LIGHT_CACHE.get(key)
-    if light is None:
-        if len(_LIGHT_CACHE) >= 4:
-            _LIGHT_CACHE.pop(next(iter(_LIGHT_CACHE)))
-        light = _LIGHT_CACHE[key] = wavelet.LightingApproximation(cube_lighting.radiance, terms)
-    return light
+    key = (keys.env_key(state.world, state.resolution), int(terms))
+    return keys.held(_LIGHT_CACHE, key, (),
+                     lambda: wavelet.LightingApproximation(cube_lighting.radiance, terms))
 
 
 class WaveletMethod(Method):
@@ -40,7 +36,7 @@ class WaveletMethod(Method):
 
     def scene_properties(self):
         from bpy.props import FloatProperty, IntProperty
-        upd = runtime.redraw_viewports
+        upd = drawing.redraw_viewports
         return {
             "wavelet_terms": IntProperty(
                 name="Lighting Terms", default=256, min=1, max=98304, update=upd,
@@ -63,7 +59,7 @@ class WaveletMethod(Method):
 
     def shade(self, state, eye, view_dir):
         cube = directions.cubemap(state.resolution)
-        L = runtime.environment_cubemap(state.world, state.resolution)
+        L = keys.environment_cubemap(state.world, state.resolution)
         settings = state.settings
         diffuse_light = _lighting(state, L, settings["wavelet_terms"])
         glossy_terms = haar.keep_count(settings["wavelet_glossy_percent"] / 100.0, cube.resolution)
@@ -72,22 +68,17 @@ class WaveletMethod(Method):
         out = []
         for st in state.objects:
             pts = st.points
-            transfer = runtime.per_visibility(
+            transfer = keys.per_visibility(
                 _TRANSFER_CACHE, (st.name, id(st.bits), transfer_terms), st.bits,
-                lambda: wavelet.diffuse_transfer(st.bits, pts.normals, cube, transfer_terms),
-                limit=8)
+                lambda: wavelet.diffuse_transfer(st.bits, pts.normals, cube, transfer_terms))
             irradiance = wavelet.diffuse_irradiance(transfer, diffuse_light)
             radiance = np.zeros((pts.count, 3), dtype=np.float32)
             for slot in np.unique(pts.materials):
                 sel = np.nonzero(pts.materials == slot)[0]
-                mat = (st.materials[int(slot)] if 0 <= slot < len(st.materials)
-                       else brdf.Material())
+                mat = brdf.slot_material(st.materials, slot)
                 vd = None
                 if mat.fresnel == "DIELECTRIC" or not mat.is_diffuse_only:
-                    if view_dir is not None:
-                        vd = np.broadcast_to(np.asarray(view_dir, np.float64), (len(sel), 3))
-                    else:
-                        vd = reference.view_directions(pts.positions[sel], eye)
+                    vd = reference.point_views(pts.positions[sel], eye, view_dir)
                 radiance[sel] = reference.lambert_layer(mat, irradiance[sel], pts.normals[sel],
                                                         vd)
                 if not mat.is_diffuse_only:

@@ -1,0 +1,335 @@
+"""SSDF_SG per pixel on the GPU (``shaders/ssdf_sg_*.glsl``): the shaders, the textures of
+the SSDFs, lighting and materials, the per-slot batches and the pair table of flat
+triangles (eq. 39's per-pair SSDF angles, weights and slopes per point, since those are
+exactly linear inside a flat triangle: :func:`pair_table`).  The numerics they mirror are
+in ``core/ssdf_sg.py`` and ``core/ssdf_sg_scene.py``; the method is ``ssdf_sg.py``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core import sg_brdf
+from ...core.brdf import slot_material
+from ...core.ssdf_sg_scene import (cosine_amplitudes, diffuse_slots, flat_triangles,
+                                   is_glossy, sg_materials)
+from .. import drawing, keys
+
+# shaders ("shader", "shader_flat", "pairs"), the pair pass's "quad", the prefiltered
+# environment's "atlas" (per pyramid) and the light-lobe texture per cosine lobe count
+_GPU = drawing.gpu_cache({}, limit=8)
+# (coefficient texture, eigen-image texture array, texels per point) per field
+_FIELD_TEXTURES = drawing.gpu_cache({}, limit=64)
+# per-slot batches of an object (ObjectBatches) per (object, geometry, flat or not)
+_BATCHES = drawing.gpu_cache({}, limit=64)
+# pair tables per (object, geometry, lighting): entries hold the field and the fit
+_PAIR_TABLES = drawing.gpu_cache({}, limit=8)
+
+
+_SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"), ("FLOAT_2D", "envTex"),
+             ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
+
+
+def _fragment_source(main: str) -> str:
+    """sg_common.glsl (the SG algebra, BRDF factors and cube-face lookup shared with the
+    material helpers' GLSL twin, tested against numpy there), ssdf_sg_lib.glsl, ``main``."""
+    return drawing.glsl_source("sg_common.glsl", "ssdf_sg_lib.glsl", main)
+
+
+def _gpu_shader(flat: bool = False):
+    """The per-pixel shader; ``flat``: its variant for flat triangles (FLAT_PAIRS: eq. 39
+    from the pair table, see :func:`pair_table`)."""
+    return keys.held(_GPU, "shader_flat" if flat else "shader", (), lambda: _make_shader(flat))
+
+
+def _make_shader(flat: bool):
+    import gpu
+    info = gpu.types.GPUShaderCreateInfo()
+    if flat:
+        info.define("FLAT_PAIRS", "1")
+    for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
+                        ("FLOAT", "closedSide")):
+        info.push_constant(kind, ident)
+    for slot, (kind, ident) in enumerate(_SAMPLERS + ((("FLOAT_2D", "pairTex"),) if flat
+                                                     else ())):
+        info.sampler(slot, kind, ident)
+    inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"))
+    for slot, (kind, ident) in enumerate(inputs + ((("VEC3", "triFlat"),) if flat else ())):
+        info.vertex_in(slot, kind, ident)
+    iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_flat_iface" if flat
+                                            else "prt_ssdf_sg_iface")
+    iface.smooth("VEC3", "vPos")
+    iface.smooth("VEC3", "vNrm")
+    iface.smooth("VEC3", "vBary")
+    iface.flat("VEC3", "vTri")
+    if flat:
+        iface.flat("VEC3", "vFlat")
+    info.vertex_out(iface)
+    info.fragment_out(0, "VEC4", "fragColor")
+    info.vertex_source(drawing.glsl_source("ssdf_sg_vert.glsl"))
+    info.fragment_source(_fragment_source("ssdf_sg_frag.glsl"))
+    return gpu.shader.create_from_info(info)
+
+
+def _pairs_shader():
+    """The pair pass (``shaders/ssdf_sg_pairs_frag.glsl``) over a full-screen quad."""
+    return keys.held(_GPU, "pairs", (), _make_pairs_shader)
+
+
+def _make_pairs_shader():
+    import gpu
+    info = gpu.types.GPUShaderCreateInfo()
+    info.push_constant("MAT3", "envRot")
+    info.push_constant("INT", "flatCount")
+    for slot, (kind, ident) in enumerate(_SAMPLERS + (("FLOAT_2D", "flatTex"),)):
+        info.sampler(slot, kind, ident)
+    info.vertex_in(0, "VEC2", "ndc")
+    info.fragment_out(0, "VEC4", "fragColor")
+    info.vertex_source("void main() { gl_Position = vec4(ndc, 0.0, 1.0); }")
+    info.fragment_source(_fragment_source("ssdf_sg_pairs_frag.glsl"))
+    return gpu.shader.create_from_info(info)
+
+
+def _texture(rgba, layers=0):
+    import gpu
+    flat = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+    buf = gpu.types.Buffer("FLOAT", flat.size, flat)
+    if layers:
+        h, w = rgba.shape[1:3]
+        return gpu.types.GPUTexture((w, h), layers=layers, format="RGBA32F", data=buf)
+    h, w = rgba.shape[:2]
+    return gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
+
+
+def field_textures(field):
+    """(coefficient texture, eigen-image array, texels per point) of a StoredField."""
+    return keys.held(_FIELD_TEXTURES, id(field), (field,), lambda: _field_textures(field))
+
+
+def _field_textures(field):
+    K, D, n = field.terms, field.resolution ** 2, field.resolution
+    kt = -(-(K + 1) // 4)
+    weights = np.zeros((len(field.coefficients), kt * 4), np.float32)
+    weights[:, 0] = 1.0
+    weights[:, 1:K + 1] = field.coefficients
+    total = len(weights) * kt
+    rows = max(1, -(-total // 4096))
+    data = np.zeros((rows * 4096, 4), np.float32)
+    data[:total] = weights.reshape(-1, 4)
+    images = np.zeros((kt * 4, D), np.float32)
+    images[0] = field.mean
+    images[1:K + 1] = field.eigen
+    layers = images.reshape(kt, 4, n, n).transpose(0, 2, 3, 1)          # (kt, n, n, 4)
+    return (_texture(data.reshape(rows, 4096, 4)), _texture(layers, layers=kt), kt)
+
+
+def environment_textures(fit, pre, cosine_lobes: int):
+    """(prefiltered atlas texture, light-lobe texture, lobe count): the atlas is made
+    once per pyramid, the small lobe texture per fit (a turned world re-solves the
+    scene-fitted amplitudes, the pyramid stays).  Lobe texture row j: texel 0 = (axis,
+    lam), texel 1 + m = the amplitude seen by cosine lobe m."""
+    atlas = keys.held(_GPU, "atlas", (pre,), lambda: _texture(pre.atlas()))
+
+    def lights():
+        axes, lam, mu = fit[:3]
+        J = max(len(lam), 1)
+        light = np.zeros((J, 1 + cosine_lobes, 4), np.float32)
+        light[:len(lam), 0, :3] = axes
+        light[:len(lam), 0, 3] = lam
+        if len(lam):
+            light[:len(lam), 1:, :3] = cosine_amplitudes(mu, cosine_lobes).transpose(1, 0, 2)
+        return _texture(light)
+    return atlas, keys.held(_GPU, ("lights", cosine_lobes), (fit,), lights), len(fit[1])
+
+
+def material_uniforms(material):
+    """Push-constant values of one material slot (the CPU half of specular_lobes)."""
+    m = sg_materials([material])[0]
+    kd = np.asarray(sg_brdf.diffuse_albedo(m), np.float64).reshape(3) / np.pi
+    lam, mu = sg_brdf.iso_ndf_sg(m.model, m.roughness)
+    A, Bd, Bs = (np.asarray(x, np.float64).reshape(3) for x in sg_brdf.fresnel_coefficients(m))
+    glossy = is_glossy(m)
+    model = {"COOK_TORRANCE": 0, "BLINN_PHONG": 0, "WARD": 1}.get(m.model, 2)
+    return dict(kd=(*kd, 1.0), glossy=int(glossy), brdfModel=model,
+                principled=int(m.fresnel == "PRINCIPLED"),
+                roughness=float(np.asarray(m.roughness).reshape(-1)[0]),
+                ior=float(np.asarray(m.ior).reshape(-1)[0]), ndfLambda=float(lam),
+                ndfMu=float(mu), fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0))
+
+
+def parameter_texture(env, mat, res, kt, eye4, cosine):
+    """The parameter texels read by ``read_parameters`` in ssdf_sg_frag.glsl: 9 scalars
+    texels, then (count, sharpness) and (local direction, amplitude) per cosine lobe."""
+    M = len(cosine.amplitudes)
+    p = np.zeros((1, 10 + M, 4), np.float32)
+    p[0, 8] = eye4
+    p[0, 9] = (M, cosine.sharpness, 0.0, 0.0)
+    p[0, 10:, :3] = cosine.directions
+    p[0, 10:, 3] = cosine.amplitudes
+    p[0, 0] = (env["envStrength"], env["lightCount"], res, kt)
+    p[0, 1] = (env["envRes"], env["envLevels"], env["envLambdaFirst"], env["envRatio"])
+    p[0, 2] = (env["envTop"], mat["glossy"], mat["brdfModel"], mat["principled"])
+    p[0, 3] = (mat["roughness"], mat["ior"], mat["ndfLambda"], mat["ndfMu"])
+    p[0, 4], p[0, 5], p[0, 6], p[0, 7] = mat["kd"], mat["fresA"], mat["fresBd"], mat["fresBs"]
+    return _texture(p)
+
+
+#: an object whose pair table would pass this many texels (256 MiB) is drawn without it
+MAX_PAIR_TEXELS = 1 << 24
+
+
+class ObjectBatches:
+    """Per material slot the batches of one object: ``draws`` = [(slot, flat, batch)];
+    ``flat_points`` the shading points of its flat triangles (pair table rows)."""
+
+    def __init__(self, draws, flat_points):
+        self.draws = draws
+        self.flat_points = flat_points
+
+
+def object_batches(st, field, use_flat: bool = True) -> ObjectBatches:
+    """Per material slot: per-corner position, normal, triangle points, barycentrics -- the
+    flat triangles (:func:`flat_triangles`) in a second batch for the FLAT_PAIRS shader
+    with their points' rows in the pair table."""
+    return keys.held(_BATCHES, (st.name, st.fingerprint, use_flat), (field,),
+                     lambda: _object_batches(st, use_flat))
+
+
+def _object_batches(st, use_flat: bool) -> ObjectBatches:
+    from gpu_extras.batch import batch_for_shader
+    arrays, pts = st.arrays, st.points
+    tri = arrays.triangles
+    corner = tri.reshape(-1)
+    pos = arrays.positions[arrays.corner_verts[corner]].astype(np.float32)
+    nrm = arrays.corner_normals[corner].astype(np.float32)
+    tri_points = np.repeat(pts.point_of_corner[tri].astype(np.float32), 3, axis=0)
+    bary = np.tile(np.eye(3, dtype=np.float32), (len(tri), 1))
+    slots = arrays.corner_materials[tri[:, 0]]
+    flat = flat_triangles(arrays, pts) if use_flat else np.zeros(len(tri), bool)
+    flat_points = np.unique(pts.point_of_corner[tri[flat]])
+    row = np.full(len(pts.normals), -1, np.int64)
+    row[flat_points] = np.arange(len(flat_points))
+    tri_flat = np.repeat(row[pts.point_of_corner[tri]].astype(np.float32), 3, axis=0)
+    draws = []
+    for slot in np.unique(slots):
+        for is_flat in (False, True):
+            sel = np.repeat((slots == slot) & (flat == is_flat), 3)
+            if not sel.any():
+                continue
+            attrs = {"pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
+                     "triPoints": np.ascontiguousarray(tri_points[sel]),
+                     "bary": np.ascontiguousarray(bary[sel])}
+            if is_flat:
+                attrs["triFlat"] = np.ascontiguousarray(tri_flat[sel])
+            draws.append((int(slot), is_flat,
+                          batch_for_shader(_gpu_shader(is_flat), "TRIS", attrs)))
+    return ObjectBatches(draws, flat_points)
+
+
+def _bind_field_and_lighting(sh, rotation, field_textures, env_tex, light_tex):
+    """The uniforms both passes read: the world's rotation, the SSDF's coefficient and
+    eigen-image textures, the prefiltered environment and the light lobes."""
+    import mathutils
+    sh.uniform_float("envRot", mathutils.Matrix(rotation))
+    sh.uniform_sampler("coeffTex", field_textures[0])
+    sh.uniform_sampler("eigenTex", field_textures[1])
+    sh.uniform_sampler("envTex", env_tex)
+    sh.uniform_sampler("lightTex", light_tex)
+
+
+def pair_texels(cosine_lobes: int, light_count: int) -> int:
+    """Texels per flat point in the pair table: ceil(P / 4) angles, then P (w, k)."""
+    pairs = cosine_lobes * light_count
+    return -(-pairs // 4) + pairs
+
+
+def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_count,
+               cosine_lobes, rotation):
+    """Run the pair pass for the object's flat points: a GPUTexture (rows of 4096 texels,
+    :func:`pair_texels` per point).  Eq. 39's per-pair work that a flat triangle's pixels
+    share, done once per point."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+    coeff_tex, eigen_tex, _ = field_textures(field)
+    normals = st.points.normals[flat_points]
+    count = len(flat_points)
+    flat = np.zeros((max(1, -(-count // 4096)) * 4096, 4), np.float32)
+    flat[:count, :3] = normals
+    flat[:count, 3] = flat_points
+    flat_tex = _texture(flat.reshape(-1, 4096, 4))
+    total = count * pair_texels(cosine_lobes, light_count)
+    rows = max(1, -(-total // 4096))
+    sh = _pairs_shader()
+    quad = keys.held(_GPU, "quad", (), lambda: batch_for_shader(
+        sh, "TRIS", {"ndc": [(-1, -1), (3, -1), (-1, 3)]}))
+    offscreen = gpu.types.GPUOffScreen(4096, rows, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            gpu.state.depth_test_set("NONE")
+            gpu.state.blend_set("NONE")
+            sh.bind()
+            _bind_field_and_lighting(sh, rotation, (coeff_tex, eigen_tex), env_tex, light_tex)
+            sh.uniform_int("flatCount", count)
+            sh.uniform_sampler("paramTex", param_tex)
+            sh.uniform_sampler("flatTex", flat_tex)
+            quad.draw(sh)
+            fb = gpu.state.active_framebuffer_get()
+            buf = fb.read_color(0, 0, 4096, rows, 4, 0, "FLOAT")
+    finally:
+        offscreen.free()
+    buf.dimensions = 4096 * rows * 4
+    # read back and uploaded again (once per lighting change): a plain texture outlives the
+    # offscreen and may be drawn from the viewport's and the F12 render's GPU contexts
+    return _texture(np.array(buf, dtype=np.float32).reshape(rows, 4096, 4))
+
+
+def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
+    """draw(view_projection) callables, one per object: ``fields`` its SSDF
+    (StoredField), ``sg_tables`` its SG material per slot, ``fit``/``pre`` the lighting
+    (``core.ssdf_sg_scene``), ``cosine`` the clamped-cosine mixture."""
+    M = len(cosine.amplitudes)
+    env_tex, light_tex, light_count = environment_textures(fit, pre, M)
+    world = state.world
+    rot = [list(map(float, r)) for r in np.asarray(world.rotation, np.float64)]
+    eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None
+            else (*map(float, eye), 1.0))
+    env_common = dict(envStrength=float(world.strength), lightCount=int(light_count),
+                      envRes=int(pre.resolution), envLevels=int(pre.n_levels),
+                      envLambdaFirst=float(pre.lambda_first), envRatio=float(pre.ratio),
+                      envTop=float(pre.lambdas[-2]))
+    draws = []
+    for st, field, table in zip(state.objects, fields, sg_tables):
+        coeff_tex, eigen_tex, kt = field_textures(field)
+        batches = object_batches(st, field, use_flat=bool(diffuse_slots(table).any()))
+        if len(batches.flat_points) * pair_texels(M, int(light_count)) > MAX_PAIR_TEXELS:
+            batches = object_batches(st, field, use_flat=False)
+        params = {slot: parameter_texture(env_common, material_uniforms(slot_material(table, slot)),
+                                          field.resolution, kt, eye4, cosine)
+                  for slot in sorted({slot for slot, _, _ in batches.draws})}
+        pair_tex = None
+        if len(batches.flat_points):
+            key = (st.name, st.fingerprint, np.asarray(world.rotation).round(12).tobytes(),
+                   cosine.sharpness, M, int(light_count))
+            pair_tex = keys.held(
+                _PAIR_TABLES, key, (field, fit, batches),
+                lambda: pair_table(st, field, batches.flat_points, env_tex, light_tex,
+                                   next(iter(params.values())), int(light_count), M, rot))
+
+        def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
+                 eigen_tex=eigen_tex, pair_tex=pair_tex, side=float(st.closed_side)):
+            for flat in (False, True):
+                todo = [(slot, batch) for slot, f, batch in batches.draws if f == flat]
+                if not todo:
+                    continue
+                sh = _gpu_shader(flat)
+                sh.bind()
+                sh.uniform_float("viewProjection", view_projection)
+                sh.uniform_float("closedSide", side)
+                _bind_field_and_lighting(sh, rot, (coeff_tex, eigen_tex), env_tex, light_tex)
+                if flat:
+                    sh.uniform_sampler("pairTex", pair_tex)
+                for slot, batch in todo:
+                    sh.uniform_sampler("paramTex", params[slot])
+                    batch.draw(sh)
+
+        draws.append(draw)
+    return draws
