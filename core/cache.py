@@ -50,7 +50,7 @@ class Cache(MutableMapping):
         if not self._name:
             module = sys.modules.get(self._module)
             found = [k for k, v in vars(module).items() if v is self] if module else []
-            short = self._module.split(".", 1)[-1] if "." in self._module else self._module
+            short = self._module.rsplit(".", 1)[-1]     # the module, whatever package holds it
             self._name = f"{short}.{found[0]}" if found else short
         return self._name
 
