@@ -32,7 +32,7 @@ _GPU = drawing.gpu_cache({})
 _BATCHES = drawing.gpu_cache({})
 _SHADOWS = drawing.gpu_cache({})
 # extraction per (image content, settings): (core sources, residual image)
-_SPLITS: dict = {}
+_SPLITS = keys.cache(2, name="lights._SPLITS")
 #: one line per source of the last synced frame, for the panel
 LAST_SOURCES: list = []
 
@@ -92,12 +92,8 @@ def split_world(world, settings: dict):
         return world, []
     # keyed on the pixels' content: a packed image is exported as a new array every sync
     key = (keys.image_key(img), tuple(sorted(settings.items())))
-    got = _SPLITS.get(key)
-    if got is None:
-        got = core_lights.extract_sources(img, **settings)
-        _SPLITS.clear()
-        _SPLITS[key] = got
-    sources, residual = got
+    sources, residual = keys.held(_SPLITS, key, (),
+                                  lambda: core_lights.extract_sources(img, **settings))
     if not sources:
         return world, []
     out = copy.copy(world)

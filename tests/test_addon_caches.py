@@ -14,7 +14,6 @@ from prt_relight.core import cache as core_cache
 NOT_CACHES = {
     "addon.methods.REGISTRY",              # the registered methods
     "addon.methods.blocks.LAST_STATS",     # statistics of the newest BLOCKS frame
-    "addon.lights._SPLITS",                # addon/lights.py: its owner converts it
 }
 
 
