@@ -204,7 +204,9 @@ class FrameState:
         shown_only = [] if depsgraph.mode != "RENDER" else None
         found = scene_export.visible_mesh_objects(depsgraph, skipped, shown_only)
         run = scene.prt.precompute_id
-        for ob in found + (shown_only or []):
+        listed = found + (shown_only or [])
+        for i, ob in enumerate(listed):
+            self.tick(i / len(listed))          # F12's progress; ESC stops here
             arrays = scene_export.mesh_arrays(ob)
             if len(arrays.triangles) == 0:
                 continue

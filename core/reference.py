@@ -37,22 +37,42 @@ def _blocks(count, block):
         yield start, min(count, start + block)
 
 
-def _for_blocks(count, block, fn):
+def _for_blocks(count, block, fn, tick=None):
     """Call ``fn(a, b)`` for every block of points; blocks run on all cores (numpy's
-    large ufuncs and matrix products release the GIL) and write disjoint rows."""
+    large ufuncs and matrix products release the GIL) and write disjoint rows.
+
+    ``tick(fraction)`` is called in the calling thread as blocks finish (in order); it
+    may raise (e.g. ``visibility.Cancelled`` on ESC): blocks not started are dropped."""
     spans = list(_blocks(count, block))
     threads = min(len(spans), os.cpu_count() or 1)
     if threads <= 1:
-        for a, b in spans:
+        for k, (a, b) in enumerate(spans):
             fn(a, b)
+            if tick is not None:
+                tick((k + 1) / len(spans))
         return
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        for f in [pool.submit(fn, a, b) for a, b in spans]:
-            f.result()
+        futures = [pool.submit(fn, a, b) for a, b in spans]
+        try:
+            for k, f in enumerate(futures):
+                f.result()
+                if tick is not None:
+                    tick((k + 1) / len(futures))
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise
+
+
+def part(tick, lo: float, hi: float):
+    """``tick`` for a part ``[lo, hi]`` of the work (None stays None)."""
+    if tick is None:
+        return None
+    return lambda fraction: tick(lo + (hi - lo) * fraction)
 
 
 def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
-                       lighting: CubeLighting) -> np.ndarray:
+                       lighting: CubeLighting, tick=None) -> np.ndarray:
     """E(x) = sum_k L_k V_k max(0, n.w_k) dw_k per point, (P, 3) float32.
 
     ``w_k`` is the lighting's mean direction vector in texel k, so the cosine is
@@ -72,7 +92,7 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
         cos *= dw
         out[a:b] = cos @ L
 
-    _for_blocks(len(normals), block, block_irradiance)
+    _for_blocks(len(normals), block, block_irradiance, tick)
     return out
 
 
@@ -104,7 +124,7 @@ def view_directions(positions, eye) -> np.ndarray:
 
 def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                       eye, cube: Cubemap, lighting: CubeLighting, material: Material,
-                      view_dirs: np.ndarray | None = None) -> np.ndarray:
+                      view_dirs: np.ndarray | None = None, tick=None) -> np.ndarray:
     """Glossy part of B toward the eye, (P, 3) float32.
 
     ``eye`` is the camera position (perspective) or, with ``view_dirs`` given,
@@ -141,7 +161,7 @@ def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.n
             lobe *= visdw
             out[a:b] += (lobe @ Lc) * weight
 
-    _for_blocks(P, block, block_radiance)
+    _for_blocks(P, block, block_radiance, tick)
     return out
 
 
@@ -156,18 +176,21 @@ def lambert_layer(material: Material, irradiance: np.ndarray, normals: np.ndarra
 
 
 def shade_points(vis_bits, positions, normals, materials, material_table, eye, cube, lighting,
-                 irradiance=None, view_dirs=None) -> np.ndarray:
+                 irradiance=None, view_dirs=None, tick=None) -> np.ndarray:
     """Outgoing radiance (P, 3) of every point, each with ``material_table[materials[p]]``.
 
     ``irradiance`` (from :func:`diffuse_irradiance`) may be passed in when cached.
     The diffuse part is ``irradiance * albedo / pi * diffuse_view_weight(n, v)``
     (the view weight is 1 except for Principled layering, where it needs the
-    per-point view ``v``: toward ``eye``, or ``view_dirs``).
+    per-point view ``v``: toward ``eye``, or ``view_dirs``).  ``tick(fraction)``:
+    progress, called between blocks of points (it may raise to stop).
     """
     if irradiance is None:
-        irradiance = diffuse_irradiance(vis_bits, normals, cube, lighting)
+        irradiance = diffuse_irradiance(vis_bits, normals, cube, lighting, part(tick, 0, 0.5))
+        tick = part(tick, 0.5, 1.0)
     out = np.zeros((len(normals), 3), dtype=np.float32)
     materials = np.asarray(materials)
+    done, total = 0, max(len(materials), 1)
     for slot in np.unique(materials):
         sel = np.nonzero(materials == slot)[0]
         mat = material_table[int(slot)] if 0 <= int(slot) < len(material_table) else Material()
@@ -178,5 +201,10 @@ def shade_points(vis_bits, positions, normals, materials, material_table, eye, c
         out[sel] = lambert_layer(mat, irradiance[sel], normals[sel], vd)
         if not mat.is_diffuse_only:
             out[sel] += specular_radiance(vis_bits[sel], positions[sel], normals[sel], eye, cube,
-                                          lighting, mat, view_dirs=vd)
+                                          lighting, mat, view_dirs=vd,
+                                          tick=part(tick, done / total,
+                                                    (done + len(sel)) / total))
+        done += len(sel)
+        if tick is not None:
+            tick(done / total)
     return out
