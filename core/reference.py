@@ -28,8 +28,17 @@ from .directions import Cubemap
 from .envmap import CubeLighting
 from .visibility import unpack_visibility
 
-#: points per vectorised block; (block, 6*N*N) float32 temporaries.
+#: points per vectorised block at 6x32^2 with two threads; (block, 6*N*N) float32
+#: temporaries.  With more threads blocks shrink (:func:`block_points`), so the points in
+#: flight -- and the temporaries' memory -- stay the same on any number of cores.
 BLOCK_POINTS = 256
+
+
+def block_points(resolution: int, per_block: int = BLOCK_POINTS) -> int:
+    """Points per block at a cubemap ``resolution``: ``per_block`` at 6x32^2 with two
+    threads, fewer at finer cubemaps and with more threads (at least 16)."""
+    threads = max(2, os.cpu_count() or 1)
+    return max(16, per_block * 32 * 32 * 2 // (resolution ** 2 * threads))
 
 
 def _blocks(count, block):
@@ -83,7 +92,7 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
     dw = cube.solid_angles.astype(np.float32)
     L = np.asarray(lighting.radiance, dtype=np.float32)
     out = np.zeros((len(normals), 3), dtype=np.float32)
-    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    block = block_points(cube.resolution)
 
     def block_irradiance(a, b):
         cos = normals[a:b] @ dirs.T
@@ -102,7 +111,7 @@ def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> 
     dirs = cube.directions.astype(np.float32)
     dw = cube.solid_angles.astype(np.float32)
     out = np.zeros(len(normals), dtype=np.float32)
-    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    block = block_points(cube.resolution)
 
     def block_sky(a, b):
         w = normals[a:b] @ dirs.T
@@ -141,7 +150,7 @@ def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.n
     dirs = lighting.unit_directions
     dw = cube.solid_angles.astype(np.float32)
     L = np.asarray(lighting.radiance, dtype=np.float32)
-    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    block = block_points(cube.resolution)
     scalar = material.fresnel == "NONE" and material.distribution != "MULTI_GGX"
 
     def block_radiance(a, b):

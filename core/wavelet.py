@@ -31,7 +31,7 @@ from . import haar
 from .brdf import Material, specular_terms
 from .directions import Cubemap
 from .envmap import CubeLighting
-from .reference import _for_blocks
+from .reference import _for_blocks, block_points
 from .visibility import unpack_visibility
 
 #: points per vectorised block (each holds a few (block, 6*N*N) float arrays)
@@ -120,7 +120,7 @@ def diffuse_transfer(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
         idx_out[a:b] = idx
         val_out[a:b] = vals
 
-    _for_blocks(P, BLOCK_POINTS, block, tick)
+    _for_blocks(P, block_points(cube.resolution, BLOCK_POINTS), block, tick)
     return SparseTransfer(idx_out, val_out, cube.resolution)
 
 
@@ -225,5 +225,5 @@ def glossy_radiance(vis_bits: np.ndarray, normals: np.ndarray, view_dirs: np.nda
             acc += triple_product_points(light, V, rho, idx) * weight
         out[a:b] = acc
 
-    _for_blocks(P, BLOCK_POINTS // 2, block, tick)
+    _for_blocks(P, block_points(cube.resolution, BLOCK_POINTS // 2), block, tick)
     return out
