@@ -27,12 +27,13 @@ Estimates (:func:`estimate`)
     reported with its sampling error ``sqrt((Ê + z σ) / B̂) - sqrt(Ê / B̂)``.
 
 Time (:func:`relit_time`, :func:`assignment_seconds`)
-    A relit frame of a method on an object costs a per-lighting part ``F`` (resampling
-    the environment, lighting tables), a part per call ``c`` and a part per shading point
-    ``s``: frames of ``n_0 < n_a`` points with the lighting cached give ``c + s n`` (two
-    points of a line), a frame of ``n_a`` with the lighting turned adds ``F``; so
-    ``t(P) = F + c + s P``.  Objects sharing a method share its per-lighting work, so an
-    assignment costs ``Σ_methods (max_i (F + c)_i + Σ_i s_i P_i)``.
+    A relit frame of a method on an object costs a fixed part ``F`` (resampling the
+    environment, lighting tables, per-call work) and a part per shading point ``s`` (its
+    per-lighting and per-view work): with a new lighting, a frame of one point first
+    (``F`` and one point), then frames of ``n_a`` and ``n_0`` points that find the shared
+    lighting work cached (their slope is ``s``), so ``t(P) = F + s P``.  Objects sharing a
+    method share its fixed part, so an assignment costs ``Σ_methods (max_i F_i + Σ_i s_i
+    P_i)``.
 
 Assignment (:func:`mix`)
     The cheapest option per object (``(key, seconds, err²)``) such that ``Σ err² ≤
@@ -183,16 +184,16 @@ def linear_time(n_a: int, t_a: float, n_b: int, t_b: float, count: int):
     return fixed, per_point, fixed + per_point * count
 
 
-def relit_time(n_0: int, warm_0: float, n_a: int, warm_a: float, relit_a: float,
-               count: int):
-    """``(fixed, per_point, seconds at count)`` of a relit frame: ``warm_0`` and
-    ``warm_a`` are frames of ``n_0 < n_a`` points with the lighting cached (their slope
-    is the per-point part, the rest per call), ``relit_a`` a frame of ``n_a`` points
-    with the lighting turned anew (what it adds to ``warm_a`` is the per-lighting part)."""
-    call, per_point, _ = linear_time(n_0, warm_0, n_a, warm_a, count)
-    if not np.isfinite(relit_a) or not np.isfinite(per_point):
+def relit_time(n_0: int, t_0: float, n_a: int, t_a: float, t_1: float, count: int):
+    """``(fixed, per_point, seconds at count)`` of a relit frame from three frames with
+    the same new lighting: ``t_1`` of one point first (it does the lighting's shared work:
+    resampling, tables), then ``t_a`` and ``t_0`` of ``n_a > n_0`` points (the shared
+    work cached, their own per-lighting and per-view work not): their slope is the
+    per-point part, ``t_1`` less one point's the fixed part."""
+    if not all(np.isfinite(v) for v in (t_0, t_a, t_1)):
         return float("inf"), float("inf"), float("inf")
-    fixed = call + max(float(relit_a) - float(warm_a), 0.0)
+    per_point = max(float(t_a) - float(t_0), 0.0) / max(n_a - n_0, 1)
+    fixed = max(float(t_1) - per_point, 0.0)
     return fixed, per_point, fixed + per_point * count
 
 

@@ -201,6 +201,10 @@ def test_linear_time_and_assignment_seconds():
     # 0.1 s per lighting + 1 ms per point, timed at 100 and 400 points
     fixed, per_point, at = ac.linear_time(100, 0.2, 400, 0.5, 10000)
     assert (fixed, per_point, at) == pytest.approx((0.1, 1e-3, 10.1))
+    # relit: one point (0.3 s: the lighting's shared work), then 1000 and 100 points
+    fixed, per_point, at = ac.relit_time(100, 0.02, 1000, 0.11, 0.3, 10000)
+    assert (fixed, per_point, at) == pytest.approx((0.3 - 1e-4, 1e-4, 1.2999))
+    assert ac.relit_time(100, 0.02, 1000, np.inf, 0.3, 10)[2] == np.inf
     # one timing (the whole object): all per point
     assert ac.linear_time(50, 0.5, 50, 0.5, 50) == pytest.approx((0.0, 0.01, 0.5))
     # a noisy pair never gives a negative slope or fixed part

@@ -20,13 +20,13 @@ against the reference norm ``B̂`` of the same draws); every decision uses ``Ê 
 (``z`` = :data:`core.auto_choice.MARGIN_Z` = 2), and the stored choice reports the
 estimate and that margin per object.
 
-Time: a candidate's frame on the sample is timed with the lighting it has cached (its
-probe frames after the first) and with the lighting turned to an angle not used before
-(a relit frame), and once more with the lighting cached on every eighth sampled point
-(:data:`SLOPE_POINTS`); the per-point part ``s`` is the slope between the two cached
-timings, the per-lighting part ``F`` what the relit frame adds, so a relit frame of the
-whole object is modelled as ``t(P) = F + c + s P`` (:func:`core.auto_choice.relit_time`;
-an object measured whole is timed whole).  The whole frame's time of an assignment is
+Time: with the lighting turned to an angle not used before, a candidate's frame of one
+sampled point (it does the lighting's shared work: resampling, tables), then of the
+sample and of every eighth drawn point (:data:`SLOPE_POINTS`), which find that work
+cached: their slope is the per-point part ``s`` (per-lighting and per-view work), the
+first frame the fixed part ``F``, so a relit frame of the whole object is modelled as
+``t(P) = F + s P`` (:func:`core.auto_choice.relit_time`; an object measured whole is
+timed whole).  The whole frame's time of an assignment is
 modelled from those (:func:`core.auto_choice.assignment_seconds`: objects sharing a
 method pay its fixed part once), not timed on the whole scene.  A candidate slower than
 REFERENCE on the sample (with the lighting cached) cannot be the fastest at any error
@@ -580,9 +580,12 @@ class AutoMethod(Method):
         areas = core_mesh.point_areas(st.arrays, pts)
         sample = auto_choice.area_sample(areas, pts.positions, SAMPLE_POINTS, SEED)
         one = _restricted(st, sample.rows, "sample")
-        # every eighth drawn point: the per-point time is the slope between the two
-        few = None if sample.exact else _restricted(
-            st, sample.rows[::max(1, sample.size // SLOPE_POINTS)], "slope")
+        # every eighth drawn point: the per-point time is the slope between the two; and
+        # one point, whose relit frame does the lighting's shared work
+        few = point = None
+        if not sample.exact:
+            few = _restricted(st, sample.rows[::max(1, sample.size // SLOPE_POINTS)], "slope")
+            point = _restricted(st, sample.rows[:1], "point")
         truth, ref_warm = [], float("inf")
         for k, eye in enumerate(eyes):
             t0 = time.perf_counter()
@@ -628,21 +631,24 @@ class AutoMethod(Method):
                                                                          _ANGLE[0])))
             return min(times)
 
-        def timing(m, prop, value, warm):
-            """(fixed, per point, seconds on the whole object) of a relit frame, from
-            ``warm`` (a frame of the sample with its lighting cached, or None)."""
+        def timing(m, prop, value):
+            """(fixed, per point, seconds on the whole object) of a relit frame: frames
+            with the lighting turned anew, of one point (the lighting's shared work), then
+            of the sample and of every eighth drawn point (their per-point work)."""
             sub = _substate(state, [one.obj], m.id, prop, value, quiet=True)
-            if warm is None:
-                warm = shade_seconds(m, sub)
-            relit = relit_seconds(m, sub)
             n_a = one.obj.points.count
             if few is None:                     # measured whole: timed whole
+                relit = relit_seconds(m, sub)
                 return auto_choice.linear_time(n_a, relit, n_a, relit, pts.count)
             small = _substate(state, [few.obj], m.id, prop, value, quiet=True)
+            first = _substate(state, [point.obj], m.id, prop, value, quiet=True)
             shade_seconds(m, small)             # fills its per-visibility caches
-            warm_few = min(shade_seconds(m, small) for _ in range(2))
-            return auto_choice.relit_time(few.obj.points.count, warm_few, n_a, warm, relit,
-                                          pts.count)
+            _ANGLE[0] += 0.61
+            world = runtime.rotated_world(state.world, _ANGLE[0])
+            t_1 = shade_seconds(m, first, world)
+            t_a = shade_seconds(m, sub, world)
+            t_0 = shade_seconds(m, small, world)
+            return auto_choice.relit_time(few.obj.points.count, t_0, n_a, t_a, t_1, pts.count)
 
         def measure(m, prop, value) -> bool:
             """Adds the option ``(key, seconds, err² with margin, err²)`` of ``(m.id,
@@ -676,14 +682,12 @@ class AutoMethod(Method):
                         break
                     if view_free:
                         point_err2[key] = e2
-            else:
-                warm = ref_warm if np.isfinite(ref_warm) else None
             to_object = ref_norm2 / probe_ref2_min if probe_ref2_min > 0 else 1.0
             err2, err2_up = worst * to_object, worst_up * to_object
             finite = bool(np.isfinite(err2))
             seconds = float("inf")
             if finite:
-                fixed, per_point, seconds = timing(m, prop, value, warm)
+                fixed, per_point, seconds = timing(m, prop, value)
                 models[key] = (fixed, per_point, pts.count)
             options.append((key, seconds, err2_up, err2))
             return finite and _rel(err2_up, ref_norm2) <= limit
