@@ -178,11 +178,19 @@ class ViewportShading:
         if key == self.key:
             return self.radiance
         layout = self.layout_of(state)
-        if not state.view_dependent or self.radiance is None or self.layout != layout:
+        # AUTO about to measure (no stored choice holds): off the main thread from the
+        # first frame, drawn meanwhile with what there is (unlit at first)
+        slow = getattr(state.method_impl, "slow_frame", lambda s: False)(state)
+        if not slow and (not state.view_dependent or self.radiance is None
+                         or self.layout != layout):
             self.radiance = state.shade(eye, view_dirs_for=view_dir)
             self.layout, self.key = layout, key
             self.version += 1
             return self.radiance
+        if self.radiance is None or self.layout != layout:
+            self.radiance = [np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+                             for st in state.objects]
+            self.layout = layout
         if self.worker is None:
             def work():
                 try:

@@ -127,3 +127,28 @@ def test_esc_stops_auto_live_choice_and_keeps_nothing(monkeypatch):
     assert engine.pixels is not None and engine.progress[-1] == 1.0
     assert all(a < b for a, b in zip(engine.progress, engine.progress[1:]))
     assert len(auto._CHOICE_CACHE) == 2
+
+
+def test_viewport_measures_auto_off_the_main_thread(monkeypatch):
+    """The viewport with AUTO and no stored choice: the first draw returns at once (the
+    geometry unlit) while a worker measures; the next draw after it shows the frame."""
+    every = auto.AutoMethod.candidates
+    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
+        lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")]))
+    scene = _scene("AUTO")
+    auto._CHOICE_CACHE.clear()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    w, h = 32, 24
+    window = cam.calc_matrix_camera(depsgraph, x=w, y=h)
+    view = cam.matrix_world.inverted()
+    engine = bs.FakeViewEngine()
+    _, first = bs.view_draw(depsgraph, view, window, w, h, engine=engine)
+    assert len(engine.workers) == 1 and not auto._CHOICE_CACHE     # measuring meanwhile
+    engine.workers[0].join(300)
+    assert len(auto._CHOICE_CACHE) == 2
+    _, second = bs.view_draw(depsgraph, view, window, w, h, engine=engine)
+    assert len(engine.workers) == 1
+    drawn = second[..., 3] > 0.5
+    assert drawn.any() and second[drawn][:, :3].max() > 0.05
+    assert not np.array_equal(first, second)

@@ -10,7 +10,7 @@ radiance against REFERENCE's (worst probe; points weighted by the surface area t
 stand for, as pixels are) and a model of its *relit* shading time on the whole object
 (the lighting turned to an angle not used before, as in the report's per-frame timing).
 
-Sample (:mod:`core.auto_choice`): :data:`SAMPLE_POINTS` draws per object with
+Sample (:mod:`core.auto_choice`): :data:`SAMPLE_POINTS` (512) draws per object with
 probability proportional to area, one per stratum of equal area along a Morton curve
 (fixed seed :data:`SEED`: a function of the geometry); an object with fewer points is
 measured whole, exactly as before.  The methods shade the drawn points only (the object
@@ -132,7 +132,7 @@ REJECT = 4.0
 #: Single methods compared with the mix on the whole scene (the fastest by estimate).
 UNIFORM_TRIED = 3
 #: Shading points drawn per object (by area; an object with fewer is measured whole).
-SAMPLE_POINTS = 1024
+SAMPLE_POINTS = 512
 #: Points of the smaller sample (every eighth drawn point) a candidate's per-point time
 #: is taken against.
 SLOPE_POINTS = SAMPLE_POINTS // 8
@@ -607,7 +607,9 @@ class AutoMethod(Method):
         probe_ref2_min = min(_sum(sample, pw, b) for pw, b in zip(probe_w, ref2))
         point_err2 = {}     # per option: per sampled point squared error (view independent)
         cube = directions.cubemap(state.resolution)
-        open_sky = bool(np.array_equal(st.bits, runtime.open_visibility(pts.normals, cube)))
+        # (on the sampled points: the whole object's check is a (P, 6N^2) product)
+        open_sky = bool(np.array_equal(one.obj.bits, runtime.open_visibility(
+            one.obj.points.normals, cube)))
         limit = (SAFETY_DIFFUSE if view_free else SAFETY) * target
         options, models = [], {}
         slower = set()      # methods slower than REFERENCE on the sample
@@ -726,7 +728,8 @@ class AutoMethod(Method):
             except Exception as exc:            # a broken candidate is skipped, not fatal
                 print(f"PRT AUTO: {m.id} failed on '{st.name}': {exc}")
             yield
-        notes = (["no occluders"] if open_sky else []) + (["diffuse only"] if view_free else [])
+        notes = ((["no occluders" + ("" if sample.exact else " at the sampled points")]
+                  if open_sky else []) + (["diffuse only"] if view_free else []))
         if not sample.exact:
             notes.append(f"measured on {sample.size} of {pts.count} points")
         return dict(object=st.name, options=options, models=models, ref_norm2=ref_norm2,
@@ -744,8 +747,8 @@ class AutoMethod(Method):
         cache keys (the materials' repr is kept per synced object)."""
         return drive(self._selection_steps(state), state.tick)
 
-    def _selection_steps(self, state):
-        """:meth:`_selection` as a generator of progress fractions (returns its result)."""
+    def _cached(self, state):
+        """(per-object cache keys, their cached measurements or None)."""
         target = float(state.settings.get("auto_error_target", 0.02))
         key = runtime.env_key(state.world, state.resolution)
         env = (key[0], key[1], key[3])      # content and strength: a rotation keeps the choice
@@ -758,6 +761,19 @@ class AutoMethod(Method):
             entry = _CHOICE_CACHE.get(keys[-1])
             measured.append(entry[1] if entry is not None and entry[0][0] is st.bits
                             else None)
+        return keys, measured
+
+    def slow_frame(self, state) -> bool:
+        """Whether the next frame would measure (no stored choice holds and some object's
+        measurement is not cached): the viewport then shades it off the main thread."""
+        if self._stored(state)[0] is not None:
+            return False
+        return any(m is None for m in self._cached(state)[1])
+
+    def _selection_steps(self, state):
+        """:meth:`_selection` as a generator of progress fractions (returns its result)."""
+        target = float(state.settings.get("auto_error_target", 0.02))
+        keys, measured = self._cached(state)
         todo = [i for i, m in enumerate(measured) if m is None]
         total = max(1, self._steps_per_object() * len(todo))
         done = 0
