@@ -561,9 +561,11 @@ class AutoMethod(Method):
                 m.sync(state)
 
     # ------------------------------------------------------------ selection
-    def _steps_per_object(self) -> int:
-        """About how many steps :meth:`_measure_steps` takes (the progress bar's scale)."""
-        return 2 + len(self.candidates()) + BETWEEN_STEPS
+    def _steps_per_object(self, st) -> int:
+        """About how many steps :meth:`_measure_steps` takes on ``st`` (the progress bar's
+        scale: a step per frame it shades)."""
+        probes = 1 if _is_view_independent(st) else PROBES
+        return 2 + (len(self.candidates()) + BETWEEN_STEPS) * (probes + 3)
 
     def _measure_steps(self, state, st, target):
         """Per-object measurements on a sample of its points (a generator: yields after the
@@ -636,7 +638,8 @@ class AutoMethod(Method):
         def timing(m, prop, value):
             """(fixed, per point, seconds on the whole object) of a relit frame: frames
             with the lighting turned anew, of one point (the lighting's shared work), then
-            of the sample and of every eighth drawn point (their per-point work)."""
+            of the sample and of every eighth drawn point (their per-point work).  A
+            generator: yields between frames."""
             sub = _substate(state, [one.obj], m.id, prop, value, quiet=True)
             n_a = one.obj.points.count
             if few is None:                     # measured whole: timed whole
@@ -645,17 +648,20 @@ class AutoMethod(Method):
             small = _substate(state, [few.obj], m.id, prop, value, quiet=True)
             first = _substate(state, [point.obj], m.id, prop, value, quiet=True)
             shade_seconds(m, small)             # fills its per-visibility caches
+            yield
             _ANGLE[0] += 0.61
             world = runtime.rotated_world(state.world, _ANGLE[0])
             t_1 = shade_seconds(m, first, world)
             t_a = shade_seconds(m, sub, world)
+            yield
             t_0 = shade_seconds(m, small, world)
             return auto_choice.relit_time(few.obj.points.count, t_0, n_a, t_a, t_1, pts.count)
 
-        def measure(m, prop, value) -> bool:
+        def measure(m, prop, value):
             """Adds the option ``(key, seconds, err² with margin, err²)`` of ``(m.id,
             prop, value)`` (error at the probes, modelled relit time unless it is far
-            off); whether it meets ``limit`` with its margin."""
+            off); returns whether it meets ``limit`` with its margin.  A generator:
+            yields after each frame it shades (one step of the modal choice)."""
             key = (m.id, prop, value)
             sub = _substate(state, [one.obj], m.id, prop, value, quiet=True)
             # the worst probe's squared error over the dimmest probe's norm (a glossy
@@ -684,12 +690,13 @@ class AutoMethod(Method):
                         break
                     if view_free:
                         point_err2[key] = e2
+                    yield
             to_object = ref_norm2 / probe_ref2_min if probe_ref2_min > 0 else 1.0
             err2, err2_up = worst * to_object, worst_up * to_object
             finite = bool(np.isfinite(err2))
             seconds = float("inf")
             if finite:
-                fixed, per_point, seconds = timing(m, prop, value)
+                fixed, per_point, seconds = yield from timing(m, prop, value)
                 models[key] = (fixed, per_point, pts.count)
             options.append((key, seconds, err2_up, err2))
             return finite and _rel(err2_up, ref_norm2) <= limit
@@ -707,7 +714,7 @@ class AutoMethod(Method):
                     # already met the target here is dearer at a smaller error only, so
                     # it is not measured (the cheaper one is the object's fastest)
                     continue
-                elif not measure(m, prop, value):
+                elif not (yield from measure(m, prop, value)):
                     below[m.id] = value
                 else:
                     met.add(m.id)
@@ -718,8 +725,7 @@ class AutoMethod(Method):
                         mid = m.budget_between(lo, hi)
                         if mid is None:
                             break
-                        yield
-                        if measure(m, prop, mid):
+                        if (yield from measure(m, prop, mid)):
                             hi = mid
                         else:
                             lo = mid
@@ -775,7 +781,7 @@ class AutoMethod(Method):
         target = float(state.settings.get("auto_error_target", 0.02))
         keys, measured = self._cached(state)
         todo = [i for i, m in enumerate(measured) if m is None]
-        total = max(1, self._steps_per_object() * len(todo))
+        total = max(1, sum(self._steps_per_object(state.objects[i]) for i in todo))
         done = 0
         for i in todo:
             st = state.objects[i]
