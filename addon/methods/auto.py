@@ -466,7 +466,10 @@ class AutoMethod(Method):
     @staticmethod
     def _draw_choices(layout, choices):
         for c in choices[:8]:
-            err = "" if c["error"] is None else f" ({100 * c['error']:.2f} %)"
+            margin = c.get("margin")
+            err = "" if c["error"] is None else (
+                f" ({100 * c['error']:.2f} ± {100 * margin:.2f} %)" if margin
+                else f" ({100 * c['error']:.2f} %)")
             layout.label(text=f"{c['object']}: {c['choice']}{err}", icon="OBJECT_DATA")
 
     # ------------------------------------------------------------ candidates
@@ -568,8 +571,8 @@ class AutoMethod(Method):
         return 2 + (len(self.candidates()) + BETWEEN_STEPS) * (probes + 3)
 
     def _measure_steps(self, state, st, target):
-        """Per-object measurements on a sample of its points (a generator: yields after the
-        reference and after each candidate, returns the measurement): for each candidate
+        """Per-object measurements on a sample of its points (a generator: yields after
+        every frame it shades, returns the measurement): for each candidate
         (and REFERENCE, and budget values sized between a method's listed ones) the
         estimated squared error norm against REFERENCE at the probes (worst probe, with its
         sampling margin), the modelled relit shading time on the whole object, plus the
@@ -595,6 +598,7 @@ class AutoMethod(Method):
             if k:
                 ref_warm = min(ref_warm, time.perf_counter() - t0)
             truth.append(one.values(rad[0]))
+            yield
         ref2 = [_norm2(t) for t in truth]
         ref_norm2 = min(_sum(sample, None, b) for b in ref2)
         # a view-dependent object is judged per probe on what that probe's image shows
