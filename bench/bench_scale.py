@@ -7,19 +7,22 @@ under a bundled HDRI, default settings, F12 at 256^2.
                                 [--hdri city] [--size 256] [--out-file out/bench/scale.txt]
 
 Each size runs in a process of its own (peak memory is the process's, VmHWM of
-/proc/self/status, reset before each step), and prints per size:
+/proc/self/status, reset before a step), which prints:
 
-* the precompute (REFERENCE, as the operator runs it): seconds and peak memory;
+* the precompute (REFERENCE, as the operator runs it): seconds and peak memory, then
+  REFERENCE's F12 in the same process (the defaults: the peak over both is the issue's
+  "precompute + F12" figure);
 * the stored visibility in bytes per shading point and the saved .blend's growth;
-* AUTO's choice (``prt.auto_choose``, nothing measured before): seconds, its ratio to the
-  precompute's, and AUTO's first F12 (the choice plus the frame it draws) against the
-  precompute (the issue's "AUTO's first F12 <= 1.5x the precompute time");
-* F12 per method, each the first frame of that method after the REFERENCE precompute (a
-  method deriving its data from the visibility does it in that frame, as a user switching
-  methods sees it): seconds and peak memory;
 * ESC: an F12 of REFERENCE stopped by a stand-in engine whose ``test_break`` turns true
-  2 s in: seconds from that to the end of ``render()``, and how many progress updates it
-  made before.
+  2 s in: seconds from that to the end of ``render()``, and its progress updates before;
+* AUTO's choice (``prt.auto_choose``, nothing measured before): seconds and its ratio to
+  the precompute's; then AUTO's first F12 with that choice (the issue's "AUTO's first F12
+  <= 1.5x the precompute time": choice + frame);
+
+and each other method's first F12 runs in a process of its own on the saved file
+(what a user opening it and switching to that method gets, derived data included):
+seconds and peak.  A method whose F12 would pass the memory budget at the next size
+(from its peak per point) is skipped there.
 
 then a table over the sizes and the growth per 100k vertices (least-squares slope of
 each column over the vertex counts).  Writes ``out/bench/scale.txt`` and ``.json``.
@@ -62,6 +65,8 @@ def parse_args(argv=None):
                         "(default: 70 %% of the memory available now)")
     p.add_argument("--out-file", type=pathlib.Path, default=scenes.ROOT / "out/bench/scale.txt")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--blend", default=None, help=argparse.SUPPRESS)
+    p.add_argument("--f12", default=None, help=argparse.SUPPRESS)
     return p.parse_args(argv)
 
 
@@ -147,6 +152,8 @@ class _EscEngine:
 
 
 def child(spec: str, args) -> dict:
+    """One size: precompute and REFERENCE's F12 (the defaults) in one process, the file
+    saved for the other methods' F12s, ESC, AUTO's choice and its first F12."""
     import bpy
     scenes.reset()                                    # registers prt_relight
     from prt_relight.addon import storage
@@ -162,7 +169,7 @@ def child(spec: str, args) -> dict:
     depsgraph = bpy.context.evaluated_depsgraph_get()
     vertices = len(ob.evaluated_get(depsgraph).data.vertices)
     out = dict(spec=spec, vertices=vertices, cores=os.cpu_count())
-    tmp = pathlib.Path(tempfile.mkdtemp())
+    tmp = pathlib.Path(args.blend).parent
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "before.blend"), copy=True)
     before = os.path.getsize(tmp / "before.blend")
     out["setup_rss"] = _memory()["VmRSS"]
@@ -174,12 +181,24 @@ def child(spec: str, args) -> dict:
                encode_s=t["encode"], precompute_peak=_peak())
     stored = sum(storage.stored_bytes(o, storage.VISIBILITY) for o in bpy.data.objects)
     out["stored_bytes_per_point"] = stored / t["points"]
-    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "after.blend"), copy=True)
-    out["blend_growth"] = os.path.getsize(tmp / "after.blend") - before
+    bpy.ops.wm.save_as_mainfile(filepath=str(args.blend), copy=True)
+    out["blend_growth"] = os.path.getsize(args.blend) - before
     out["blend_bytes_per_point"] = out["blend_growth"] / t["points"]
     print(json.dumps({k: out[k] for k in ("vertices", "points", "precompute_s")}), flush=True)
 
-    # AUTO's choice (nothing measured before), then its frame with the stored choice
+    # F12 with the default method in the same process: the peak over both
+    out["f12_s"] = {"REFERENCE": scenes.render_prt(tmp / "frame.exr")}
+    out["f12_peak"] = {"REFERENCE": _peak()}
+    out["precompute_f12_peak"] = _peak()
+
+    # ESC: REFERENCE's F12 stopped by a stand-in engine
+    ensure_gpu(scene)
+    engine = _EscEngine(args.esc_after)
+    PRTRenderEngine.render(engine, bpy.context.evaluated_depsgraph_get())
+    out["esc_s"] = (time.perf_counter() - engine.pressed) if engine.pressed else float("nan")
+    out["esc_progress_updates"] = len(engine.progress)
+
+    # AUTO's choice (nothing measured before), then its first frame with that choice
     scene.prt.method = "AUTO"
     auto._CHOICE_CACHE.clear()
     _reset_peak()
@@ -192,33 +211,23 @@ def child(spec: str, args) -> dict:
     out["auto_error"] = {c["object"]: [c["error"], c.get("margin")] for c in record["objects"]}
     print(json.dumps({"auto_choice_s": out["auto_choice_s"], "choice": out["auto_choice"]}),
           flush=True)
-
-    # F12 per method (the first frame of each after the REFERENCE precompute)
-    out["f12_s"], out["f12_peak"] = {}, {}
-    for method in args.methods:
-        scene.prt.method = method
+    if "AUTO" in args.methods:
         _reset_peak()
-        try:
-            seconds = scenes.render_prt(tmp / "frame.exr")
-        except Exception as exc:                      # noted, not fatal
-            seconds = float("nan")
-            print(f"F12 {method} failed: {exc}", flush=True)
-        out["f12_s"][method], out["f12_peak"][method] = seconds, _peak()
-        print(json.dumps({"f12": method, "s": seconds, "peak": out["f12_peak"][method]}),
-              flush=True)
-    if "AUTO" in out["f12_s"]:
+        out["f12_s"]["AUTO"] = scenes.render_prt(tmp / "frame.exr")
+        out["f12_peak"]["AUTO"] = _peak()
         out["auto_first_f12_s"] = out["auto_choice_s"] + out["f12_s"]["AUTO"]
-
-    # ESC: REFERENCE's F12 stopped by a stand-in engine
-    scene.prt.method = "REFERENCE"
-    ensure_gpu(scene)
-    engine = _EscEngine(args.esc_after)
-    PRTRenderEngine.render(engine, bpy.context.evaluated_depsgraph_get())
-    out["esc_s"] = (time.perf_counter() - engine.pressed) if engine.pressed else float("nan")
-    out["esc_progress_updates"] = len(engine.progress)
-    out["peak"] = max([out["precompute_peak"], out["auto_choice_peak"]]
-                      + list(out["f12_peak"].values()))
     return out
+
+
+def child_f12(blend: str, method: str) -> dict:
+    """The first F12 of ``method`` on the saved file, in a process of its own."""
+    import bpy
+    scenes.load_addon()
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    bpy.context.scene.prt.method = method
+    _reset_peak()
+    seconds = scenes.render_prt(pathlib.Path(blend).parent / f"{method}.exr")
+    return dict(method=method, s=seconds, peak=_peak())
 
 
 # ------------------------------------------------------------------ table (parent)
@@ -272,6 +281,7 @@ def table(results, methods) -> str:
     col("precompute s", lambda r: f"{r['precompute_s']:.1f}")
     col("  of which rays s", lambda r: f"{r['rays_s']:.1f}")
     col("precompute peak MiB", lambda r: _mib(r["precompute_peak"]))
+    col("precompute + F12 peak MiB", lambda r: _mib(r["precompute_f12_peak"]))
     col("stored B/point", lambda r: f"{r['stored_bytes_per_point']:.1f}")
     col(".blend growth MB", lambda r: f"{r['blend_growth'] / 1e6:.2f}")
     col(".blend B/point", lambda r: f"{r['blend_bytes_per_point']:.1f}")
@@ -290,7 +300,7 @@ def table(results, methods) -> str:
     for m in methods:
         col(f"F12 {m} peak MiB", lambda r, m=m: skipped(r, m) or
             _mib(r["f12_peak"].get(m, 0)))
-    col("peak MiB (precompute + F12s)", lambda r: _mib(r["peak"]))
+    col("largest peak MiB (any step)", lambda r: _mib(r["peak"]))
     col("ESC to stop s (REFERENCE F12)", lambda r: f"{r['esc_s']:.2f}")
     col("progress updates before ESC", lambda r: f"{r['esc_progress_updates']}")
     width = max(len(n) for n, _ in rows)
@@ -314,7 +324,8 @@ def table(results, methods) -> str:
                                       2 ** -20)),
             (".blend", slope([r["blend_growth"] for r in results], "MB", 1e-6)),
             ("AUTO choice", slope([r["auto_choice_s"] for r in results], "s")),
-            ("peak (precompute + F12s)", slope([r["peak"] for r in results], "MiB", 2 ** -20)),
+            ("precompute + F12 peak", slope([r["precompute_f12_peak"] for r in results],
+                                            "MiB", 2 ** -20)),
         ] + [(f"F12 {m}", slope([r["f12_s"].get(m, float("nan")) for r in results], "s"))
              for m in methods] + [
             (f"F12 {m} peak", slope([r["f12_peak"].get(m, float("nan")) for r in results],
@@ -330,10 +341,23 @@ def table(results, methods) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _run(cmd) -> dict:
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    lines = proc.stdout.splitlines()
+    for line in lines:
+        if not line.startswith("RESULT ") and line.strip() and "EGL" not in line:
+            print("   " + line, flush=True)
+    got = [json.loads(line[7:]) for line in lines if line.startswith("RESULT ")]
+    if proc.returncode != 0 or not got:
+        print(proc.stderr[-3000:], flush=True)
+        return {"failed": proc.returncode}
+    return got[0]
+
+
 def main(argv=None):
     args = parse_args(argv)
-    if args.child:
-        result = child(args.child, args)
+    if args.child or args.f12:
+        result = child(args.child, args) if args.child else child_f12(args.blend, args.f12)
         print("RESULT " + json.dumps(result), flush=True)
         return 0
     specs = [f"vertices={v}" for v in args.vertices] + [f"subsurf={s}" for s in args.subsurf]
@@ -343,24 +367,30 @@ def main(argv=None):
     for spec in specs:
         print(f"== {spec}", flush=True)
         skipped = _too_big(results, spec, args.methods, budget)
-        methods = [m for m in args.methods if m not in skipped]
         for m, need in skipped.items():
             print(f"   F12 {m} skipped: it would need ~{need / 2 ** 30:.1f} GiB "
                   f"(budget {budget / 2 ** 30:.1f} GiB)", flush=True)
-        cmd = [sys.executable, __file__, "--child", spec, "--hdri", args.hdri,
-               "--size", str(args.size), "--esc-after", str(args.esc_after),
-               "--methods", *methods]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        lines = proc.stdout.splitlines()
-        for line in lines:
-            if not line.startswith("RESULT "):
-                print("   " + line, flush=True)
-        got = [json.loads(line[7:]) for line in lines if line.startswith("RESULT ")]
-        if proc.returncode != 0 or not got:
-            print(proc.stderr[-3000:], flush=True)
-            raise SystemExit(f"{spec} failed (exit {proc.returncode})")
-        got[0]["skipped"] = skipped
-        results.append(got[0])
+        with tempfile.TemporaryDirectory() as tmp:
+            blend = str(pathlib.Path(tmp) / "scale.blend")
+            methods = [m for m in args.methods if m == "AUTO" and m not in skipped]
+            result = _run([sys.executable, __file__, "--child", spec, "--blend", blend,
+                           "--hdri", args.hdri, "--size", str(args.size),
+                           "--esc-after", str(args.esc_after), "--methods", *methods])
+            if "failed" in result:
+                raise SystemExit(f"{spec} failed (exit {result['failed']})")
+            for m in args.methods:
+                if m in ("REFERENCE", "AUTO") or m in skipped:
+                    continue
+                got = _run([sys.executable, __file__, "--f12", m, "--blend", blend])
+                result["f12_s"][m] = got.get("s", float("nan"))
+                result["f12_peak"][m] = got.get("peak", float("nan"))
+                print(f"   F12 {m}: {result['f12_s'][m]:.1f} s, peak "
+                      f"{result['f12_peak'][m] / 2 ** 20:.0f} MiB", flush=True)
+        result["skipped"] = skipped
+        result["peak"] = max(v for v in [result["precompute_f12_peak"],
+                                         result["auto_choice_peak"]]
+                             + list(result["f12_peak"].values()) if np.isfinite(v))
+        results.append(result)
     import platform
     header = (f"bench_scale: Suzanne on a 64^2 ground, HDRI {args.hdri}, F12 {args.size}^2, "
               f"default settings; {os.cpu_count()} cores, {platform.processor() or platform.machine()}\n")
