@@ -6,6 +6,7 @@
 #   make test    run the test suite (PYTEST_ARGS="-k foo -x" to pass options)
 #   make demo    render the demo into out/demo
 #   make bench   run the precompute benchmark
+#   make bench-scale  production scale: 25k-500k vertices (time, memory, storage, AUTO)
 #   make report  speed/error report of every method into out/report
 #   make clean   remove dist/, out/, caches   (make distclean: also .venv, wheels/)
 
@@ -31,7 +32,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test demo bench bench-methods report clean distclean
+.PHONY: setup apt venv wheels validate build test demo bench bench-scale bench-methods report clean distclean
 
 setup: apt venv
 
@@ -90,6 +91,14 @@ demo: setup
 
 bench: setup
 	$(VENV_PY) bench/bench_precompute.py
+
+# Production scale (issue 20): Suzanne of 25k / 100k / 250k / 500k vertices on a 64^2
+# ground, one process per size: precompute, peak memory, stored bytes and .blend growth
+# per point, AUTO's choice against the precompute, F12 per method, ESC (long: an hour or
+# more on 2 cores; SCALE_ARGS="--vertices 25000 100000" for fewer sizes).
+SCALE_ARGS ?=
+bench-scale: setup
+	$(VENV_PY) bench/bench_scale.py $(SCALE_ARGS)
 
 # Each method against REFERENCE on its held-out scenes (long: tens of minutes on 2 cores).
 bench-methods: setup

@@ -11,8 +11,21 @@ from gpu_extras.presets import draw_texture_2d
 from mathutils import Matrix
 
 from ..core import pixel_filter
+from ..core.visibility import Cancelled
 from . import drawing, lights, sharp
 from .runtime import FrameState, TexturedRadiance
+
+
+def monotonic_progress(update):
+    """``update(fraction)`` called only when the fraction grows (F12's progress bar:
+    parts of a frame report in their own spans, and a span may tick back)."""
+    last = [0.0]
+
+    def report(fraction):
+        if fraction > last[0]:
+            last[0] = fraction
+            update(float(fraction))
+    return report
 
 
 def _background(state: FrameState):
@@ -133,11 +146,17 @@ def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: in
     """Shade for this view and draw: the engine's one drawing path (viewport and F12)."""
     eye, view_dir = _eye(view, is_perspective)
     state.camera = frame_camera(view, projection, width, height, eye, view_dir)
-    object_draws = state.draw_objects(eye, view_dir)
-    radiance = None if object_draws is not None else state.shade(eye, view_dirs_for=view_dir)
-    return draw_pixels(state, radiance, view, projection, width, height, transparent,
-                       supersampling, object_draws=object_draws, filter_width=filter_width,
-                       eye=eye, view_dir=view_dir)
+    # progress (F12: state.tick reports it and stops on ESC): shading, then drawing
+    with state.span(0.0, 0.85):
+        object_draws = state.draw_objects(eye, view_dir)
+        radiance = None if object_draws is not None else state.shade(eye,
+                                                                      view_dirs_for=view_dir)
+    state.tick(0.85)
+    pixels = draw_pixels(state, radiance, view, projection, width, height, transparent,
+                         supersampling, object_draws=object_draws, filter_width=filter_width,
+                         eye=eye, view_dir=view_dir)
+    state.tick(1.0)
+    return pixels
 
 
 class ViewportShading:
@@ -169,11 +188,19 @@ class ViewportShading:
         if key == self.key:
             return self.radiance
         layout = self.layout_of(state)
-        if not state.view_dependent or self.radiance is None or self.layout != layout:
+        # AUTO about to measure (no stored choice holds): off the main thread from the
+        # first frame, drawn meanwhile with what there is (unlit at first)
+        slow = getattr(state.method_impl, "slow_frame", lambda s: False)(state)
+        if not slow and (not state.view_dependent or self.radiance is None
+                         or self.layout != layout):
             self.radiance = state.shade(eye, view_dirs_for=view_dir)
             self.layout, self.key = layout, key
             self.version += 1
             return self.radiance
+        if self.radiance is None or self.layout != layout:
+            self.radiance = [np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+                             for st in state.objects]
+            self.layout = layout
         if self.worker is None:
             def work():
                 try:
@@ -260,13 +287,27 @@ class PRTRenderEngine(bpy.types.RenderEngine):
                         "in the camera properties")
             return
         state = FrameState()
-        state.sync(depsgraph)
-        if state.error:
-            self.report({"ERROR"}, "PRT Relight: " + state.error)
-        for w in state.warnings:
-            self.report({"WARNING"}, "PRT Relight: " + w)
-        pixels = render_pixels(state, view, projection, width, height, r.film_transparent, persp,
-                               scene.prt.supersampling, r.filter_size)
+        # progress bar and ESC: every method ticks between objects (REFERENCE, SH and
+        # WAVELET between blocks of points; AUTO between measured candidates)
+        state.progress = monotonic_progress(self.update_progress)
+        state.cancelled = self.test_break
+        try:
+            self.update_stats("PRT Relight", "Reading the scene")
+            with state.span(0.0, 0.1):
+                state.sync(depsgraph)
+            if state.error:
+                self.report({"ERROR"}, "PRT Relight: " + state.error)
+            for w in state.warnings:
+                self.report({"WARNING"}, "PRT Relight: " + w)
+            self.update_stats("PRT Relight", f"Shading ({state.method}; ESC stops)")
+            with state.span(0.1, 1.0):
+                pixels = render_pixels(state, view, projection, width, height,
+                                       r.film_transparent, persp, scene.prt.supersampling,
+                                       r.filter_size)
+        except Cancelled:
+            self.update_stats("PRT Relight", "Stopped")
+            self.report({"WARNING"}, "PRT Relight: render stopped (ESC); nothing was drawn")
+            return
         result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
         result.layers[0].passes["Combined"].rect.foreach_set(
             np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1))

@@ -1,9 +1,17 @@
 """Precompute in three steps: gather (main thread, reads bpy), run (pure core, any
 thread, cancellable), commit (main thread, writes bpy).  Nothing in the scene
-changes before commit, so an error or ESC leaves it as it was."""
+changes before commit, so an error or ESC leaves it as it was.
+
+Memory (issue 20): the trace hands each chunk of visibility rows on as it is traced;
+they are compressed into each object's stored blob in order (``storage.visibility_writer``)
+and their sky visibility (the tessellation check) is taken on the way, so no copy of the
+whole scene's visibility is held -- unless the method derives data from it (then the
+bits are kept for ``Method.derive``; else ``ObjectJob.bits`` decodes the blob when read).
+Every step reports ``stage`` and progress; ``commit_steps`` writes one object per step."""
 
 from __future__ import annotations
 
+import threading
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -20,10 +28,23 @@ class ObjectJob:
     arrays: core_mesh.MeshArrays
     points: core_mesh.ShadingPoints
     fingerprint: str
-    bits: np.ndarray | None = None
-    #: the visibility as stored (storage.visibility_blob), made with the bits
+    #: the visibility as stored (storage.visibility_blob), made in run()
     blob: bytes | None = None
     coarse_warning: str = ""
+    #: the traced bits, kept when the job's method derives from them
+    kept: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def bits(self) -> np.ndarray | None:
+        """The traced visibility (P, 6N^2/8): kept, else decoded from the blob each time
+        it is read (nothing is held)."""
+        if self.kept is not None or self.blob is None:
+            return self.kept
+        return storage.visibility_of_blob(self.blob)
+
+    @bits.setter
+    def bits(self, value):
+        self.kept = value
 
 
 @dataclass
@@ -42,6 +63,10 @@ class PrecomputeJob:
     progress_done: int = 0
     progress_total: int = 0
     cancel_requested: bool = False
+    #: what run() is doing now (shown with the progress)
+    stage: str = ""
+    #: AUTO's choice is left to the caller (the modal operator runs it in steps)
+    defer_choice: bool = False
 
     @property
     def point_count(self):
@@ -50,47 +75,113 @@ class PrecomputeJob:
     # -------------------------------------------------------------- run (no bpy)
     def run(self, threads=None):
         t0 = time.perf_counter()
+        self.stage = "building the BVH"
         scene = visibility.build_occluder_scene(self.occluders)
         t1 = time.perf_counter()
         cube = directions.cubemap(self.resolution)
         pts = np.concatenate([o.points.positions for o in self.objects])
         nrm = np.concatenate([o.points.normals for o in self.objects])
-        self.progress_total = len(pts)
+        total = len(pts)
+        starts = np.cumsum([0] + [o.points.count for o in self.objects])
+        self.progress_done, self.progress_total = 0, total
+        self.stage = "tracing"
 
-        def progress(done, total):
+        def progress(done, count):
             self.progress_done = done
 
+        method = methods.get(self.method)
+        keep = type(method).derive is not methods.Method.derive     # it reads the bits
+        kept = np.empty((total, cube.size // 8), np.uint8) if keep else None
+        writers = [storage.visibility_writer(o.points.count, self.resolution)
+                   for o in self.objects]
+        sky = np.empty(total, np.float32)       # the tessellation check's, per point
+        stream = _InOrder(lambda a, b, rows: [
+            w.write(rows[max(a, lo) - a:min(b, hi) - a])
+            for w, lo, hi in zip(writers, starts[:-1], starts[1:]) if max(a, lo) < min(b, hi)])
+
+        def consume(start, stop, bits):
+            """A traced chunk (worker thread): its sky visibility, then on to the blobs."""
+            sky[start:stop] = reference.sky_visibility(bits, nrm[start:stop], cube)
+            if kept is not None:
+                kept[start:stop] = bits
+            stream.put(start, stop, bits)
+
         stats = {}
-        bits = visibility.trace_visibility(scene, pts, nrm, cube, self.offset, threads=threads,
-                                           progress=progress, cancel=lambda: self.cancel_requested,
-                                           stats=stats)
+        visibility.trace_visibility(scene, pts, nrm, cube, self.offset, threads=threads,
+                                    progress=progress, cancel=lambda: self.cancel_requested,
+                                    stats=stats, consume=consume)
+        del scene
+        stream.drain()
         t2 = time.perf_counter()
-        start = 0
-        for o in self.objects:
-            o.bits = bits[start:start + o.points.count]
-            start += o.points.count
-            o.coarse_warning = coarse_receiver_warning(o, cube)
+        self.stage = "checking the tessellation"
+        for i, o in enumerate(self.objects):
+            o.blob = writers[i].finish()
+            o.kept = None if kept is None else kept[starts[i]:starts[i + 1]]
+            o.coarse_warning = coarse_receiver_warning(o, cube, sky[starts[i]:starts[i + 1]])
+            self.progress_done = int(starts[i + 1])
         t3 = time.perf_counter()
-        # compressed here, off the main thread: the commit only assigns the blobs
-        for o in self.objects:
-            o.blob = storage.visibility_blob(o.bits, self.resolution)
-        t4 = time.perf_counter()
         self.timings.update(build_bvh=t1 - t0, rays=t2 - t1, ray_count=stats["rays"],
                             rays_per_second=stats["rays"] / max(t2 - t1, 1e-9),
-                            tessellation_check=t3 - t2, encode=t4 - t3)
-        self.derived = methods.get(self.method).derive(self)
-        self.timings["derive"] = time.perf_counter() - t4
+                            tessellation_check=t3 - t2, encode=stream.seconds)
+        self.stage = f"deriving {method.label}"
+        self.progress_done = 0
+        self.derived = method.derive(self)
+        self.timings["derive"] = time.perf_counter() - t3
+        self.stage = "writing"
 
 
-def coarse_receiver_warning(job: ObjectJob, cube) -> str:
+class _InOrder:
+    """Rows handed on in order: ``put(start, stop, rows)`` from any thread (chunks come
+    out of order); one thread at a time passes the next ones to ``write(start, stop,
+    rows)`` while the others go back to tracing; ``drain()`` at the end passes the rest.
+    Holds only the chunks that wait for an earlier one."""
+
+    def __init__(self, write):
+        self.write = write
+        self.at = 0
+        self.pending: dict = {}
+        self.lock = threading.Lock()
+        self.writing = threading.Lock()
+        self.seconds = 0.0          # spent writing (compressing)
+
+    def put(self, start, stop, rows):
+        with self.lock:
+            self.pending[start] = (stop, rows)
+        if self.writing.acquire(blocking=False):
+            try:
+                self._write()
+            finally:
+                self.writing.release()
+
+    def _write(self):
+        while True:
+            with self.lock:
+                got = self.pending.pop(self.at, None)
+            if got is None:
+                return
+            t0 = time.perf_counter()
+            self.write(self.at, got[0], got[1])
+            self.seconds += time.perf_counter() - t0
+            self.at = got[0]
+
+    def drain(self):
+        with self.writing:
+            self._write()
+        if self.pending:
+            raise RuntimeError("visibility rows missing from the trace")
+
+
+def coarse_receiver_warning(job: ObjectJob, cube, sky=None) -> str:
     """A note when shadows change faster than the tessellation can show.
 
     When more than 5 % of the mesh's edges join points whose sky visibility differs by
-    over a quarter (:func:`core.reference.coarse_edge_share`), per-vertex shading blurs
+    over a quarter (:func:`core.reference.coarse_edge_share`; ``sky`` per point when
+    the trace took it already: the bits are then not decoded), per-vertex shading blurs
     or aliases the shadows.
     """
-    frac = reference.coarse_edge_share(job.bits, job.points.normals, job.points.point_of_corner,
-                                       job.arrays.triangles, cube)
+    bits = job.bits if sky is None else None
+    frac = reference.coarse_edge_share(bits, job.points.normals, job.points.point_of_corner,
+                                       job.arrays.triangles, cube, sky=sky)
     if frac > reference.COARSE_SHARE:
         return (f"'{job.name}' is too coarse for its shadows ({frac:.0%} of edges jump by more "
                 "than a quarter of the sky): subdivide it for sharper per-vertex shadows")
@@ -143,6 +234,13 @@ def gather(depsgraph, settings) -> PrecomputeJob:
 
 def commit(scene, job: PrecomputeJob):
     """Store the job's results in the .blend (main thread)."""
+    for _ in commit_steps(scene, job):
+        pass
+
+
+def commit_steps(scene, job: PrecomputeJob):
+    """:func:`commit` in steps (a generator of progress fractions, one object per step:
+    the modal operator runs one per timer event, so the UI stays responsive)."""
     import bpy
 
     t0 = time.perf_counter()
@@ -152,7 +250,8 @@ def commit(scene, job: PrecomputeJob):
     if any(o.blob is None for o in job.objects):
         raise RuntimeError("precompute commit without run(): nothing was traced")
     run_id = uuid.uuid4().hex
-    for o in job.objects:
+    steps = len(job.objects) + 1
+    for i, o in enumerate(job.objects):
         ob = bpy.data.objects[o.name]
         ob.prt.resolution = job.resolution
         ob.prt.point_count = o.points.count
@@ -161,6 +260,7 @@ def commit(scene, job: PrecomputeJob):
         ob.prt.coarse_warning = o.coarse_warning
         # what earlier runs stored (other methods' data too) is dropped with them
         storage.replace_all(ob, {storage.VISIBILITY: o.blob})
+        yield (i + 1) / steps
     storage.remove_legacy()
     scene.prt.precomputed_resolution = job.resolution
     scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(o.fingerprint for o in job.objects)
@@ -173,3 +273,4 @@ def commit(scene, job: PrecomputeJob):
     scene.prt.last_report = (f"{job.point_count} points, {t.get('ray_count', 0) / 1e6:.1f} M rays "
                              f"in {t.get('rays', 0):.1f} s "
                              f"({t.get('rays_per_second', 0) / 1e6:.2f} M rays/s)")
+    yield 1.0

@@ -8,6 +8,7 @@ returns per-corner radiance for each object with the active method.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 from dataclasses import replace
 
@@ -15,6 +16,7 @@ import numpy as np
 
 from ..core import brdf as core_brdf, directions, envmap, mesh as core_mesh, visibility
 from . import keys, lights, methods, scene_export, storage, texture_export
+from ..core.visibility import Cancelled  # noqa: F401  (raised by FrameState.tick)
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
 LAST_MESSAGES: list = []
@@ -130,6 +132,34 @@ class FrameState:
         #: the camera of the frame being drawn (set by the engine before shading):
         #: dict(clip=4×4 world-to-clip, width, height, eye, view_dir), or None
         self.camera: dict | None = None
+        #: set by F12 (engine.render): ``progress(fraction)`` reports 0..1 of the frame,
+        #: ``cancelled()`` is true once the user pressed ESC (see :meth:`tick`)
+        self.progress = None
+        self.cancelled = None
+        #: the part of the frame's progress that ticks now report in (:meth:`span`)
+        self._span = (0.0, 1.0)
+
+    # ------------------------------------------------------------------ progress
+    def tick(self, fraction=None):
+        """Called between objects and chunks of work (methods, AUTO, the sync): raises
+        :class:`Cancelled` when the frame was stopped (ESC), reports ``fraction`` of the
+        current :meth:`span` when given.  Costs nothing without hooks (the viewport)."""
+        if self.cancelled is not None and self.cancelled():
+            raise Cancelled()
+        if self.progress is not None and fraction is not None:
+            lo, hi = self._span
+            self.progress(lo + (hi - lo) * min(max(float(fraction), 0.0), 1.0))
+
+    @contextlib.contextmanager
+    def span(self, lo: float, hi: float):
+        """Ticks inside report within ``[lo, hi]`` of the current span."""
+        outer = self._span
+        a, b = outer
+        self._span = (a + (b - a) * lo, a + (b - a) * hi)
+        try:
+            yield self
+        finally:
+            self._span = outer
 
     # ------------------------------------------------------------------ sync
     def sync(self, depsgraph):
@@ -156,7 +186,9 @@ class FrameState:
         shown_only = [] if depsgraph.mode != "RENDER" else None
         found = scene_export.visible_mesh_objects(depsgraph, skipped, shown_only)
         run = scene.prt.precompute_id
-        for ob in found + (shown_only or []):
+        listed = found + (shown_only or [])
+        for i, ob in enumerate(listed):
+            self.tick(i / len(listed))          # F12's progress; ESC stops here
             arrays = scene_export.mesh_arrays(ob)
             if len(arrays.triangles) == 0:
                 continue

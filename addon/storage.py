@@ -51,6 +51,19 @@ def visibility_blob(bits: np.ndarray, resolution: int) -> bytes:
     return codec.pack({"bits": bits}, {"resolution": int(resolution)})
 
 
+def visibility_writer(points: int, resolution: int) -> codec.RowWriter:
+    """A writer of the same blob as :func:`visibility_blob`, fed rows of (points,
+    6N^2/8) uint8 in order as they are traced (any thread; nothing but the compressed
+    bytes is held)."""
+    return codec.RowWriter("bits", np.uint8, (int(points), 6 * int(resolution) ** 2 // 8),
+                           {"resolution": int(resolution)})
+
+
+def visibility_of_blob(blob: bytes) -> np.ndarray:
+    """The bits of a :func:`visibility_blob` (read-only)."""
+    return codec.unpack(blob)[0]["bits"]
+
+
 # ------------------------------------------------------------------ per object
 
 def _entry(ob, name):

@@ -97,6 +97,42 @@ def pack(arrays: dict, meta: dict | None = None) -> bytes:
     return b"".join([_FIXED.pack(MAGIC, FORMAT, len(header)), header] + payload)
 
 
+class RowWriter:
+    """The blob of :func:`pack` of one array of one-byte elements (plain ``zlib``),
+    written row block by row block as they come (in order): no copy of the whole array
+    is held, only its compressed bytes (the precompute streams each traced chunk of
+    visibility into it).  ``finish()`` returns the blob, byte for byte what :func:`pack`
+    makes of the same rows."""
+
+    def __init__(self, name: str, dtype, shape, meta: dict | None = None):
+        self.name, self.dtype = str(name), np.dtype(dtype)
+        if self.dtype.itemsize != 1:
+            raise TypeError("RowWriter stores one-byte elements (plain zlib)")
+        self.shape = tuple(int(s) for s in shape)
+        self.meta = dict(meta or {})
+        self.rows = 0
+        self._z = zlib.compressobj(LEVEL)
+        self._parts: list = []
+
+    def write(self, rows: np.ndarray):
+        rows = np.ascontiguousarray(rows, dtype=self.dtype)
+        if rows.shape[1:] != self.shape[1:] or self.rows + len(rows) > self.shape[0]:
+            raise ValueError(f"rows {rows.shape} do not continue an array of {self.shape}")
+        self._parts.append(self._z.compress(rows.reshape(-1).view(np.uint8)))
+        self.rows += len(rows)
+
+    def finish(self) -> bytes:
+        if self.rows != self.shape[0]:
+            raise ValueError(f"{self.rows} of {self.shape[0]} rows written")
+        self._parts.append(self._z.flush())
+        data = b"".join(self._parts)
+        self._parts = []
+        header = json.dumps({"arrays": [[self.name, _dtype_name(self.dtype), list(self.shape),
+                                         "zlib", len(data)]], "meta": self.meta},
+                            allow_nan=True, separators=(",", ":")).encode("utf-8")
+        return b"".join([_FIXED.pack(MAGIC, FORMAT, len(header)), header, data])
+
+
 def _header(blob) -> tuple[dict, int]:
     if len(blob) < _FIXED.size:
         raise FormatError("not prt_relight data (too short)")

@@ -28,8 +28,17 @@ from .directions import Cubemap
 from .envmap import CubeLighting
 from .visibility import unpack_visibility
 
-#: points per vectorised block; (block, 6*N*N) float32 temporaries.
+#: points per vectorised block at 6x32^2 with two threads; (block, 6*N*N) float32
+#: temporaries.  With more threads blocks shrink (:func:`block_points`), so the points in
+#: flight -- and the temporaries' memory -- stay the same on any number of cores.
 BLOCK_POINTS = 256
+
+
+def block_points(resolution: int, per_block: int = BLOCK_POINTS) -> int:
+    """Points per block at a cubemap ``resolution``: ``per_block`` at 6x32^2 with two
+    threads, fewer at finer cubemaps and with more threads (at least 16)."""
+    threads = max(2, os.cpu_count() or 1)
+    return max(16, per_block * 32 * 32 * 2 // (resolution ** 2 * threads))
 
 
 def _blocks(count, block):
@@ -37,22 +46,42 @@ def _blocks(count, block):
         yield start, min(count, start + block)
 
 
-def _for_blocks(count, block, fn):
+def _for_blocks(count, block, fn, tick=None):
     """Call ``fn(a, b)`` for every block of points; blocks run on all cores (numpy's
-    large ufuncs and matrix products release the GIL) and write disjoint rows."""
+    large ufuncs and matrix products release the GIL) and write disjoint rows.
+
+    ``tick(fraction)`` is called in the calling thread as blocks finish (in order); it
+    may raise (e.g. ``visibility.Cancelled`` on ESC): blocks not started are dropped."""
     spans = list(_blocks(count, block))
     threads = min(len(spans), os.cpu_count() or 1)
     if threads <= 1:
-        for a, b in spans:
+        for k, (a, b) in enumerate(spans):
             fn(a, b)
+            if tick is not None:
+                tick((k + 1) / len(spans))
         return
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        for f in [pool.submit(fn, a, b) for a, b in spans]:
-            f.result()
+        futures = [pool.submit(fn, a, b) for a, b in spans]
+        try:
+            for k, f in enumerate(futures):
+                f.result()
+                if tick is not None:
+                    tick((k + 1) / len(futures))
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise
+
+
+def part(tick, lo: float, hi: float):
+    """``tick`` for a part ``[lo, hi]`` of the work (None stays None)."""
+    if tick is None:
+        return None
+    return lambda fraction: tick(lo + (hi - lo) * fraction)
 
 
 def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
-                       lighting: CubeLighting) -> np.ndarray:
+                       lighting: CubeLighting, tick=None) -> np.ndarray:
     """E(x) = sum_k L_k V_k max(0, n.w_k) dw_k per point, (P, 3) float32.
 
     ``w_k`` is the lighting's mean direction vector in texel k, so the cosine is
@@ -63,7 +92,7 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
     dw = cube.solid_angles.astype(np.float32)
     L = np.asarray(lighting.radiance, dtype=np.float32)
     out = np.zeros((len(normals), 3), dtype=np.float32)
-    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    block = block_points(cube.resolution)
 
     def block_irradiance(a, b):
         cos = normals[a:b] @ dirs.T
@@ -72,7 +101,7 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
         cos *= dw
         out[a:b] = cos @ L
 
-    _for_blocks(len(normals), block, block_irradiance)
+    _for_blocks(len(normals), block, block_irradiance, tick)
     return out
 
 
@@ -82,7 +111,7 @@ def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> 
     dirs = cube.directions.astype(np.float32)
     dw = cube.solid_angles.astype(np.float32)
     out = np.zeros(len(normals), dtype=np.float32)
-    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    block = block_points(cube.resolution)
 
     def block_sky(a, b):
         w = normals[a:b] @ dirs.T
@@ -103,15 +132,18 @@ COARSE_SHARE = 0.05
 
 
 def coarse_edge_share(vis_bits: np.ndarray, normals: np.ndarray, point_of_corner: np.ndarray,
-                      triangles: np.ndarray, cube: Cubemap, jump: float = COARSE_JUMP) -> float:
+                      triangles: np.ndarray, cube: Cubemap, jump: float = COARSE_JUMP,
+                      sky: np.ndarray | None = None) -> float:
     """Share of a mesh's edges (the three of every triangle) whose endpoints' sky
-    visibility (:func:`sky_visibility` of their shading points) differs by more than
-    ``jump``: where shadows change faster than the tessellation can show, so per-vertex
-    shading blurs or aliases them.  0 for a mesh without triangles."""
+    visibility (:func:`sky_visibility` of their shading points; ``sky`` when already
+    taken) differs by more than ``jump``: where shadows change faster than the
+    tessellation can show, so per-vertex shading blurs or aliases them.  0 for a mesh
+    without triangles."""
     tri_points = np.asarray(point_of_corner)[np.asarray(triangles)].reshape(-1, 3)
     if len(tri_points) == 0:
         return 0.0
-    sky = sky_visibility(vis_bits, normals, cube)
+    if sky is None:
+        sky = sky_visibility(vis_bits, normals, cube)
     edges = np.concatenate([tri_points[:, [0, 1]], tri_points[:, [1, 2]], tri_points[:, [2, 0]]])
     return float((np.abs(sky[edges[:, 0]] - sky[edges[:, 1]]) > jump).mean())
 
@@ -132,7 +164,7 @@ def point_views(positions, eye=None, view_dir=None) -> np.ndarray:
 
 def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                       eye, cube: Cubemap, lighting: CubeLighting, material: Material,
-                      view_dirs: np.ndarray | None = None) -> np.ndarray:
+                      view_dirs: np.ndarray | None = None, tick=None) -> np.ndarray:
     """Glossy part of B toward the eye, (P, 3) float32.
 
     ``eye`` is the camera position (perspective) or, with ``view_dirs`` given,
@@ -149,7 +181,7 @@ def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.n
     dirs = lighting.unit_directions
     dw = cube.solid_angles.astype(np.float32)
     L = np.asarray(lighting.radiance, dtype=np.float32)
-    block = max(16, BLOCK_POINTS * 32 * 32 // (cube.resolution ** 2))
+    block = block_points(cube.resolution)
     scalar = material.fresnel == "NONE" and material.distribution != "MULTI_GGX"
 
     def block_radiance(a, b):
@@ -169,7 +201,7 @@ def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.n
             lobe *= visdw
             out[a:b] += (lobe @ Lc) * weight
 
-    _for_blocks(P, block, block_radiance)
+    _for_blocks(P, block, block_radiance, tick)
     return out
 
 
@@ -184,19 +216,22 @@ def lambert_layer(material: Material, irradiance: np.ndarray, normals: np.ndarra
 
 
 def shade_points(vis_bits, positions, normals, materials, material_table, eye, cube, lighting,
-                 irradiance=None, view_dirs=None) -> np.ndarray:
+                 irradiance=None, view_dirs=None, tick=None) -> np.ndarray:
     """Outgoing radiance (P, 3) of every point, each with its slot's material
     (``materials[p]`` in ``material_table``, :func:`.brdf.slot_material`).
 
     ``irradiance`` (from :func:`diffuse_irradiance`) may be passed in when cached.
     The diffuse part is ``irradiance * albedo / pi * diffuse_view_weight(n, v)``
     (the view weight is 1 except for Principled layering, where it needs the
-    per-point view ``v``: toward ``eye``, or ``view_dirs``).
+    per-point view ``v``: toward ``eye``, or ``view_dirs``).  ``tick(fraction)``:
+    progress, called between blocks of points (it may raise to stop).
     """
     if irradiance is None:
-        irradiance = diffuse_irradiance(vis_bits, normals, cube, lighting)
+        irradiance = diffuse_irradiance(vis_bits, normals, cube, lighting, part(tick, 0, 0.5))
+        tick = part(tick, 0.5, 1.0)
     out = np.zeros((len(normals), 3), dtype=np.float32)
     materials = np.asarray(materials)
+    done, total = 0, max(len(materials), 1)
     for slot in np.unique(materials):
         sel = np.nonzero(materials == slot)[0]
         mat = slot_material(material_table, slot)
@@ -207,5 +242,10 @@ def shade_points(vis_bits, positions, normals, materials, material_table, eye, c
         out[sel] = lambert_layer(mat, irradiance[sel], normals[sel], vd)
         if not mat.is_diffuse_only:
             out[sel] += specular_radiance(vis_bits[sel], positions[sel], normals[sel], eye, cube,
-                                          lighting, mat, view_dirs=vd)
+                                          lighting, mat, view_dirs=vd,
+                                          tick=part(tick, done / total,
+                                                    (done + len(sel)) / total))
+        done += len(sel)
+        if tick is not None:
+            tick(done / total)
     return out

@@ -27,7 +27,7 @@ def _clip_to_pixels(points: np.ndarray, clip: np.ndarray, width: int, height: in
 
 
 def corner_pixel_weights(meshes, clip: np.ndarray, width: int, height: int,
-                         eye=None, view_dir=None, occluders=None) -> list:
+                         eye=None, view_dir=None, occluders=None, only=None) -> list:
     """Per mesh, the pixel area (float64 per corner) each corner stands for in the image.
 
     ``meshes``: :class:`~.mesh.MeshArrays` in world space (the whole scene's, so they
@@ -35,13 +35,18 @@ def corner_pixel_weights(meshes, clip: np.ndarray, width: int, height: int,
     (perspective) or ``view_dir``: unit direction toward an orthographic camera.
     ``occluders``: an Embree scene of every triangle (:func:`visibility.build_occluder_scene`
     of them when None and Embree is installed; without Embree nothing is hidden).
+    ``only``: per mesh, a mask of the triangles to count (None: all); the others count
+    nothing here but still hide (AUTO weighs a sample of points: the triangles around
+    them are all it needs).
     """
-    tris = [m.positions[m.corner_verts[m.triangles]] for m in meshes]
-    if occluders is None and visibility.have_embree() and tris:
-        occluders = visibility.build_occluder_scene(np.concatenate(tris))
+    if occluders is None and visibility.have_embree() and meshes:
+        occluders = visibility.build_occluder_scene(
+            np.concatenate([m.positions[m.corner_verts[m.triangles]] for m in meshes]))
     out = []
-    for m, tp in zip(meshes, tris):
+    for i, m in enumerate(meshes):
         weights = np.zeros(len(m.corner_verts), dtype=np.float64)
+        triangles = m.triangles if only is None or only[i] is None else m.triangles[only[i]]
+        tp = m.positions[m.corner_verts[triangles]]
         if len(tp) == 0:
             out.append(weights)
             continue
@@ -77,7 +82,7 @@ def corner_pixel_weights(meshes, clip: np.ndarray, width: int, height: int,
             seen[idx] = ok & (np.asarray(hit) == -1)
         per = np.where(seen, area / 3.0, 0.0)
         for k in range(3):
-            np.add.at(weights, m.triangles[:, k], per)
+            weights += np.bincount(triangles[:, k], weights=per, minlength=len(weights))
         out.append(weights)
     return out
 

@@ -86,11 +86,12 @@ def project_lighting(lighting: CubeLighting, cube: Cubemap, order: int) -> np.nd
 
 
 def transfer(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap, order: int,
-             block: int = 512) -> np.ndarray:
+             block: int = 512, tick=None) -> np.ndarray:
     """Diffuse shadowed transfer vectors (P, order^2) float32 from stored visibility.
 
     The cosine of each texel is its exact mean cosine (``cube.mean_directions``),
-    as in REFERENCE; the basis is evaluated at the texel centre.
+    as in REFERENCE; the basis is evaluated at the texel centre.  ``tick(fraction)``
+    is called after each block (it may raise to stop).
     """
     Y = (basis(cube.directions, order) * cube.solid_angles[:, None]).astype(np.float32)
     means = np.asarray(cube.mean_directions, dtype=np.float32)
@@ -102,6 +103,8 @@ def transfer(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap, order: in
         np.maximum(w, 0.0, out=w)
         w *= unpack_visibility(vis_bits[a:b], cube.size)
         out[a:b] = w @ Y
+        if tick is not None:
+            tick(b / len(normals))
     return out
 
 

@@ -14,7 +14,9 @@ meeting a floor) still block.
 Work is split in chunks of points handed to a thread pool; Embree releases
 the GIL during ``run``, so all cores trace, and two threads per core let one
 thread's numpy set-up overlap the others' tracing.  Memory stays bounded by
-the chunk size (about half a million rays in flight per thread).
+the chunk size (about half a million rays in flight per thread, and at most
+:data:`RAYS_IN_FLIGHT` over all threads); with ``consume`` the rows are handed on
+as they are traced (the precompute compresses them) instead of being kept.
 """
 
 from __future__ import annotations
@@ -119,26 +121,37 @@ def _directions32(cube: Cubemap) -> np.ndarray:
     return d
 
 
+#: Rays in flight over all threads at most (with the default chunks): what the trace's
+#: temporaries (origins, directions, masks, Embree's ray buffers) take does not grow with
+#: the number of cores.
+RAYS_IN_FLIGHT = 4_000_000
+
+
 def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubemap,
                      offset: float, chunk_points: int | None = None, threads: int | None = None,
-                     progress=None, cancel=None, stats: dict | None = None) -> np.ndarray:
+                     progress=None, cancel=None, stats: dict | None = None,
+                     consume=None) -> np.ndarray | None:
     """Bit-packed visibility (P, cube.size // 8) of ``cube`` directions at ``points``.
 
     ``progress(done, total)`` is called from worker threads after each chunk;
     ``cancel()`` returning True stops the trace with :class:`Cancelled`.
     ``stats``, when given, receives ``rays`` (the number traced).
+    ``consume(start, stop, bits)``, when given, receives each chunk of rows as it is
+    traced (from worker threads, in any order) and nothing is kept: returns None.
     """
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
     total = len(pts)
     nbytes = (cube.size + 7) // 8
-    out = np.zeros((total, nbytes), dtype=np.uint8)
+    out = None if consume is not None else np.zeros((total, nbytes), dtype=np.uint8)
     if stats is not None:
         stats["rays"] = 0
     if total == 0:
         return out
-    if chunk_points is None:      # about 0.5 M rays per chunk
-        chunk_points = max(8, 1_000_000 // cube.size)
+    nthreads = threads or default_threads()
+    if chunk_points is None:      # about 0.5 M rays per chunk, fewer with many threads
+        chunk_points = max(8, min(1_000_000 // cube.size,
+                                  2 * RAYS_IN_FLIGHT // (nthreads * cube.size)))
     lock = threading.Lock()
     done = [0, 0]
 
@@ -150,15 +163,20 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
         if len(rays):
             hit = scene.run(origins, rays, query="OCCLUDED")
             mask[mask] = hit == -1                    # -1: no hit, the texel is visible
-        out[start:stop] = np.packbits(mask, axis=1)
+        packed = np.packbits(mask, axis=1)
+        count = len(rays)
+        del mask, origins, rays
+        if consume is not None:
+            consume(start, stop, packed)
+        else:
+            out[start:stop] = packed
         with lock:
             done[0] += stop - start
-            done[1] += len(rays)
+            done[1] += count
             if progress is not None:
                 progress(done[0], total)
 
     starts = list(range(0, total, chunk_points))
-    nthreads = threads or default_threads()
     if nthreads == 1:
         for s in starts:
             work(s)

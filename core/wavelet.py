@@ -31,7 +31,7 @@ from . import haar
 from .brdf import Material, specular_terms
 from .directions import Cubemap
 from .envmap import CubeLighting
-from .reference import _for_blocks
+from .reference import _for_blocks, block_points
 from .visibility import unpack_visibility
 
 #: points per vectorised block (each holds a few (block, 6*N*N) float arrays)
@@ -99,9 +99,10 @@ class SparseTransfer:
 
 
 def diffuse_transfer(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
-                     terms: int) -> SparseTransfer:
+                     terms: int, tick=None) -> SparseTransfer:
     """``T_k = V_k max(0, n.w_k) dw_k`` per point (``w_k`` the texel's mean direction),
-    Haar-transformed and truncated to its ``terms`` largest coefficients."""
+    Haar-transformed and truncated to its ``terms`` largest coefficients (``tick``:
+    progress between blocks)."""
     normals = np.asarray(normals, dtype=np.float32)
     P, S = len(normals), cube.size
     m = int(min(max(int(terms), 1), S))
@@ -119,7 +120,7 @@ def diffuse_transfer(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
         idx_out[a:b] = idx
         val_out[a:b] = vals
 
-    _for_blocks(P, BLOCK_POINTS, block)
+    _for_blocks(P, block_points(cube.resolution, BLOCK_POINTS), block, tick)
     return SparseTransfer(idx_out, val_out, cube.resolution)
 
 
@@ -197,7 +198,7 @@ def triple_product_points(light: LightingApproximation, V: np.ndarray, rho: np.n
 
 def glossy_radiance(vis_bits: np.ndarray, normals: np.ndarray, view_dirs: np.ndarray,
                     cube: Cubemap, lighting: CubeLighting, material: Material,
-                    light: LightingApproximation, brdf_terms: int) -> np.ndarray:
+                    light: LightingApproximation, brdf_terms: int, tick=None) -> np.ndarray:
     """Glossy outgoing radiance by the Haar triple product, (P, 3) float32.
 
     Per point and separable term of :func:`~.brdf.specular_terms` (Fresnel and
@@ -224,5 +225,5 @@ def glossy_radiance(vis_bits: np.ndarray, normals: np.ndarray, view_dirs: np.nda
             acc += triple_product_points(light, V, rho, idx) * weight
         out[a:b] = acc
 
-    _for_blocks(P, BLOCK_POINTS // 2, block)
+    _for_blocks(P, block_points(cube.resolution, BLOCK_POINTS // 2), block, tick)
     return out

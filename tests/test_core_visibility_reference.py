@@ -234,6 +234,46 @@ def test_trace_independent_of_threads_and_chunks():
         np.testing.assert_array_equal(bits, ref)
 
 
+def test_trace_hands_on_every_chunk_and_keeps_none():
+    """With ``consume`` the rows come chunk by chunk (from worker threads, in any order),
+    together exactly the bits kept without it, and nothing is returned."""
+    rng = np.random.default_rng(22)
+    tris = _random_scene(rng)
+    pts = np.column_stack([rng.uniform(-1, 1, 150), rng.uniform(-1, 1, 150), np.zeros(150)])
+    nrm = unit(rng.normal(size=(150, 3)) * [0.3, 0.3, 1.0] + [0, 0, 1.5])
+    ref, _ = trace(tris, pts, nrm, threads=1, chunk_points=64)
+    cube = directions.cubemap(N)
+    scene = visibility.build_occluder_scene(tris)
+    for threads in (1, 4):
+        got, chunks = np.zeros_like(ref), []
+
+        def consume(start, stop, rows):
+            chunks.append((start, stop))
+            got[start:stop] = rows
+
+        out = visibility.trace_visibility(scene, pts, nrm, cube, 1e-4, chunk_points=9,
+                                          threads=threads, consume=consume)
+        assert out is None
+        assert sorted(chunks) == [(a, min(a + 9, 150)) for a in range(0, 150, 9)]
+        np.testing.assert_array_equal(got, ref)
+
+
+def test_trace_caps_the_rays_in_flight_over_the_threads(monkeypatch):
+    """The default chunk shrinks with many threads: the hemisphere rays of every thread's
+    chunk together stay within RAYS_IN_FLIGHT (temporaries bounded on any core count)."""
+    cube = directions.cubemap(N)
+    monkeypatch.setattr(visibility, "RAYS_IN_FLIGHT", 20 * cube.size)
+    scene = visibility.build_occluder_scene(wall_triangles())
+    for threads in (1, 4, 16):
+        seen = []
+        visibility.trace_visibility(
+            scene, np.zeros((3000, 3)), np.tile([0.0, 0.0, 1.0], (3000, 1)), cube, 1e-4,
+            threads=threads, consume=lambda a, b, rows: seen.append(b - a))
+        chunk = max(seen)
+        assert chunk == 8 or threads * chunk * cube.size / 2 <= visibility.RAYS_IN_FLIGHT
+        assert chunk == max(8, min(1_000_000 // cube.size, 40 // threads)), (threads, chunk)
+
+
 def test_trace_empty_points():
     bits, _ = trace(wall_triangles(), np.zeros((0, 3)), np.zeros((0, 3)))
     assert bits.shape == (0, 6 * N * N // 8)

@@ -318,3 +318,47 @@ def test_clear_leaves_nothing_the_addon_wrote(stored_file, tmp_path):
     for written in (b"prt_store", b"prt_rsl", b"PRT Visibility", b"PRT RSL",
                     run.encode(), blobs["Suzanne"][storage.VISIBILITY][:64]):
         assert written not in data, written
+
+
+def test_precompute_streams_the_visibility_and_keeps_it_only_for_a_derive():
+    """The trace's chunks go straight into each object's blob (the blob pack makes of the
+    whole array); the bits are kept only for a method that derives from them, else read
+    back from the blob."""
+    from prt_relight.core import directions, visibility
+    scene = _scene()
+    scene.prt.method = "REFERENCE"
+    job = precompute.gather(bpy.context.evaluated_depsgraph_get(), scene.prt)
+    job.run(threads=4)
+    assert all(o.kept is None and o.blob for o in job.objects)
+    pts = np.concatenate([o.points.positions for o in job.objects])
+    nrm = np.concatenate([o.points.normals for o in job.objects])
+    whole = visibility.trace_visibility(visibility.build_occluder_scene(job.occluders), pts,
+                                        nrm, directions.cubemap(job.resolution), job.offset)
+    start = 0
+    for o in job.objects:
+        rows = whole[start:start + o.points.count]
+        start += o.points.count
+        np.testing.assert_array_equal(o.bits, rows)
+        assert o.blob == storage.visibility_blob(rows, job.resolution)
+    assert "rays" in job.timings and job.stage == "writing"
+    scene.prt.method = "BLOCKS"
+    kept = precompute.gather(bpy.context.evaluated_depsgraph_get(), scene.prt)
+    kept.run()
+    for o, p in zip(kept.objects, job.objects):
+        assert o.kept is not None and o.blob == p.blob
+        np.testing.assert_array_equal(o.bits, p.bits)
+
+
+def test_in_order_writer_takes_chunks_in_any_order():
+    got = []
+    w = precompute._InOrder(lambda a, b, rows: got.append((a, b, rows[0, 0])))
+    chunks = [(a, a + 3, np.full((3, 2), a)) for a in range(0, 30, 3)]
+    for i in np.random.default_rng(0).permutation(len(chunks)):
+        w.put(*chunks[i])
+    w.drain()
+    assert [g[0] for g in got] == list(range(0, 30, 3)) and [g[2] for g in got] == \
+        list(range(0, 30, 3))
+    gap = precompute._InOrder(lambda a, b, rows: None)
+    gap.put(3, 6, np.zeros((3, 2)))
+    with pytest.raises(RuntimeError):
+        gap.drain()

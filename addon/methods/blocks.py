@@ -134,7 +134,8 @@ class BlocksMethod(Method):
         stats = core_blocks.BlocksStats()
         sources = []
         out = []
-        for st in state.objects:
+        for i, st in enumerate(state.objects):
+            state.tick(i / len(state.objects))      # progress; ESC stops here
             pts = st.points
             dv, source = self.visibility_of(st, res)
             sources.append(source)

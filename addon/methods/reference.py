@@ -27,18 +27,28 @@ class ReferenceMethod(Method):
         L = keys.environment_cubemap(state.world, state.resolution)
         env_key = keys.env_key(state.world, state.resolution)
         out = []
-        for st in state.objects:
+        n = len(state.objects)
+        for i, st in enumerate(state.objects):
             pts = st.points
+            # progress per block of points (ESC stops between them): the irradiance is
+            # the first half of an object when it is not cached, its glossy part the rest
+            tick = reference.part(state.tick, i / n, (i + 1) / n)
+            state.tick(i / n)
+            cached = []
             irradiance = keys.per_visibility(
                 _IRRADIANCE_CACHE, (st.name, id(st.bits), env_key), st.bits,
-                lambda: reference.diffuse_irradiance(st.bits, pts.normals, cube, L))
+                lambda: cached.append(1) or reference.diffuse_irradiance(
+                    st.bits, pts.normals, cube, L, reference.part(tick, 0.0, 0.5)))
+            if cached:
+                tick = reference.part(tick, 0.5, 1.0)
             view_dirs = None
             if view_dir is not None:
                 view_dirs = np.broadcast_to(np.asarray(view_dir, dtype=np.float64),
                                             pts.normals.shape)
             radiance = reference.shade_points(st.bits, pts.positions, pts.normals, pts.materials,
                                               st.materials, eye, cube, L,
-                                              irradiance=irradiance, view_dirs=view_dirs)
+                                              irradiance=irradiance, view_dirs=view_dirs,
+                                              tick=tick)
             radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
             out.append(radiance[pts.point_of_corner].astype(np.float32))
         return out

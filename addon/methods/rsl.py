@@ -235,7 +235,8 @@ class RSLMethod(Method):
         use_gpu = bool(state.settings.get("rsl_gpu", True)) and gpu_available()
         cos_tables = brdf_tables(brdf.Material())
         out = []
-        for st in state.objects:
+        for i, st in enumerate(state.objects):
+            state.tick(i / len(state.objects))      # progress; ESC stops here
             pts = st.points
             turn = st.data.get("rsl_rotation")
             ev, normals = evaluator, pts.normals

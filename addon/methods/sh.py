@@ -35,11 +35,14 @@ class SHMethod(Method):
         light = projector.coefficients(state.world, keys.env_key(state.world, 0)[0])
         out = []
         glossy = []
-        for st in state.objects:
+        n = len(state.objects)
+        for i, st in enumerate(state.objects):
             pts = st.points
+            state.tick(i / n)
             transfer = keys.per_visibility(
                 _TRANSFER_CACHE, (st.name, id(st.bits), order), st.bits,
-                lambda: sh.transfer(st.bits, pts.normals, cube, order))
+                lambda: sh.transfer(st.bits, pts.normals, cube, order,
+                                    tick=lambda f: state.tick((i + f) / n)))
             sums = sh.shade_diffuse(transfer, light)
             radiance = np.zeros_like(sums)
             for slot in np.unique(pts.materials):

@@ -305,7 +305,8 @@ class SSDFSGMethod(Method):
     def shade(self, state, eye, view_dir):
         fit, pre = self._lighting(state)
         out = []
-        for st in state.objects:
+        for i, st in enumerate(state.objects):
+            state.tick(i / len(state.objects))      # progress; ESC stops here
             field = self._field(state, st)
             pts = st.points
             rad = scene.shade_points(field.numpy, pts.normals, pts.positions, pts.materials,

@@ -66,11 +66,16 @@ class WaveletMethod(Method):
         transfer_terms = haar.keep_count(settings["wavelet_transfer_percent"] / 100.0,
                                          cube.resolution)
         out = []
-        for st in state.objects:
+        n = len(state.objects)
+        for i, st in enumerate(state.objects):
             pts = st.points
+            state.tick(i / n)
+            tick = reference.part(state.tick, i / n, (i + 1) / n)
             transfer = keys.per_visibility(
                 _TRANSFER_CACHE, (st.name, id(st.bits), transfer_terms), st.bits,
-                lambda: wavelet.diffuse_transfer(st.bits, pts.normals, cube, transfer_terms))
+                lambda: wavelet.diffuse_transfer(st.bits, pts.normals, cube, transfer_terms,
+                                                 tick=reference.part(tick, 0.0, 0.5)),
+                limit=8)
             irradiance = wavelet.diffuse_irradiance(transfer, diffuse_light)
             radiance = np.zeros((pts.count, 3), dtype=np.float32)
             for slot in np.unique(pts.materials):
@@ -85,7 +90,7 @@ class WaveletMethod(Method):
                     glossy_light = _lighting(state, L, glossy_terms)
                     radiance[sel] += wavelet.glossy_radiance(
                         st.bits[sel], pts.normals[sel], vd, cube, L, mat, glossy_light,
-                        glossy_terms)
+                        glossy_terms, tick=reference.part(tick, 0.5, 1.0))
             radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
             out.append(radiance[pts.point_of_corner].astype(np.float32))
         return out
