@@ -1,4 +1,4 @@
-"""Rotatable square lights (seed 000, Wang et al.): light decomposition, BRDF SATs,
+"""Rotatable square lights (Xu, Jia, Hu, Tai 2006): light decomposition, BRDF SATs,
 visibility distance tables and the per-vertex evaluation of eq. 5.
 
 Per vertex ``x`` and view ``wo`` the rendering integral over the environment is split

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-r"""Lighting for the SG renderer of paper 003 (Wang et al. 2009, §6).
+r"""Lighting for the SG renderer of Wang et al. 2009 (§6).
 
-Equation numbers refer to ``/work/shared/papers/003_*.txt``; SG lobes are
+Equation numbers are that paper's; SG lobes are
 ``G(i; axis, lam, mu) = mu exp(lam (i . axis - 1))`` (eq. 2, :mod:`.sg`).
 
 * :func:`fit_environment_sgs` -- the SG mixture ``L*`` of the environment used
