@@ -116,7 +116,7 @@ def main(argv=None):
     say(f"sources of the differential visibility at sync: {method.LAST_STATS['sources']}")
 
     # ---------------------------------------------------------------- SH and WAVELET
-    # the classical bases (the paper's §5 comparison) on the same scene, same resolution, against REFERENCE
+    # the classical bases (the paper's §5 comparison), same scene and resolution, vs REFERENCE
     if not args.skip_bases:
         say("")
         say("the same scene with the classical bases (F12 against REFERENCE's F12; WAVELET keeps "

@@ -1,4 +1,4 @@
-"""SG reflectance (core/sg_brdf.py, Wang et al. 2009, §4) against quadrature of the analytic BRDFs."""
+"""SG reflectance (core/sg_brdf.py, Wang et al. 2009, §4) against quadrature of analytic BRDFs."""
 
 import math
 
