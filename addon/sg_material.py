@@ -1,4 +1,4 @@
-"""SG reflectance settings per material (paper 003 §4) and the exports the SSDF_SG method needs.
+"""SG reflectance settings per material (Wang et al. 2009, §4) and the exports SSDF_SG needs.
 
 Blender side only; the numerics are in ``core/sg_brdf.py`` / ``core/sg_lighting.py``.
 

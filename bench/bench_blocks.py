@@ -1,4 +1,4 @@
-"""BLOCKS (seed 004, Inger et al. 2012) against REFERENCE on a held-out glossy scene.
+"""BLOCKS (Inger, Farbman, Lischinski 2013) against REFERENCE on a held-out glossy scene.
 
     .venv/bin/python bench/bench_blocks.py [--hdri city] [--roughness 0.25] [--directions 64]
 
@@ -116,12 +116,12 @@ def main(argv=None):
     say(f"sources of the differential visibility at sync: {method.LAST_STATS['sources']}")
 
     # ---------------------------------------------------------------- SH and WAVELET
-    # issue 5: the classical bases on the same scene, same resolution, against REFERENCE
+    # the classical bases (the paper's §5 comparison), same scene and resolution, vs REFERENCE
     if not args.skip_bases:
         say("")
         say("the same scene with the classical bases (F12 against REFERENCE's F12; WAVELET keeps "
-            "1 % of the lighting's and of each BRDF's Haar coefficients, Ng 04, and 1 % of the "
-            "lighting for the diffuse ground, Ng 03; paper: 33.5 dB at 1 %):")
+            "1 % of the lighting's and of each BRDF's Haar coefficients, Ng et al. 2004, and 1 % of "
+            "the lighting for the diffuse ground, Ng et al. 2003; paper: 33.5 dB at 1 %):")
         say(f"  {'method':22s} {'F12':>8s} {'PSNR':>9s} {'rel-L2':>9s} {'PSNR [0,1]':>10s}")
         runs = [("SH", "sh_order", v) for v in (2, 3, 4, 5)]
         runs.append(("WAVELET", "wavelet_terms", max(1, round(0.01 * 6 * args.directions ** 2))))

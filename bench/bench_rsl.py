@@ -1,4 +1,4 @@
-"""RSL (rotatable square lights, seed 000) against REFERENCE: the K table of Fig. 9/10.
+"""RSL (rotatable square lights, Xu et al. 2006) against REFERENCE: the K table of Fig. 9/10.
 
     .venv/bin/python bench/bench_rsl.py [--mesh spot.obj] [--hdri forest city]
                                         [--resolution 160x120]

@@ -1,4 +1,4 @@
-"""SSDF_SG (paper 003) against Cycles and REFERENCE, and its F12 time (issue 3 targets).
+"""SSDF_SG (Wang et al. 2009) against Cycles and REFERENCE, and its F12 time against its targets.
 
     .venv/bin/python bench/bench_ssdf_sg.py [--resolution 160x120] [--samples 512]
                                             [--glossy-samples 2048]

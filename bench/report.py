@@ -8,7 +8,7 @@
 
 Writes out/report/<scene>/index.html (images, error maps, plot, tables) and prints, per
 scene, every method/budget's per-frame time and rel-L2 against REFERENCE, then the AUTO
-check of issue 6: AUTO's error against REFERENCE and its time against the fastest single
+check: AUTO's error against REFERENCE and its time against the fastest single
 fixed method that also meets the target (relit frames of the two interleaved, same run).  ``--docs``
 copies the demo scene's images that docs/report.md shows into docs/images/report/.
 """
@@ -33,7 +33,7 @@ def _diffuse(ob, name, colour):
 
 
 def _glossy(ob, name, colour, roughness):
-    """Cycles Glossy BSDF, Beckmann (the issue 3/5 glossy material)."""
+    """Cycles Glossy BSDF, Beckmann (the glossy material of the SSDF_SG and BLOCKS benches)."""
     scenes.add_bsdf_material(ob, name, "ShaderNodeBsdfGlossy", distribution="BECKMANN",
                              Color=colour, Roughness=roughness)
 

@@ -1,4 +1,4 @@
-"""BLOCKS: locally adaptive per-block products (seed 004, Inger et al., §4) -- the batched
+"""BLOCKS: locally adaptive per-block products (Inger, Farbman, Lischinski 2013, §4) -- the batched
 evaluator of the method.  The data layout and the visibility encoding are in
 :mod:`.blocks_encoding`, the float32 microfacet lobe in :mod:`.blocks_lobe`;
 ``tests/blocks_oracle.py`` states Algorithm 1 per vertex (the oracle the tests hold this

@@ -1,4 +1,4 @@
-"""BLOCKS' data layout (seed 004, Inger et al., §4): cubemap blocks, the DCT basis and the
+"""BLOCKS' data layout (Inger, Farbman, Lischinski 2013, §4): cubemap blocks, the DCT basis and the
 differential visibility encoding (eq. 5).  No BRDF and no lighting here: the evaluator is
 :mod:`.blocks`, its float32 lobe :mod:`.blocks_lobe`.
 

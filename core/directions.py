@@ -1,6 +1,6 @@
 """Direction sets on the sphere with exact solid-angle weights.
 
-The cubemap is the discretisation every method shares (seed 004 §4: "we use a
+The cubemap is the discretisation every method shares (Inger et al. 2013, §4: "we use a
 cubemap to discretize the space of all directions").  Its texels are
 addressed as ``(face, row, col)`` and flattened in that order; ``face`` runs
 over +X, -X, +Y, -Y, +Z, -Z in *world* coordinates (Blender: Z up).
@@ -207,7 +207,7 @@ def shirley_chiu_to_hemisphere(a, b):
     to pi/4), the disk to the hemisphere by the equal-area lift
     ``z = 1 - r^2``, ``xy *= sqrt(2 - r^2)``.  Every region of the square of area
     ``A`` covers the solid angle ``A * pi / 2``.  (Shirley & Chiu 1997; the SSDF
-    images of seed 003 §5.2 live in this square.)
+    images of Wang et al. 2009, §5.2, live in this square.)
     """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
@@ -262,7 +262,7 @@ def shirley_chiu_hemisphere(resolution: int):
 
 
 def rsl_disk_to_hemisphere(px, py):
-    """The hemisphere map of seed 000 §5: ``p = sin(t)/sqrt(1+cos(t)) * (sin(f), cos(f))``.
+    """The hemisphere map of Xu et al. 2006, §5: ``p = sin(t)/sqrt(1+cos(t)) * (sin(f), cos(f))``.
 
     ``|p|^2 = 1 - cos(t)``: an equal-area (Lambert azimuthal) map of the
     hemisphere onto the unit disk, a region of area ``A`` covering ``2 A``
@@ -313,7 +313,7 @@ def _disk_strip_area(x0, x1, y0, y1):
 
 
 def rsl_hemisphere(resolution: int):
-    """N x N texels of the seed-000 disk map over [-1, 1]^2 (rows py, columns px).
+    """N x N texels of Xu et al. 2006's disk map over [-1, 1]^2 (rows py, columns px).
 
     Returns ``(directions (N*N, 3) local, solid_angles (N*N,))``: texel centres
     mapped to the hemisphere (clamped to the horizon outside the disk) and the

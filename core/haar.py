@@ -1,5 +1,5 @@
 """Haar wavelets on the cubemap: non-linear approximation (Ng et al. 2003) and
-triple product integrals (Ng et al. 2004), as surveyed in seeds 001 and 004 §3/§5.
+triple product integrals (Ng et al. 2004), the comparison basis of Inger et al. 2013, §3/§5.
 
 Transform
 ---------
@@ -47,7 +47,7 @@ coefficients by area; here the exact texel solid angle ``dw_k`` (and, for
 Lambert/BRDF shading, ``max(0, n.w_k)``) is folded into the *transport* factor,
 never into the lighting:
 
-    rho~_k = rho_k * max(0, n.w_k) * dw_k      (triple product, seed 004 eq. 2)
+    rho~_k = rho_k * max(0, n.w_k) * dw_k      (triple product, Inger et al. 2013, eq. 2)
     T_k    = V_k   * max(0, n.w_k) * dw_k      (double product, Ng 03 diffuse)
 
 so that REFERENCE's ``B = sum_k L_k V_k rho_k max(0,n.w_k) dw_k`` is

@@ -1,4 +1,4 @@
-"""Rotatable square lights (seed 000, Wang et al.): light decomposition, BRDF SATs,
+"""Rotatable square lights (Xu, Jia, Hu, Tai 2006): light decomposition, BRDF SATs,
 visibility distance tables and the per-vertex evaluation of eq. 5.
 
 Per vertex ``x`` and view ``wo`` the rendering integral over the environment is split
@@ -111,9 +111,8 @@ def _fit_error(A, E, Q, M):
     of the symmetric difference, averaged over the rotations 0, π/8, π/4, 3π/8.  That
     area is estimated from the region's second moment about its centre
     ``J = A - |M|²/A``: ``A (0.1 + 1.9 (1 - min(1, A²/2πJ)))``, from about ``0.1 A``
-    for disk-like regions to ``2 A`` for long ones.  (Measured on the plane the mean is
-    0.18 A for a disk and 0.22 A for a square; the smaller constant rendered better
-    on the tuning HDRIs: sunset 4.5 % vs 4.8 % at 30 lights, courtyard 3.4 % vs 4.8 %.)
+    for disk-like regions to ``2 A`` for long ones.  (The plane's own mean, 0.18 A for a disk,
+    rendered worse on the tuning HDRIs: docs/measurements.md, RSL.)
     """
     var = max(Q - E * E / A, 0.0)
     J = max(A - (M[0] * M[0] + M[1] * M[1] + M[2] * M[2]) / A, 1e-300)

@@ -1,7 +1,7 @@
 """Spherical Gaussians (Wang, Ren, Gong, Snyder, Guo 2009, "All-Frequency
-Rendering of Dynamic, Spatially-Varying Reflectance"; paper 003).
+Rendering of Dynamic, Spatially-Varying Reflectance").
 
-Equation numbers below refer to that paper (``/work/shared/papers/003_*.txt``).
+Equation numbers below refer to that paper.
 
 Representation (eq. 2)::
 

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-r"""Microfacet BRDFs as spherical-Gaussian mixtures (paper 003, Wang et al. 2009, §4).
+r"""Microfacet BRDFs as spherical-Gaussian mixtures (Wang et al. 2009, §4).
 
-Equation numbers refer to ``/work/shared/papers/003_*.txt``.  Every SG lobe is
+Equation numbers are that paper's.  Every SG lobe is
 ``G(i; axis, lam, mu) = mu * exp(lam * (i . axis - 1))`` (eq. 2, :mod:`.sg`).
 
 The split of eq. 8

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-r"""Lighting for the SG renderer of paper 003 (Wang et al. 2009, §6).
+r"""Lighting for the SG renderer of Wang et al. 2009 (§6).
 
-Equation numbers refer to ``/work/shared/papers/003_*.txt``; SG lobes are
+Equation numbers are that paper's; SG lobes are
 ``G(i; axis, lam, mu) = mu exp(lam (i . axis - 1))`` (eq. 2, :mod:`.sg`).
 
 * :func:`fit_environment_sgs` -- the SG mixture ``L*`` of the environment used
@@ -114,8 +114,8 @@ def fit_environment_sgs(cube_radiance, cube: Cubemap, max_lobes: int = 8, tol: f
        them is :func:`fit_scene_amplitudes`).
     3. Stop when the relative L2 error of that irradiance is <= ``tol``, or at
        ``max_lobes``.  Lobes are only added, so the radiance residual never grows
-       (a joint non-linear refinement of axes and sharpnesses was tried and left:
-       it diverged on the bundled 'sunrise' HDRI, 220 % irradiance error).
+       (no joint non-linear refinement of axes and sharpnesses: it can diverge;
+       docs/measurements.md, SSDF_SG).
 
     Returns ``(axes (J, 3), lam (J,), mu (J, 3), rel_error)`` in the cube's
     space (texture space for an unrotated world).  A black world gives J = 0.

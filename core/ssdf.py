@@ -1,5 +1,5 @@
 """Spherical signed distance functions of visibility and their PCA (Wang, Ren,
-Gong, Snyder, Guo 2009, paper 003, §5.1-5.2, eq. 23-24).
+Gong, Snyder, Guo 2009, §5.1-5.2, eq. 23-24).
 
 Per shading point the SSDF is an ``n x n`` image over the upper hemisphere of
 the point's local frame, parameterised by the Shirley-Chiu concentric square

@@ -1,4 +1,4 @@
-"""SSDF_SG shading: eq. 39, 41, 42, 43 of paper 003 (Wang, Ren, Gong, Snyder, Guo 2009)
+"""SSDF_SG shading: eq. 39, 41, 42, 43 of Wang, Ren, Gong, Snyder, Guo 2009
 evaluated in numpy -- the reference for ``shaders/ssdf_sg_frag.glsl``.
 
 Per shading point with normal ``n`` (SSDF frame ``t, b, n`` from

@@ -181,8 +181,8 @@ def fit_scene_lobes(transfer, irradiance, weights, mu):
     amplitudes ``mu`` (J, 3) or (M, J, 3).  One RGB amplitude per (cosine lobe, light
     lobe): each lobe of the clamped-cosine mixture gets its own mix of the same light
     lobes (same per-pixel cost), with a ridge toward ``mu`` that fades as the points
-    outnumber the unknowns (:data:`PRIOR_WEIGHT`; a small object: 5 points held 8 % ->
-    3.8 % off on the tests' occluder)."""
+    outnumber the unknowns (:data:`PRIOR_WEIGHT`), so an object with few points stays
+    determined (docs/measurements.md, scene-fitted amplitudes)."""
     T = np.asarray(transfer, np.float64)
     E = np.asarray(irradiance, np.float64)
     W = np.asarray(weights, np.float64)

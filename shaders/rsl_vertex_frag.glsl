@@ -1,4 +1,4 @@
-/* RSL per-vertex shading (seed 000 Fig. 8, eq. 5): one texel per shading point.
+/* RSL per-vertex shading (Xu et al. 2006, Fig. 8, eq. 5): one texel per shading point.
  *
  * For every rotatable square light: its centre in the vertex frame (t, b, n) gives the
  * square in the disk map p = sqrt(1 - cos) (sin f, cos f); the visibility average comes

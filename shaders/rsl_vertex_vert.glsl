@@ -1,4 +1,4 @@
-/* RSL per-vertex pass (seed 000 §5.2): a full-screen quad over the point texture. */
+/* RSL per-vertex pass (Xu et al. 2006, §5.2): a full-screen quad over the point texture. */
 void main()
 {
   gl_Position = vec4(ndc, 0.0, 1.0);

@@ -1,4 +1,4 @@
-/* Spherical-Gaussian helpers of paper 003 (Wang et al. 2009): functions only, no main.
+/* Spherical-Gaussian helpers of Wang et al. 2009: functions only, no main.
  *
  * GLSL twin of core/sg.py (product eq. 5, inner product eq. 4 in the stable form),
  * core/sg_brdf.py (specular_lobes: NDF lobe -> spherical warp eq. 17-21 -> M_o at the

@@ -1,4 +1,4 @@
-"""The test oracle of BLOCKS: Algorithm 1 of Inger et al. (seed 004) for one vertex, as
+"""The test oracle of BLOCKS: Algorithm 1 of Inger et al. 2013 for one vertex, as
 readably as it can be stated (the per-block lighting of §4.3, ProjectBRDF of §4.1 with
 its sample-based selection rule, the four cases).  ``core/blocks.py`` evaluates the same
 cases batched over many vertices; tests hold the two to each other.

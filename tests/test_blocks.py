@@ -1,4 +1,4 @@
-"""BLOCKS (seed 004 §4): layout, differential visibility, lighting bases, Algorithm 1."""
+"""BLOCKS (Inger et al. 2013, §4): layout, differential visibility, lighting bases, Algorithm 1."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""BLOCKS (seed 004) as a method: batched Algorithm 1 against REFERENCE and against the
+"""BLOCKS (Inger et al. 2013) as a method: batched Algorithm 1 against REFERENCE and against the
 per-vertex integrator, and the add-on path (precompute, stored varint visibility, F12)."""
 
 from __future__ import annotations

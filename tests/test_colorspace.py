@@ -1,4 +1,4 @@
-"""The world image's colour space: read as Cycles reads it (issue 19 item 2).
+"""The world image's colour space: read as Cycles reads it.
 
 A texture is converted from its image's colour space to the blend file's working space;
 Non-Color is read as stored and the view transform (a display transform) never matters.

@@ -558,7 +558,7 @@ def test_load_equirect_missing(tmp_path):
 
 
 # --------------------------------------------------------------------------- #
-# hemisphere parameterizations (Shirley-Chiu square for SSDFs, seed-000 disk)
+# hemisphere parameterizations (Shirley-Chiu square for SSDFs, Xu et al. 2006's disk)
 # --------------------------------------------------------------------------- #
 
 def _uniform_hemisphere(count, seed=7):

@@ -3,7 +3,7 @@ filter against Cycles' at a silhouette: slow, small scenes.
 
 Thresholds: Cycles' own noise at these sample counts is about 1 % rel-L2, and
 per-vertex shading of a tessellated scene is 1.6-3.7 % off per-pixel shading
-(see DEVELOPERS notes), so 3 % is the issue's bound for the diffuse scene.
+(docs/measurements.md), so 3 % is the bound for the diffuse scene.
 """
 
 from __future__ import annotations
@@ -117,7 +117,7 @@ def _suzanne_on_ground_with_ssdf_sg(hdri, node_type, **inputs):
 
 
 def test_ssdf_sg_glossy_within_six_percent_of_cycles(tmp_path):
-    """Issue 3's glossy goal on a small scene: a Beckmann Glossy BSDF (roughness 0.3)
+    """SSDF_SG's glossy goal on a small scene: a Beckmann Glossy BSDF (roughness 0.3)
     Suzanne on a diffuse ground under 'city' (a small sun), SSDF_SG's per-pixel F12
     against Cycles (direct light, 2048 spp: glossy highlights of a small sun are noisy)."""
     suz = _suzanne_on_ground_with_ssdf_sg("city", "ShaderNodeBsdfGlossy",
@@ -136,7 +136,7 @@ def test_ssdf_sg_glossy_within_six_percent_of_cycles(tmp_path):
 
 
 def test_ssdf_sg_diffuse_within_three_percent_of_cycles(tmp_path):
-    """Issue 3's diffuse goal on a small scene: diffuse Suzanne (subdivision 2) on a 48²
+    """SSDF_SG's diffuse goal on a small scene: diffuse Suzanne (subdivision 2) on a 48²
     ground under 'sunset', SSDF_SG's F12 (scene-fitted lighting, SG7 cosine) against
     Cycles 512 spp and against REFERENCE (measured 2.2 % / 1.9 %; 2.3 % / 2.0 % without the
     default Min Occlusion Kept)."""

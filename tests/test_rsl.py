@@ -1,4 +1,4 @@
-"""Rotatable square lights (core/rsl.py, seed 000) against brute force and REFERENCE."""
+"""Rotatable square lights (core/rsl.py, Xu et al. 2006) against brute force and REFERENCE."""
 
 from __future__ import annotations
 

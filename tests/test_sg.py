@@ -1,4 +1,4 @@
-"""Spherical Gaussians (core/sg.py, paper 003) against numerical quadrature."""
+"""Spherical Gaussians (core/sg.py, Wang et al. 2009) against numerical quadrature."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""SG reflectance (core/sg_brdf.py, paper 003 §4) against quadrature of the analytic BRDFs."""
+"""SG reflectance (core/sg_brdf.py, Wang et al. 2009, §4) against quadrature of analytic BRDFs."""
 
 import math
 
@@ -188,7 +188,7 @@ def test_grazing_views_stay_finite_and_bounded():
 
 
 def test_cycles_glossy_beckmann_03_within_6_percent():
-    """The issue's target: Cycles' Glossy BSDF (Beckmann, roughness 0.3) through
+    """The target: Cycles' Glossy BSDF (Beckmann, roughness 0.3) through
     sg_material_from_brdf, against core.brdf (Cycles' evaluation) by quadrature,
     views 0-80 deg, the SG clamped cosine of eq. 40 NOT used (exact cosine)."""
     cm = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.8, 0.8), roughness=0.3,

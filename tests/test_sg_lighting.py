@@ -1,4 +1,4 @@
-"""SG lighting (core/sg_lighting.py, paper 003 §6) against brute force and quadrature."""
+"""SG lighting (core/sg_lighting.py, Wang et al. 2009, §6) against brute force and quadrature."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""SSDF (paper 003 §5.1-5.2, eq. 23) and its PCA (eq. 24): against brute force,
+"""SSDF (Wang et al. 2009, §5.1-5.2, eq. 23) and its PCA (eq. 24): against brute force,
 closed forms and the PCA error budget."""
 
 import math

@@ -1,4 +1,4 @@
-"""SSDF_SG numpy evaluation (paper 003 eq. 39, 41-43) against REFERENCE and quadrature."""
+"""SSDF_SG numpy evaluation (Wang et al. 2009, eq. 39, 41-43) against REFERENCE and quadrature."""
 
 import math
 
