@@ -1,7 +1,7 @@
 """Blender scene -> core arrays: meshes, materials, world lighting.
 
 Everything here reads Blender data and returns plain numpy/core objects (meshes,
-materials and their image textures, lamps, the world); it never writes to the scene.  Problems a user can fix are raised as
+materials, lamps, the world); it never writes to the scene.  Problems a user can fix are raised as
 :class:`ExportError` with a message meant for the UI; things we can render
 approximately are collected as warnings.
 """
@@ -256,103 +256,6 @@ def object_materials(ob_eval, warnings: list, colours=None) -> list:
     mats = [export_material(slot.material, warnings, colours.get(i))
             for i, slot in enumerate(ob_eval.material_slots)]
     return mats or [DEFAULT_MATERIAL]
-
-
-# --------------------------------------------------------------------------- textures
-
-def _image_array(image) -> np.ndarray | None:
-    """(H, W, 4) float32 of a Blender image, row 0 at v = 0, colour data linearised."""
-    w, h = image.size
-    if (w == 0 or h == 0) and not _try_load(image):
-        return None
-    w, h = image.size
-    if w == 0 or h == 0:
-        return None
-    buf = np.empty(w * h * image.channels, dtype=np.float32)
-    image.pixels.foreach_get(buf)
-    px = buf.reshape(h, w, image.channels)
-    if image.channels < 4:
-        px = np.concatenate([px, np.ones((h, w, 4 - image.channels), np.float32)], axis=2)
-    if image.colorspace_settings.name == "sRGB" and not image.is_float:
-        px[..., :3] = envmap.srgb_to_linear(px[..., :3])
-    return px
-
-
-def _linked_image(socket):
-    """(image node, uv map name) when an Image Texture feeds ``socket`` directly."""
-    if socket is None or not socket.is_linked:
-        return None
-    node = socket.links[0].from_node
-    if node.type != "TEX_IMAGE" or node.image is None:
-        return None
-    uv = ""
-    vec = node.inputs.get("Vector")
-    if vec is not None and vec.is_linked and vec.links[0].from_node.type == "UVMAP":
-        uv = vec.links[0].from_node.uv_map
-    return node, uv
-
-
-def export_material_textures(blender_material) -> dict:
-    """Image textures wired straight into the Principled "Base Color" / "Roughness"
-    inputs and the image of a Normal Map node wired into "Normal": ``{"base_color":
-    (pixels (H, W, 4) linear, uv_map name), "roughness": ..., "normal": (pixels, uv_map,
-    strength)}`` (only the keys present).  Pixels are Blender's order (row 0 at v = 0);
-    sample them per shading point with ``core.sg_brdf.sample_texture(pixels, uv)``, make
-    the per-point material with ``core.sg_brdf.with_textures(material, base_color=...,
-    roughness=...)`` (roughness r -> slope ``a = max(r^2, ALPHA_MIN)``) and turn
-    normal-map texels into normals with ``core.sg_brdf.tangent_space_normals``."""
-    out = {}
-    if blender_material is None:
-        return out
-    node = _surface_node(blender_material)
-    if node is None or node.type != "BSDF_PRINCIPLED":
-        return out
-    for key, name in (("base_color", "Base Color"), ("roughness", "Roughness")):
-        hit = _linked_image(node.inputs.get(name))
-        if hit:
-            px = _image_array(hit[0].image)
-            if px is not None:
-                out[key] = (px, hit[1])
-    nsock = node.inputs.get("Normal")
-    if nsock is not None and nsock.is_linked and nsock.links[0].from_node.type == "NORMAL_MAP":
-        nm = nsock.links[0].from_node
-        hit = _linked_image(nm.inputs.get("Color"))
-        if hit and nm.space == "TANGENT":
-            px = _image_array(hit[0].image)
-            strength = float(nm.inputs["Strength"].default_value)
-            if px is not None:
-                out["normal"] = (px, nm.uv_map or hit[1], strength)
-    return out
-
-
-def mesh_uv_tangents(ob_eval, uv_map: str | None = None):
-    """Per-corner UVs, world tangents and bitangent signs (``mesh.calc_tangents``)."""
-    mesh = ob_eval.to_mesh()
-    try:
-        layers = mesh.uv_layers
-        if not len(layers):
-            return None
-        layer = layers.get(uv_map) if uv_map else layers.active
-        layer = layer or layers.active
-        nc = len(mesh.loops)
-        uv = np.empty(nc * 2, dtype=np.float32)
-        layer.data.foreach_get("uv", uv)
-        try:
-            mesh.calc_tangents(uvmap=layer.name)
-        except RuntimeError:
-            return uv.reshape(-1, 2), None, None
-        tan = np.empty(nc * 3, dtype=np.float32)
-        mesh.loops.foreach_get("tangent", tan)
-        sign = np.empty(nc, dtype=np.float32)
-        mesh.loops.foreach_get("bitangent_sign", sign)
-    finally:
-        ob_eval.to_mesh_clear()
-    M = np.array(ob_eval.matrix_world, dtype=np.float64)[:3, :3]
-    t = tan.reshape(-1, 3).astype(np.float64) @ M.T
-    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-30)
-    if np.linalg.det(M) < 0:
-        sign = -sign
-    return uv.reshape(-1, 2).astype(np.float64), t, sign.astype(np.float64)
 
 
 # --------------------------------------------------------------------------- lamps

@@ -10,10 +10,9 @@ Blender side only; the numerics are in ``core/sg_brdf.py`` / ``core/sg_lighting.
 * Panel "PRT Reflectance" in Material properties for the PRT_RELIGHT engine.
 
 Functions for the method module (``addon/methods/ssdf_sg.py``):
-:func:`export_sg_material` and :func:`uses_blender_material`.  The image textures of a
-material, the per-corner UV tangents and the lamps are exported by
-``addon/scene_export.py`` (``export_material_textures``, ``mesh_uv_tangents``,
-``export_lamps``).
+:func:`export_sg_material` and :func:`uses_blender_material`.  A material's textured
+inputs (colour, roughness, metallic, specular, normal and bump maps) are read by
+``addon/texture_export.py``, the lamps by ``addon/scene_export.py`` (``export_lamps``).
 """
 
 from __future__ import annotations

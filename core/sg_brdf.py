@@ -104,7 +104,7 @@ __all__ = [
     "fit_anisotropic_ndf", "iso_ndf_sg", "specular_lobes", "specular_brdf",
     "fresnel_coefficients", "fresnel_eq14", "diffuse_albedo", "diffuse_view_weight",
     "sg_material_from_brdf", "ISO_TABLE_ALPHA", "ISO_NDF_TABLE", "iso_table_fit",
-    "MODEL_INDEX", "FRESNEL_INDEX", "sample_texture", "tangent_space_normals", "with_textures",
+    "MODEL_INDEX", "FRESNEL_INDEX",
 ]
 
 MODELS = ("COOK_TORRANCE", "BLINN_PHONG", "WARD", "WARD_ANISO", "ASHIKHMIN_SHIRLEY")
@@ -833,62 +833,3 @@ def without_glossy(material: SGMaterial) -> SGMaterial:
     whose glossy lobes are drawn elsewhere (per pixel, :func:`.brdf.is_sharp`)."""
     return SGMaterial(model="COOK_TORRANCE", diffuse=diffuse_albedo(material),
                       specular=(0.0, 0.0, 0.0), roughness=material.roughness, fresnel="NONE")
-
-
-# --------------------------------------------------------------------------- textures
-
-def sample_texture(pixels, uv):
-    """Bilinear lookup with repeat wrapping (Blender's Image Texture defaults, Linear
-    interpolation): ``pixels`` (H, W, C) with row 0 at v = 0 (Blender's order, bottom
-    row first), ``uv`` (P, 2).  Texel centres sit at ``((i + 0.5)/W, (j + 0.5)/H)``.
-    Returns (P, C) float64.  Used for per-point textured SG parameters (base colour,
-    roughness, normal maps) exported by ``addon/sg_material.py``."""
-    img = np.asarray(pixels, dtype=np.float64)
-    if img.ndim == 2:
-        img = img[..., None]
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-    if not (np.all(np.isfinite(img)) and np.all(np.isfinite(uv))):
-        raise ValueError("texture pixels/uv have NaN/Inf values")
-    H, W = img.shape[:2]
-    x = uv[:, 0] * W - 0.5
-    y = uv[:, 1] * H - 0.5
-    x0 = np.floor(x).astype(np.int64)
-    y0 = np.floor(y).astype(np.int64)
-    fx = (x - x0)[:, None]
-    fy = (y - y0)[:, None]
-    xa, xb = x0 % W, (x0 + 1) % W
-    ya, yb = y0 % H, (y0 + 1) % H
-    return ((img[ya, xa] * (1 - fx) + img[ya, xb] * fx) * (1 - fy)
-            + (img[yb, xa] * (1 - fx) + img[yb, xb] * fx) * fy)
-
-
-def tangent_space_normals(normal_pixels_rgb, normals, tangents, bitangent_sign, strength=1.0):
-    """Blender Normal Map node (tangent space): ``n' = normalize(x t + y b + z n)`` with
-    ``(x, y, z) = 2 rgb - 1``, ``b = sign (n x t)``, blended with ``n`` by ``strength``.
-    All inputs per point: rgb (P, 3), normals/tangents (P, 3), sign (P,).  Returns (P, 3)."""
-    rgb = np.asarray(normal_pixels_rgb, dtype=np.float64)[:, :3]
-    n = _unit(normals, "normals")
-    t = _unit(tangents, "tangents")
-    b = np.asarray(bitangent_sign, dtype=np.float64)[:, None] * np.cross(n, t)
-    c = 2.0 * rgb - 1.0
-    m = c[:, 0:1] * t + c[:, 1:2] * b + c[:, 2:3] * n
-    m = n + float(strength) * (m - n)
-    ln = np.linalg.norm(m, axis=1, keepdims=True)
-    return np.where(ln > 1e-12, m / np.where(ln > 0, ln, 1.0), n)
-
-
-def with_textures(material: SGMaterial, base_color=None, roughness=None) -> SGMaterial:
-    """Per-point copy of ``material`` with sampled texture values (:func:`sample_texture`):
-    ``base_color`` (P, 3|4) replaces ``diffuse`` (the Principled base colour, also the
-    metal F0), ``roughness`` (P,) or (P, C) (first channel; Blender roughness r) sets the
-    slope ``a = max(r^2, ALPHA_MIN)`` of the isotropic models."""
-    out = SGMaterial.__new__(SGMaterial)
-    out.__dict__.update(material.__dict__)
-    if base_color is not None:
-        out.diffuse = np.maximum(_rgb_array(np.asarray(base_color, dtype=np.float64)[:, :3],
-                                            "base_color"), 0.0)
-    if roughness is not None:
-        r = np.asarray(roughness, dtype=np.float64)
-        r = r[:, 0] if r.ndim == 2 else r
-        out.roughness = _positive_array(np.clip(r, 0.0, 1.0) ** 2, "roughness", ALPHA_MIN)
-    return out

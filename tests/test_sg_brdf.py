@@ -488,65 +488,22 @@ def test_glsl_prefiltered_lookup_matches_numpy():
     assert np.allclose(out[:, 0, :3], ref, rtol=1e-4, atol=1e-5), np.max(np.abs(out[:, 0, :3] - ref))
 
 
-def test_sample_texture_bilinear_repeat():
-    img = np.arange(12, dtype=float).reshape(3, 4, 1)
-    # texel centres return their value; midway between two columns the mean; wraps at u = 0
-    uv = np.array([[0.125, 0.5 / 3], [0.25, 0.5 / 3], [0.0, 0.5 / 3], [0.375, 1.5 / 3]])
-    got = sg_brdf.sample_texture(img, uv)[:, 0]
-    assert np.allclose(got, [0.0, 0.5, 1.5, 5.0])
-
-
-def test_tangent_space_normal_map_identity_and_tilt():
-    n = np.array([[0.0, 0.0, 1.0]])
-    t = np.array([[1.0, 0.0, 0.0]])
-    flat = sg_brdf.tangent_space_normals([[0.5, 0.5, 1.0]], n, t, [1.0])
-    assert np.allclose(flat, n)
-    tilt = sg_brdf.tangent_space_normals([[1.0, 0.5, 0.5]], n, t, [1.0])
-    assert np.allclose(tilt, [[1.0, 0.0, 0.0]])
-
-
 # --------------------------------------------------------------------------- Blender side
 
 @pytest.mark.usefixtures("registered_addon")
-def test_blender_material_export_textures_and_tangents():
+def test_blender_material_export_and_the_reflectance_panel():
     import bpy
 
-    from prt_relight.addon import scene_export, sg_material
+    from prt_relight.addon import sg_material
 
     from . import blender_scene as bs
 
     bs.reset()
-    # Principled with image textures on Base Color / Roughness and a tangent-space normal map
-    mat = bs.bsdf_material("SGTex", "ShaderNodeBsdfPrincipled", **{"Metallic": 0.2, "IOR": 1.45})
-    nt = mat.node_tree
-    bsdf = [n for n in nt.nodes if n.type == "BSDF_PRINCIPLED"][0]
-    base = np.zeros((2, 4, 3), np.float32)
-    base[..., 0] = np.linspace(0, 1, 4)
-    rough = np.full((2, 4, 3), 0.6, np.float32)
-    nrm = np.tile(np.array([0.5, 0.5, 1.0], np.float32), (2, 4, 1))
-    for key, px in (("Base Color", base), ("Roughness", rough)):
-        tex = nt.nodes.new("ShaderNodeTexImage")
-        tex.image = bs.float_image(f"SG {key}", px)
-        nt.links.new(tex.outputs["Color"], bsdf.inputs[key])
-    ntex = nt.nodes.new("ShaderNodeTexImage")
-    ntex.image = bs.float_image("SG normal", nrm)
-    nmap = nt.nodes.new("ShaderNodeNormalMap")
-    nmap.inputs["Strength"].default_value = 0.7
-    nt.links.new(ntex.outputs["Color"], nmap.inputs["Color"])
-    nt.links.new(nmap.outputs["Normal"], bsdf.inputs["Normal"])
-
+    mat = bs.bsdf_material("SGMat", "ShaderNodeBsdfPrincipled", **{"Metallic": 0.2, "IOR": 1.45})
     assert mat.prt_sg.use_blender_material
     sgm = sg_material.export_sg_material(mat, [])
     assert sgm.model == "COOK_TORRANCE" and sgm.fresnel == "PRINCIPLED"
     assert np.isclose(float(sgm.metallic), 0.2) and np.isclose(float(sgm.ior), 1.45)
-    texs = scene_export.export_material_textures(mat)
-    assert set(texs) == {"base_color", "roughness", "normal"}
-    px, uvname = texs["base_color"]
-    assert px.shape == (2, 4, 4) and np.allclose(px[0, :, 0], np.linspace(0, 1, 4))
-    assert np.isclose(texs["normal"][2], 0.7)
-    # per-point sampling in core
-    uv = np.array([[0.125, 0.25], [0.875, 0.75]])
-    assert np.allclose(sg_brdf.sample_texture(px, uv)[:, 0], [0.0, 1.0])
 
     # the sliders: own model when "Use Blender Material" is off
     s = mat.prt_sg
@@ -559,15 +516,6 @@ def test_blender_material_export_textures_and_tangents():
     s.model = "COOK_TORRANCE"
     s.roughness = 0.5
     assert np.isclose(float(sg_material.export_sg_material(mat).roughness), 0.25)
-
-    # tangents of a UV-mapped plane: along +X of the object (rotated by its matrix)
-    bpy.ops.mesh.primitive_plane_add(size=2.0, rotation=(0.0, 0.0, 0.5))
-    ob = bpy.context.object
-    dg = bpy.context.evaluated_depsgraph_get()
-    uv, tan, sign = scene_export.mesh_uv_tangents(ob.evaluated_get(dg))
-    assert uv.shape == (4, 2) and tan.shape == (4, 3) and sign.shape == (4,)
-    assert np.allclose(tan, [math.cos(0.5), math.sin(0.5), 0.0], atol=1e-5)
-    assert np.allclose(np.abs(sign), 1.0)
     # panel is registered for the PRT engine
     assert hasattr(bpy.types, "PRT_PT_sg_material")
     assert sg_material.PRT_PT_sg_material.COMPAT_ENGINES == {"PRT_RELIGHT"}
@@ -614,18 +562,3 @@ def test_sharp_lobes_lambda_1e4_to_1e5_by_cap_quadrature(alpha):
         print(f"a={alpha} view {deg}: lam_W {lam[0, 0]:.0f}, SG/exact {got / ref:.4f}")
         # 88 deg: a = 0.005 hits the LAMBDA_MAX cap (warp 5.7e5), the lobe keeps its energy
         assert abs(got / ref - 1.0) < (0.02 if deg < 60 else 0.06 if deg < 80 else 0.25)
-
-
-def test_with_textures_gives_per_point_materials():
-    base = sg_brdf.SGMaterial(model="COOK_TORRANCE", roughness=0.3, specular=(0.5, 0.5, 0.5))
-    tex = sg_brdf.with_textures(base, base_color=[[0.1, 0.2, 0.3, 1.0], [0.4, 0.5, 0.6, 1.0]],
-                                roughness=[[0.2, 0, 0, 1], [0.6, 0, 0, 1]])
-    assert np.allclose(tex.diffuse, [[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]])
-    assert np.allclose(tex.roughness, [0.04, 0.36])
-    n = np.tile([0.0, 0.0, 1.0], (2, 1))
-    v = _views([20, 50])
-    _, lam, _ = sg_brdf.specular_lobes(tex, n, v)
-    for p, a in enumerate((0.04, 0.36)):
-        _, l1, _ = sg_brdf.specular_lobes(sg_brdf.SGMaterial(roughness=a), n[p:p + 1], v[p:p + 1])
-        assert np.allclose(lam[p], l1[0])
-    assert np.isclose(base.roughness, 0.3)          # the original is untouched
