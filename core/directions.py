@@ -261,16 +261,17 @@ def shirley_chiu_hemisphere(resolution: int):
     return dirs, np.full(n * n, 2.0 * np.pi / (n * n))
 
 
-def rsl_disk_to_hemisphere(px, py):
+def rsl_disk_to_hemisphere(px, py, whole_sphere: bool = False):
     """The hemisphere map of Xu et al. 2006, §5: ``p = sin(t)/sqrt(1+cos(t)) * (sin(f), cos(f))``.
 
     ``|p|^2 = 1 - cos(t)``: an equal-area (Lambert azimuthal) map of the
     hemisphere onto the unit disk, a region of area ``A`` covering ``2 A``
-    steradians.  Points outside the disk are clamped to the horizon.
+    steradians.  Points outside the disk are clamped to the horizon, or with
+    ``whole_sphere`` continue below it (``|p|^2`` up to 2, the opposite pole).
     """
     px = np.asarray(px, dtype=np.float64)
     py = np.asarray(py, dtype=np.float64)
-    r2 = np.minimum(px * px + py * py, 1.0)
+    r2 = np.minimum(px * px + py * py, 2.0 if whole_sphere else 1.0)
     cos_t = 1.0 - r2
     sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
     phi = np.arctan2(px, py)                              # p = r (sin f, cos f)
