@@ -649,8 +649,8 @@ class AutoMethod(Method):
             sub = _substate(state, [one.obj], m.id, prop, value, quiet=True)
             n_a = one.obj.points.count
             if few is None:                     # measured whole: timed whole
-                relit = relit_seconds(m, sub)
-                return auto_choice.linear_time(n_a, relit, n_a, relit, pts.count)
+                whole = relit_seconds(m, sub)
+                return auto_choice.linear_time(n_a, whole, n_a, whole, pts.count)
             small = _substate(state, [few.obj], m.id, prop, value, quiet=True)
             first = _substate(state, [point.obj], m.id, prop, value, quiet=True)
             shade_seconds(m, small)             # fills its per-visibility caches
