@@ -2,7 +2,7 @@
 
 import bpy
 
-from . import lights, methods, storage
+from . import dynamic, lights, methods, storage
 from .operators import RUNNING
 from .runtime import LAST_MESSAGES
 
@@ -25,6 +25,8 @@ def draw_settings(layout, context):
     if prt.light_sources > 0 and not lights.LAST_SOURCES:
         sub.label(text="None found: the whole World goes through the method")
     col.prop(prt, "resolution")
+    if any(o.prt.dynamic for o in scene.objects if o.type == "MESH"):
+        col.prop(prt, "field_detail")
     col.prop(prt, "ray_offset")
     col.prop(prt, "supersampling")
     sub = col.row()
@@ -48,6 +50,10 @@ def draw_settings(layout, context):
     if ob is not None and ob.type == "MESH":
         box = layout.box()
         data = ob.prt
+        box.prop(data, "dynamic")
+        if storage.has(ob, dynamic.FIELD):
+            box.label(text=f"Shadow fields: {storage.stored_bytes(ob, dynamic.FIELD) / 2**20:.1f}"
+                           " MiB stored", icon="PHYSICS")
         if not storage.has(ob, storage.VISIBILITY):
             box.label(text=f"'{ob.name}': not precomputed", icon="MESH_DATA")
         else:

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import directions, mesh as core_mesh, reference, visibility
-from . import methods, scene_export, storage
+from ..core import directions, mesh as core_mesh, reference, rigid, shadow_fields, visibility
+from . import dynamic, methods, scene_export, storage
 
 
 @dataclass
@@ -33,6 +33,14 @@ class ObjectJob:
     coarse_warning: str = ""
     #: the traced bits, kept when the job's method derives from them
     kept: np.ndarray | None = field(default=None, repr=False)
+    #: a dynamic object (shadow fields): its own triangles, its world matrix now, the box
+    #: it reaches over the animation, and its field's blob (made in run())
+    dynamic: bool = False
+    own: np.ndarray | None = field(default=None, repr=False)
+    matrix: np.ndarray | None = None
+    reach: tuple | None = None
+    extra: dict = field(default_factory=dict, repr=False)
+    field_note: str = ""
 
     @property
     def bits(self) -> np.ndarray | None:
@@ -67,6 +75,8 @@ class PrecomputeJob:
     stage: str = ""
     #: AUTO's choice is left to the caller (the modal operator runs it in steps)
     defer_choice: bool = False
+    #: the dynamic objects' field detail (core.shadow_fields.DETAIL)
+    field_detail: str = "HIGH"
 
     @property
     def point_count(self):
@@ -74,10 +84,6 @@ class PrecomputeJob:
 
     # -------------------------------------------------------------- run (no bpy)
     def run(self, threads=None):
-        t0 = time.perf_counter()
-        self.stage = "building the BVH"
-        scene = visibility.build_occluder_scene(self.occluders)
-        t1 = time.perf_counter()
         cube = directions.cubemap(self.resolution)
         pts = np.concatenate([o.points.positions for o in self.objects])
         nrm = np.concatenate([o.points.normals for o in self.objects])
@@ -106,13 +112,35 @@ class PrecomputeJob:
                 kept[start:stop] = bits
             stream.put(start, stop, bits)
 
-        stats = {}
-        visibility.trace_visibility(scene, pts, nrm, cube, self.offset, threads=threads,
-                                    progress=progress, cancel=lambda: self.cancel_requested,
-                                    stats=stats, consume=consume)
-        del scene
+        # static objects against the static occluders; a dynamic object against itself
+        # only (what other objects cast on it comes from the fields at its current pose)
+        groups = [(self.occluders, 0, int(sum(o.points.count for o in self.objects
+                                                if not o.dynamic)))]
+        groups += [(o.own, int(starts[i]), int(starts[i + 1]))
+                   for i, o in enumerate(self.objects) if o.dynamic]
+        stats = {"rays": 0}
+        bvh = 0.0
+        t1 = time.perf_counter()
+        for tris, lo, hi in groups:
+            if hi <= lo:
+                continue
+            self.stage = "building the BVH"
+            tb = time.perf_counter()
+            scene = visibility.build_occluder_scene(tris)
+            bvh += time.perf_counter() - tb
+            self.stage = "tracing"
+            got = {}
+            visibility.trace_visibility(
+                scene, pts[lo:hi], nrm[lo:hi], cube, self.offset, threads=threads,
+                progress=lambda done, count, lo=lo: progress(lo + done, total),
+                cancel=lambda: self.cancel_requested, stats=got,
+                consume=lambda a, b, bits, lo=lo: consume(lo + a, lo + b, bits))
+            stats["rays"] += got["rays"]
+            del scene
         stream.drain()
         t2 = time.perf_counter()
+        self._shadow_fields(cube, threads)
+        t1 += bvh
         self.stage = "checking the tessellation"
         for i, o in enumerate(self.objects):
             o.blob = writers[i].finish()
@@ -120,7 +148,7 @@ class PrecomputeJob:
             o.coarse_warning = coarse_receiver_warning(o, cube, sky[starts[i]:starts[i + 1]])
             self.progress_done = int(starts[i + 1])
         t3 = time.perf_counter()
-        self.timings.update(build_bvh=t1 - t0, rays=t2 - t1, ray_count=stats["rays"],
+        self.timings.update(build_bvh=bvh, rays=t2 - t1, ray_count=stats["rays"],
                             rays_per_second=stats["rays"] / max(t2 - t1, 1e-9),
                             tessellation_check=t3 - t2, encode=stream.seconds)
         self.stage = f"deriving {method.label}"
@@ -128,6 +156,33 @@ class PrecomputeJob:
         self.derived = method.derive(self)
         self.timings["derive"] = time.perf_counter() - t3
         self.stage = "writing"
+
+    def _shadow_fields(self, cube, threads):
+        """Each dynamic object's occluder field (its own frame: the world at this pose)
+        and the static scene's field over where it goes (Zhou et al. 2005)."""
+        dyn = [o for o in self.objects if o.dynamic]
+        if not dyn:
+            return
+        t0 = time.perf_counter()
+        layout, samples = shadow_fields.DETAIL[self.field_detail]
+        for k, o in enumerate(dyn):
+            self.stage = f"shadow field of '{o.name}' ({k + 1}/{len(dyn)})"
+            cancel = lambda: self.cancel_requested     # noqa: E731
+            field = shadow_fields.build_occluder_field(o.own, layout, threads, cancel)
+            static = None
+            if len(self.occluders):
+                lo, hi = o.reach
+                static = shadow_fields.build_static_field(self.occluders, lo, hi, cube, samples,
+                                                          threads, cancel)
+            data = shadow_fields.DynamicData(
+                field=field, static=static, matrix=o.matrix,
+                rotation=rigid.rotation_part(o.matrix),
+                probe=rigid.local_probe(o.arrays.positions, o.matrix), offset=self.offset)
+            o.extra[dynamic.FIELD] = storage.pack(*shadow_fields.dynamic_arrays(data))
+            o.field_note = (f"{o.name}: field {field.nbytes / 2**20:.1f} MiB (PCA error "
+                            f"{field.error:.1%})" + (f", static field {static.nbytes / 2**20:.1f}"
+                                                     " MiB" if static is not None else ""))
+        self.timings["shadow_fields"] = time.perf_counter() - t0
 
 
 class _InOrder:
@@ -194,7 +249,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     warnings = []
     scene_export.export_world(scene, warnings)       # validate lighting early
     objects = []
-    tri_blocks = []
+    tri_blocks, all_tris = [], []
     empty = []
     skipped = []
     hidden = scene_export.hidden_in_viewport(depsgraph.view_layer, depsgraph)
@@ -216,20 +271,30 @@ def gather(depsgraph, settings) -> PrecomputeJob:
         elif fixed:
             warnings.append(f"'{ob.original.name}': {fixed} corner normal(s) repaired")
         points = core_mesh.shading_points(arrays)
-        objects.append(ObjectJob(ob.original.name, arrays, points, core_mesh.fingerprint(arrays)))
-        tri_blocks.append(occluders)
+        job = ObjectJob(ob.original.name, arrays, points, core_mesh.fingerprint(arrays))
+        if ob.original.prt.dynamic:
+            job.dynamic, job.own = True, occluders
+            job.matrix = np.array(ob.matrix_world, dtype=np.float64)
+        else:
+            tri_blocks.append(occluders)
+        all_tris.append(occluders)
+        objects.append(job)
     if empty:
         warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
     warnings += scene_export.instance_warning(skipped)
     if not objects:
         raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")
-    occluders = np.concatenate(tri_blocks)
-    diag = core_mesh.bounding_diagonal(occluders.reshape(-1, 3))
+    occluders = np.concatenate(tri_blocks) if tri_blocks else np.zeros((0, 3, 3))
+    diag = core_mesh.bounding_diagonal(np.concatenate(all_tris).reshape(-1, 3))
     offset = float(settings.ray_offset) * max(diag, 1e-6)
+    # static objects first: each trace group is one run of rows
+    objects.sort(key=lambda o: o.dynamic)
+    dynamic.set_reach(scene, [o for o in objects if o.dynamic], occluders)
     return PrecomputeJob(int(settings.resolution), offset, objects, occluders, warnings,
                          method=settings.method, settings={
                              name: getattr(settings, name)
-                             for name in methods.scene_properties()})
+                             for name in methods.scene_properties()},
+                         field_detail=settings.field_detail)
 
 
 def commit(scene, job: PrecomputeJob):
@@ -259,7 +324,7 @@ def commit_steps(scene, job: PrecomputeJob):
         ob.prt.precompute_id = run_id
         ob.prt.coarse_warning = o.coarse_warning
         # what earlier runs stored (other methods' data too) is dropped with them
-        storage.replace_all(ob, {storage.VISIBILITY: o.blob})
+        storage.replace_all(ob, {storage.VISIBILITY: o.blob, **o.extra})
         yield (i + 1) / steps
     storage.remove_legacy()
     scene.prt.precomputed_resolution = job.resolution

@@ -1,8 +1,8 @@
 """Scene and object settings (``scene.prt``, ``object.prt``)."""
 
 import bpy
-from bpy.props import (EnumProperty, FloatProperty, IntProperty, PointerProperty,
-                       StringProperty)
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty,
+                       PointerProperty, StringProperty)
 
 from . import methods
 from .drawing import redraw_viewports
@@ -42,6 +42,12 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
                                    subtype="FACTOR",
                                    description="A source must carry this share of the "
                                                "World's energy", update=redraw_viewports)
+    field_detail: EnumProperty(
+        name="Field Detail", default="HIGH",
+        items=[("LOW", "Low", "8 shells of 6×8² samples, 16² maps: fastest, coarse shadows"),
+               ("MEDIUM", "Medium", "12 shells of 6×12² samples, 24² maps"),
+               ("HIGH", "High", "16 shells of 6×16² samples, 32² maps (Xu et al. 2006)")],
+        description="Sampling of the dynamic objects' shadow fields (precomputed with them)")
     # Written by the precompute operator (read-only in the UI).
     precomputed_resolution: IntProperty(name="Precomputed Directions", default=0)
     last_report: StringProperty(name="Last Precompute", default="")
@@ -63,6 +69,11 @@ class PRTObjectData(bpy.types.PropertyGroup):
     precompute_id: StringProperty(name="Precompute ID", default="",
                                   description="Unique per precompute: identifies the stored data")
     coarse_warning: StringProperty(name="Tessellation Note", default="")
+    dynamic: BoolProperty(name="Dynamic", default=False,
+                          description="Precompute a shadow field for this object, so that it "
+                                      "can move, turn and scale uniformly (keyframed or by "
+                                      "hand) with live shadows on itself and on others, "
+                                      "with no new precompute")
 
 
 CLASSES = (PRTSceneSettings, PRTObjectData)

@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..core import brdf as core_brdf, directions, envmap, mesh as core_mesh, visibility
-from . import keys, lights, methods, scene_export, storage, texture_export
+from . import dynamic, keys, lights, methods, scene_export, storage, texture_export
 from ..core.visibility import Cancelled  # noqa: F401  (raised by FrameState.tick)
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
@@ -88,7 +88,7 @@ def _with_base(state, value: float):
 
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "data",
-                 "fingerprint", "closed_side", "textures")
+                 "fingerprint", "closed_side", "textures", "dynamic")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -99,9 +99,12 @@ class ObjectState:
         self.points = points
         self.materials = materials
         self.bits = bits
-        #: "ok", "stale" (changed since its precompute), "missing" (never precomputed) or
-        #: "unshadowed" (hidden from renders, drawn in the viewport only, never traced)
+        #: "ok", "stale" (changed since its precompute), "missing" (never precomputed),
+        #: "unshadowed" (hidden from renders, drawn in the viewport only, never traced) or
+        #: "posed" (its bits are the product with dynamic objects' fields: addon.dynamic)
         self.status = status
+        #: a dynamic object's stored fields and motion since the precompute (addon.dynamic)
+        self.dynamic = None
         self.data = {}               # per-method data loaded in Method.sync
         #: core.mesh.closed_side: which side of a closed mesh is its (black) inside
         self.closed_side = closed_side(arrays, fingerprint) if fingerprint else 0
@@ -206,6 +209,7 @@ class FrameState:
             data = orig.prt
             bits = None
             status = "ok"
+            moving = None
             if orig.hide_render:
                 status = "unshadowed"          # viewport only: never traced, casts nothing
             elif storage.has(orig, storage.VISIBILITY) and data.resolution == self.resolution:
@@ -216,6 +220,8 @@ class FrameState:
                     unreadable += [w + " (drawn without shadows)" for w in why]
                 elif bits is None:
                     status = "stale"
+                elif data.dynamic or storage.has(orig, dynamic.FIELD):
+                    status, moving = dynamic.check(ob, arrays.positions, self.note)
                 elif data.fingerprint != fingerprint:
                     status = "stale"   # same topology: old data, correctly indexed
                 elif run and data.precompute_id != run:
@@ -235,6 +241,7 @@ class FrameState:
                 self.warnings.append(data.coarse_warning)
             st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
+            st.dynamic = moving if status == "ok" else None
             # the original material per slot, for methods with their own material settings
             st.data["material_names"] = [
                 slot.material.original.name if slot.material is not None else None
@@ -262,6 +269,7 @@ class FrameState:
             self.warnings.append("Objects were removed or hidden from renders since the "
                                  "precompute: their shadows are stale, press Precompute")
         self.objects = objects
+        dynamic.apply(self)       # the fields at the current poses (before methods sync)
         lamp_warnings = []
         lamps = scene_export.export_lamps(depsgraph, lamp_warnings)
         # lamps are drawn per pixel (addon/lights.py), except the point and spot lamps of a

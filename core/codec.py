@@ -32,7 +32,7 @@ MAGIC = b"PRTB"
 FORMAT = 1
 _FIXED = struct.Struct("<4sHI")
 #: element types a blob may hold (explicit byte order)
-DTYPES = ("|u1", "|i1", "<u2", "<i2", "<u4", "<i4", "<i8", "<f4", "<f8", "|b1")
+DTYPES = ("|u1", "|i1", "<u2", "<i2", "<u4", "<i4", "<i8", "<f2", "<f4", "<f8", "|b1")
 CODECS = ("zlib", "zlib-shuffle")
 LEVEL = 6
 

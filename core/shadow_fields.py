@@ -65,6 +65,14 @@ class FieldLayout:
             np.arange(self.shells) / (self.shells - 1))
 
 
+#: layouts by detail: (occluder field, static field samples); HIGH is Xu et al. 2006 §5.1's
+DETAIL = {
+    "LOW": (FieldLayout(shells=8, face=8, map=16, eigen=4), 1024),
+    "MEDIUM": (FieldLayout(shells=12, face=12, map=24, eigen=8), 4096),
+    "HIGH": (FieldLayout(shells=16, face=16, map=32, eigen=8), 16384),
+}
+
+
 def shell_directions(face: int) -> np.ndarray:
     """(6, face, face, 3) unit directions of a shell's samples: cubemap texel centres
     (face, row, col) as :func:`.directions.cubemap` orders them."""
@@ -251,14 +259,17 @@ def _cone_pairs(rel_dist, rel_dir, texel_dirs, radius, margin):
     return np.nonzero(cos >= cos_min[:, None])
 
 
-def occluder_fractions(field: OccluderField, points, texel_dirs, half, margin: float = 0.05):
+def occluder_fractions(field: OccluderField, points, texel_dirs, half, margin: float = 0.05,
+                       normals=None):
     """Visible fraction of each (point, texel) the field's object may block, by eq. 9 at
     the eight nearest samples (each in its own frame), blended trilinearly (Xu et al. 2006
     §4.3.2).  ``points`` (P, 3) and ``texel_dirs`` (D, 3) in the field's (object) frame,
     ``half`` (D,) eq. 9's half side per texel (disk-map units).
 
     Returns ``(point_idx, texel_idx, fraction)``: only pairs inside the bounding sphere's
-    cone of a point within the outermost shell (every other pair is 1)."""
+    cone of a point within the outermost shell (every other pair is 1), and with
+    ``normals`` (P, 3) only texels above each point's horizon (the others are not
+    shaded)."""
     L = field.layout
     q = np.asarray(points, dtype=np.float64).reshape(-1, 3) - field.centre
     d = np.linalg.norm(q, axis=1)
@@ -269,6 +280,10 @@ def occluder_fractions(field: OccluderField, points, texel_dirs, half, margin: f
     q, d = q[near], d[near]
     u = q / np.maximum(d, 1e-30)[:, None]
     pi, ki = _cone_pairs(d, -u, np.asarray(texel_dirs, np.float64), field.radius, margin)
+    if normals is not None:
+        nrm = np.asarray(normals, np.float64).reshape(-1, 3)[near]
+        up = np.einsum("qj,qj->q", nrm[pi], np.asarray(texel_dirs, np.float64)[ki]) > 0.0
+        pi, ki = pi[up], ki[up]
     if len(pi) == 0:
         return empty
     # shell coordinate (log radius) and face-grid coordinates of each point
@@ -452,3 +467,178 @@ def turned_bits(bits: np.ndarray, cube: Cubemap, turn) -> np.ndarray:
     vis = np.unpackbits(np.asarray(bits, np.uint8), axis=1, count=cube.size)
     return np.packbits(vis[:, idx], axis=1)
 
+
+
+# --------------------------------------------------------------------------- #
+# Poses, and the product of the fields at the current one
+# --------------------------------------------------------------------------- #
+
+#: largest spread of a motion's singular values (relative) that is still a uniform scale
+SCALE_TOLERANCE = 1e-4
+#: a texel is blocked when less than this fraction of it is visible (fields are blended,
+#: visibility bits are binary)
+BLOCKED_BELOW = 0.5
+
+
+def relative_motion(then, now, tolerance: float = SCALE_TOLERANCE):
+    """How an object moved from its 4x4 world matrix ``then`` (the precompute's) to
+    ``now``: ``(T, R, s)`` with ``x_now = T x_then`` for its points, ``T``'s linear part
+    ``s R`` (R a rotation).  None when it is no rigid motion with uniform scale
+    (non-uniform scale, shear, a mirror)."""
+    M0 = np.asarray(then, np.float64).reshape(4, 4)
+    M1 = np.asarray(now, np.float64).reshape(4, 4)
+    try:
+        T = M1 @ np.linalg.inv(M0)
+    except np.linalg.LinAlgError:
+        return None
+    A = T[:3, :3]
+    sv = np.linalg.svd(A, compute_uv=False)
+    if not np.all(np.isfinite(sv)) or sv.min() <= 0.0 or \
+            sv.max() - sv.min() > tolerance * sv.max():
+        return None
+    s = float(sv.mean())
+    R = A / s
+    if np.linalg.det(R) <= 0.0:
+        return None
+    U, _, Vt = np.linalg.svd(R)
+    return T, U @ Vt, s
+
+
+def to_field_frame(T, points) -> np.ndarray:
+    """Current world points taken back to the field's frame (the world at the precompute
+    pose): ``T^-1 x``."""
+    Ti = np.linalg.inv(np.asarray(T, np.float64))
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    return p @ Ti[:3, :3].T + Ti[:3, 3]
+
+
+def clear_bits(bits: np.ndarray, rows, texels) -> np.ndarray:
+    """A copy of packed visibility rows with the (row, texel) pairs set to blocked."""
+    out = np.array(bits, dtype=np.uint8, copy=True)
+    rows = np.asarray(rows, np.int64)
+    texels = np.asarray(texels, np.int64)
+    if len(rows):
+        mask = (~(np.uint8(0x80) >> (texels & 7).astype(np.uint8))).astype(np.uint8)
+        np.bitwise_and.at(out, (rows, texels >> 3), mask)
+    return out
+
+
+def block_by_field(bits: np.ndarray, field: OccluderField, points, cube: Cubemap, T, R,
+                   half=None, chunk: int = 2048, normals=None) -> np.ndarray:
+    """``bits`` (P, D/8) of current world ``points`` with what the moved occluder blocks
+    cleared: the occluder's field (traced in the frame of its precompute pose) read at
+    the points taken back to that frame, along the texels' directions turned back
+    (``R^T w``); a texel less than :data:`BLOCKED_BELOW` visible is blocked.  Rows of
+    points beyond its outermost shell are unchanged (the same array when none is near);
+    with ``normals`` only texels above a point's horizon are looked up."""
+    pts = to_field_frame(T, points)
+    nrm = None if normals is None else np.asarray(normals, np.float64) @ np.asarray(R,
+                                                                                 np.float64)
+    dirs = np.asarray(cube.directions, np.float64) @ np.asarray(R, np.float64)
+    half = texel_half_sides(cube) if half is None else half
+    rows, texels = [], []
+    for a in range(0, len(pts), chunk):
+        p, k, frac = occluder_fractions(field, pts[a:a + chunk], dirs, half,
+                                        normals=None if nrm is None else nrm[a:a + chunk])
+        hit = frac < BLOCKED_BELOW
+        rows.append(p[hit] + a)
+        texels.append(k[hit])
+    rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    if len(rows) == 0:
+        return bits
+    return clear_bits(bits, rows, np.concatenate(texels))
+
+
+def static_bits(field: StaticField, scene, origins, points, chunk: int = 1024) -> np.ndarray:
+    """Packed visibility (P, D/8) the static scene leaves at ``points`` (their ray
+    ``origins`` for the corner test): the blend of the grid corners each point sees,
+    blocked below :data:`BLOCKED_BELOW`."""
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    org = np.asarray(origins, np.float64).reshape(-1, 3)
+    out = np.zeros((len(pts), field.bits.shape[1]), np.uint8)
+    for a in range(0, len(pts), chunk):
+        ids, w = static_corners(field, pts[a:a + chunk])
+        if scene is not None:
+            w = seen_corners(scene, field, org[a:a + chunk], ids, w)
+        vis = static_visibility(field, ids, w)
+        out[a:a + chunk] = np.packbits(vis >= BLOCKED_BELOW, axis=1)
+    return out
+
+
+def in_field_box(field: StaticField, points) -> bool:
+    """Whether every point lies within the static field's grid (else its samples are
+    extrapolated from the nearest ones)."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    hi = field.origin + field.spacing * (np.asarray(field.dims) - 1)
+    return bool(np.all(p >= field.origin - 1e-9) and np.all(p <= hi + 1e-9))
+
+
+# --------------------------------------------------------------------------- #
+# Storage form (core.codec blobs)
+# --------------------------------------------------------------------------- #
+
+@dataclass
+class DynamicData:
+    """What a dynamic object stores besides its own visibility: its occluder field, the
+    static scene's field where it goes (None without static occluders), its pose at the
+    precompute (4x4 ``matrix``; ``rotation`` and ``probe`` as :mod:`.rigid` stores them)
+    and the ray offset the trace used."""
+    field: OccluderField
+    static: StaticField | None
+    matrix: np.ndarray
+    rotation: np.ndarray
+    probe: np.ndarray
+    offset: float
+
+    @property
+    def nbytes(self) -> int:
+        return self.field.nbytes + (self.static.nbytes if self.static is not None else 0)
+
+
+def dynamic_arrays(data: DynamicData) -> tuple[dict, dict]:
+    """``(arrays, meta)`` for :func:`core.codec.pack`."""
+    f, L = data.field, data.field.layout
+    arrays = {"means": f.means, "bases": f.bases, "coeffs": f.coeffs,
+              "centre": np.asarray(f.centre, np.float64),
+              "matrix": np.asarray(data.matrix, np.float64).reshape(4, 4),
+              "rotation": np.asarray(data.rotation, np.float64).reshape(3, 3),
+              "probe": np.asarray(data.probe, np.float64).reshape(-1, 3)}
+    meta = {"radius": float(f.radius), "error": float(f.error), "offset": float(data.offset),
+            "layout": [L.shells, L.inner, L.outer, L.face, L.map, L.eigen]}
+    if data.static is not None:
+        s = data.static
+        arrays["static_bits"] = s.bits
+        arrays["static_origin"] = np.asarray(s.origin, np.float64)
+        meta["static"] = {"spacing": float(s.spacing), "dims": [int(v) for v in s.dims],
+                          "resolution": int(s.resolution)}
+    return arrays, meta
+
+
+def dynamic_of_arrays(arrays: dict, meta: dict) -> DynamicData:
+    """The inverse of :func:`dynamic_arrays`; ValueError when it does not fit together."""
+    try:
+        shells, inner, outer, face, m, eigen = meta["layout"]
+        layout = FieldLayout(int(shells), float(inner), float(outer), int(face), int(m),
+                             int(eigen))
+        field = OccluderField(centre=arrays["centre"], radius=float(meta["radius"]),
+                              layout=layout, means=arrays["means"], bases=arrays["bases"],
+                              coeffs=arrays["coeffs"], error=float(meta.get("error", 0.0)))
+        n, M, k = layout.face, layout.map, layout.eigen
+        if (field.means.shape != (layout.shells, 6, 2, 2, M * M)
+                or field.bases.shape != (layout.shells, 6, 2, 2, k, M * M)
+                or field.coeffs.shape != (layout.shells, 6, n, n, k)):
+            raise ValueError("occluder field arrays do not match their layout")
+        static = None
+        if "static" in meta:
+            sm = meta["static"]
+            dims = tuple(int(v) for v in sm["dims"])
+            static = StaticField(origin=arrays["static_origin"], spacing=float(sm["spacing"]),
+                                 dims=dims, resolution=int(sm["resolution"]),
+                                 bits=arrays["static_bits"])
+            if static.bits.shape != (int(np.prod(dims)), 6 * static.resolution ** 2 // 8):
+                raise ValueError("static field arrays do not match their grid")
+        return DynamicData(field=field, static=static, matrix=arrays["matrix"],
+                           rotation=arrays["rotation"], probe=arrays["probe"],
+                           offset=float(meta["offset"]))
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"shadow field incomplete ({exc})") from None

@@ -208,6 +208,8 @@ class RSLMethod(Method):
     def sync(self, state):
         import bpy
         for st in state.objects:
+            if st.status == "posed":    # bits with dynamic objects' fields: derived from them
+                continue
             ob = bpy.data.objects.get(st.name)
             got = storage.load(ob, BLOB, _STORED, _stored_tables, state.note)
             if got is None or len(got[0]) != st.points.count:
