@@ -161,10 +161,15 @@ def test_marking_or_unmarking_dynamic_after_the_precompute_is_stale():
 
 
 @pytest.mark.slow
-def test_keyframed_object_against_cycles(tmp_path):
+@pytest.mark.parametrize("sky", ["sunrise", "sun"])
+def test_keyframed_object_against_cycles(tmp_path, sky):
     """Precomputed at frame 1, rendered at frame 24 after the cube moved and turned
-    (keyframes): REFERENCE's F12 against Cycles' direct light at that frame."""
+    (keyframes): REFERENCE's F12 against Cycles' direct light at that frame, under a
+    soft HDRI and under a one-pixel sun over a dim sky (its shadow drawn per pixel)."""
     scene, cube = _scene(detail="HIGH", hdri="sunrise")
+    if sky == "sun":
+        img = bs.sun_image(512, 256, (0.4, -0.3, 0.8), 2e4) + np.float32(0.05)
+        bs.add_world(image=bs.float_image("sun", img))
     scene.prt.light_sources = 8
     bs.add_camera(location=(0.0, -5.0, 4.0), rotation=(0.9, 0.0, 0.0))
     bs.set_resolution(64, 48)
