@@ -353,13 +353,27 @@ def test_turned_bits_match_visibility_traced_at_turned_pose():
 @pytest.mark.parametrize("kw", [
     dict(shells=1), dict(face=0), dict(face=7), dict(map=3),
     dict(inner=0.0), dict(inner=-0.1), dict(inner=6.0), dict(inner=7.0, outer=6.0),
-    dict(inner=float("nan")),
+    dict(inner=float("nan")), dict(outer=float("inf")), dict(eigen=-1),
 ])
 def test_field_layout_rejects_bad_values(kw):
     """A layout that cannot sample (one shell, odd or empty face, tiny map, shells not
-    0 < inner < outer) is refused when it is made, not during a trace."""
+    0 < inner < outer < inf, negative eigen count) is refused when it is made, not after
+    a trace."""
     with pytest.raises(ValueError):
         sf.FieldLayout(**kw)
+
+
+def test_mean_only_field_reads_back():
+    """``eigen=0`` keeps only each segment's mean: a valid field whose tables are the
+    means and whose error is that of the means against the traced VDTs."""
+    tri = _boxes(L_BOXES)
+    field = sf.build_occluder_field(tri, sf.FieldLayout(shells=2, face=4, map=8, eigen=0),
+                                    threads=2)
+    ids, ref = _traced_tables(field, tri)
+    tab = field.tables(ids)
+    assert tab.shape == ref.shape
+    assert field.error == pytest.approx(
+        math.sqrt(((tab - ref) ** 2).sum() / (ref ** 2).sum()), rel=0.02)
 
 
 def test_field_layout_radii():
