@@ -48,7 +48,8 @@ def _outside(points, boxes, pad=0.02):
 
 def _rotation(seed):
     """A random rotation matrix (uniform unit quaternion)."""
-    w, x, y, z = (q := np.random.default_rng(seed).normal(size=4)) / np.linalg.norm(q)
+    q = np.random.default_rng(seed).normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
@@ -112,8 +113,7 @@ def l_field():
 # --------------------------------------------------------------------------- 1. occluder field
 
 def test_occluder_fractions_match_exact_cast(l_field):
-    """Eq. 9 at the eight nearest samples agrees with the exact texel fractions seen from
-    receivers between 0.5 r and 5 r (the blocked/unblocked decision and the mean error)."""
+    """Eq. 9 fractions at 0.5-5 r match exact texel casts: the method's accuracy claim."""
     tri, field = l_field
     scene = build_occluder_scene(tri)
     rng = np.random.default_rng(1)
@@ -140,9 +140,7 @@ def test_occluder_fractions_match_exact_cast(l_field):
 
 
 def test_occluder_pairs_cover_every_blocked_texel(l_field):
-    """No texel outside the returned cone pairs is blocked in the exact cast, with the
-    margin of an 8-texel cubemap and with the default margin at 32 (the smallest
-    resolution the add-on offers)."""
+    """No blocked texel lies outside the cone pairs (else its shadow is silently lost)."""
     tri, field = l_field
     scene = build_occluder_scene(tri)
     rng = np.random.default_rng(2)
@@ -151,11 +149,13 @@ def test_occluder_pairs_cover_every_blocked_texel(l_field):
     d = field.radius * np.exp(rng.uniform(math.log(0.5), math.log(5.9), len(u)))
     pts = field.centre + u * d[:, None]
     pts = pts[_outside(pts, L_BOXES)]
-    for res, margin, count in ((8, _texel_radius(directions.cubemap(8)), 100), (32, 0.05, 16)):
+    # an 8-texel cubemap needs the margin widened to its texel radius (0.175 rad); the
+    # default 0.05 rad covers a 32-texel one (0.044 rad), the smallest the add-on offers
+    for res, kw, count in ((8, {"margin": _texel_radius(directions.cubemap(8))}, 100),
+                           (32, {}, 16)):
         cube = directions.cubemap(res)
         p = pts[:count]
         exact = _exact_fractions(scene, p, res)
-        kw = {} if res == 32 else {"margin": margin}
         pi, ki, _ = sf.occluder_fractions(field, p, cube.directions,
                                           sf.texel_half_sides(cube), **kw)
         listed = np.zeros(exact.shape, bool)
@@ -165,8 +165,7 @@ def test_occluder_pairs_cover_every_blocked_texel(l_field):
 
 
 def test_occluder_casts_nothing_beyond_outer_shell(l_field):
-    """Points beyond the outermost shell (6 r) get no pairs, though rays from there still
-    meet the object: the field's stated cut-off."""
+    """Beyond the outer shell no pairs come back, though the object still blocks: the cut-off."""
     tri, field = l_field
     cube = directions.cubemap(8)
     u = directions.fibonacci_sphere(20)
@@ -205,8 +204,7 @@ def _traced_tables(field, tri):
 
 
 def test_pca_error_falls_with_eigen_and_reaches_half_precision():
-    """The reported error is the true relative RMS of the stored tables against the traced
-    VDTs; it falls as eigenvectors are added and at full rank only float16 remains."""
+    """Reported error is the true RMS; it falls with eigen to float16 level at full rank."""
     tri = _boxes(L_BOXES)
     errors = {}
     for k in (1, 2, 4, 16):     # 16 samples per segment (face 8): 16 is the full rank
@@ -223,8 +221,7 @@ def test_pca_error_falls_with_eigen_and_reaches_half_precision():
 
 
 def test_tables_equal_traced_vdt_at_full_rank():
-    """At full rank ``tables(ids)`` returns the VDT of the map traced at each sample
-    (shell, face, row, col) within float16 rounding, in any id order."""
+    """At full rank tables(ids) are the traced maps' VDTs (id decoding, frames, PCA)."""
     tri = _boxes(L_BOXES)
     field = sf.build_occluder_field(tri, sf.FieldLayout(shells=3, face=8, map=16, eigen=16),
                                     threads=2)
@@ -253,8 +250,7 @@ def static_scene():
 
 
 def test_static_field_near_corners_matches_exact(static_scene):
-    """At the grid corners the field's visibility is the exact cast there (flat index and
-    positions agree); near the corners the blend agrees with the exact cast (>= 97 %)."""
+    """Static field is exact at its corners (indexing) and close to exact cast near them."""
     tri, cube, field, scene = static_scene
     pos = field.positions()
     assert len(pos) == np.prod(field.dims) == len(field.bits)
@@ -276,9 +272,7 @@ def test_static_field_near_corners_matches_exact(static_scene):
 
 
 def test_seen_corners_drops_corners_behind_wall_and_under_ground(static_scene):
-    """Corners under the ground or behind the wall get weight zero (as the segment test
-    says, computed here from the planes), the rest are renormalised; near the ground and
-    the wall this brings the blend close to the exact cast."""
+    """Corners under the ground/behind the wall get weight 0, rest renormalised; blend improves."""
     tri, cube, field, scene = static_scene
     pos = field.positions()
     rng = np.random.default_rng(5)
@@ -307,8 +301,7 @@ def test_seen_corners_drops_corners_behind_wall_and_under_ground(static_scene):
 
 
 def test_seen_corners_keeps_plain_weights_when_no_corner_is_seen(static_scene):
-    """A point shut in a closed box sees no corner: it keeps the plain trilinear weights
-    instead of dividing by zero."""
+    """A point that sees no corner keeps the plain weights (no division by zero)."""
     tri, cube, field, _ = static_scene
     p = np.array([[0.7, 0.3, 0.9]])
     shut = build_occluder_scene(_box(p[0] - 0.05, p[0] + 0.05))
@@ -319,8 +312,7 @@ def test_seen_corners_keeps_plain_weights_when_no_corner_is_seen(static_scene):
 # --------------------------------------------------------------------------- 4. turned bits
 
 def test_turned_bits_match_visibility_traced_at_turned_pose():
-    """An object's own visibility traced at pose 0 and turned by R matches the visibility
-    traced at the turned pose (nearest texel: >= 97 % of texels); turning by R^T does not."""
+    """Bits turned by R match a trace at the turned pose (>= 97 %); turning by R^T does not."""
     boxes = L_BOXES + (((-1.0, -0.5, 0.3), (-0.8, 0.5, 0.8)),)
     tri = _boxes(boxes)
     rng = np.random.default_rng(7)
@@ -356,16 +348,13 @@ def test_turned_bits_match_visibility_traced_at_turned_pose():
     dict(inner=float("nan")), dict(outer=float("inf")), dict(eigen=-1),
 ])
 def test_field_layout_rejects_bad_values(kw):
-    """A layout that cannot sample (one shell, odd or empty face, tiny map, shells not
-    0 < inner < outer < inf, negative eigen count) is refused when it is made, not after
-    a trace."""
+    """Unusable layouts are refused when made, not after (or silently during) a trace."""
     with pytest.raises(ValueError):
         sf.FieldLayout(**kw)
 
 
 def test_mean_only_field_reads_back():
-    """``eigen=0`` keeps only each segment's mean: a valid field whose tables are the
-    means and whose error is that of the means against the traced VDTs."""
+    """eigen=0 (means only) is a valid field whose error is its true RMS against traced VDTs."""
     tri = _boxes(L_BOXES)
     field = sf.build_occluder_field(tri, sf.FieldLayout(shells=2, face=4, map=8, eigen=0),
                                     threads=2)
@@ -377,15 +366,14 @@ def test_mean_only_field_reads_back():
 
 
 def test_field_layout_radii():
-    """Shell radii run from inner r to outer r, evenly spaced in log radius."""
+    """Shell radii run from inner r to outer r, evenly spaced in log radius (§5.1)."""
     L = sf.FieldLayout(shells=5, inner=0.5, outer=8.0)
     r = L.radii(2.0)
     np.testing.assert_allclose(r, [1.0, 2.0, 4.0, 8.0, 16.0])
 
 
 def test_bounding_sphere_ignores_non_finite_vertices():
-    """NaN/inf vertices (Embree drops them too) do not move the centre or the radius; all
-    non-finite gives an empty sphere."""
+    """NaN/inf vertices (Embree drops them) move neither centre nor radius."""
     good = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 1.0]])
     bad = np.array([[np.nan, 1.0, 1.0], [np.inf, 0.0, 0.0], [0.0, -np.inf, 0.0]])
     c, r = sf.bounding_sphere(np.concatenate([good[:1], bad, good[1:]]))
