@@ -54,10 +54,14 @@ class FieldLayout:
     eigen: int = 8            # PCA components per segment
 
     def __post_init__(self):
-        if self.shells < 2 or self.face < 2 or self.face % 2 or self.map < 4:
+        if self.shells < 2 or self.face < 2 or self.face % 2:
             raise ValueError("a field needs >= 2 shells and an even face of >= 2 samples")
-        if not 0.0 < self.inner < self.outer:
-            raise ValueError("field shells need 0 < inner < outer")
+        if self.map < 4:
+            raise ValueError("a field's maps need >= 4 texels a side")
+        if self.eigen < 0:
+            raise ValueError("a field keeps >= 0 eigenvectors per segment")
+        if not 0.0 < self.inner < self.outer < math.inf:
+            raise ValueError("field shells need 0 < inner < outer < inf")
 
     def radii(self, radius: float) -> np.ndarray:
         """The shells' radii, evenly spaced in log radius."""
