@@ -302,29 +302,32 @@ def occluder_fractions(field: OccluderField, points, texel_dirs, half, margin: f
     c0 = np.minimum(col.astype(np.int64), n - 2)
     r0 = np.minimum(row.astype(np.int64), n - 2)
     fc, fr = col - c0, row - r0
-    frames = sample_frames(n).reshape(-1, 3, 3)
-    w_dirs = np.asarray(texel_dirs, np.float64)[ki]                # (Q, 3)
-    hk = np.asarray(half, np.float64).reshape(-1)
-    hk = hk[ki] if hk.size > 1 else np.full(len(ki), float(hk[0]))
-    out = np.zeros(len(pi), dtype=np.float64)
-    for ds, ws in ((0, 1.0 - fs), (1, fs)):
-        for dr, wr in ((0, 1.0 - fr), (1, fr)):
-            for dc, wc in ((0, 1.0 - fc), (1, fc)):
-                w = ws * wr * wc                                          # (P,)
-                in_shell = ((face * n + r0 + dr) * n + c0 + dc)           # (P,) within a shell
+    frames = sample_frames(n).reshape(-1, 3, 3).astype(np.float32)
+    w_dirs = np.asarray(texel_dirs, np.float32)[ki]                # (Q, 3)
+    hk = np.asarray(half, np.float32).reshape(-1)
+    hk = hk[ki] if hk.size > 1 else np.full(len(ki), float(hk[0]), np.float32)
+    out = np.zeros(len(pi), dtype=np.float32)
+    fs, fr, fc = (v.astype(np.float32) for v in (fs, fr, fc))
+    for dr, wr in ((0, 1.0 - fr), (1, fr)):
+        for dc, wc in ((0, 1.0 - fc), (1, fc)):
+            # the sample's frame is the same on every shell: the map position is shared
+            in_shell = ((face * n + r0 + dr) * n + c0 + dc)           # (P,) within a shell
+            loc = np.einsum("qij,qj->qi", frames[in_shell[pi]], w_dirs)
+            rho = np.sqrt(loc[:, 0] ** 2 + loc[:, 1] ** 2)
+            r = np.sqrt(np.maximum(0.0, 1.0 - np.clip(loc[:, 2], -1.0, 1.0)))
+            scale = np.where(rho > 1e-12, r / np.maximum(rho, 1e-12), 0.0)
+            px, py = loc[:, 1] * scale, loc[:, 0] * scale              # (r sin f, r cos f)
+            sel = np.nonzero((np.abs(px) <= 1.0) & (np.abs(py) <= 1.0))[0]
+            for ds, ws in ((0, 1.0 - fs), (1, fs)):
+                w = (ws * wr * wc)[pi]                                    # (Q,)
+                out += w                                                  # open unless seen
+                if len(sel) == 0:
+                    continue
                 sid = (s0 + ds) * 6 * n * n + in_shell
                 uniq, inv = np.unique(sid, return_inverse=True)
                 vdt = field.tables(uniq)
-                fr_ = frames[in_shell[pi]]                                # (Q, 3, 3)
-                loc = np.einsum("qij,qj->qi", fr_, w_dirs)
-                px, py = directions.hemisphere_to_rsl_disk(loc)
-                inside = (np.abs(px) <= 1.0) & (np.abs(py) <= 1.0)
-                frac = np.ones(len(pi))
-                if inside.any():
-                    sel = np.nonzero(inside)[0]
-                    frac[sel] = vdt_box(vdt, px[sel], py[sel], hk[sel],
-                                        lead=inv.reshape(-1)[pi[sel]])
-                out += w[pi] * frac
+                frac = vdt_box(vdt, px[sel], py[sel], hk[sel], lead=inv.reshape(-1)[pi[sel]])
+                out[sel] -= w[sel] * (1.0 - frac.astype(np.float32))
     return near[pi], ki, np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
@@ -528,7 +531,7 @@ def clear_bits(bits: np.ndarray, rows, texels) -> np.ndarray:
 
 
 def block_by_field(bits: np.ndarray, field: OccluderField, points, cube: Cubemap, T, R,
-                   half=None, chunk: int = 2048, normals=None) -> np.ndarray:
+                   half=None, chunk: int = 512, normals=None, threads=None) -> np.ndarray:
     """``bits`` (P, D/8) of current world ``points`` with what the moved occluder blocks
     cleared: the occluder's field (traced in the frame of its precompute pose) read at
     the points taken back to that frame, along the texels' directions turned back
@@ -540,14 +543,20 @@ def block_by_field(bits: np.ndarray, field: OccluderField, points, cube: Cubemap
                                                                                  np.float64)
     dirs = np.asarray(cube.directions, np.float64) @ np.asarray(R, np.float64)
     half = texel_half_sides(cube) if half is None else half
-    rows, texels = [], []
-    for a in range(0, len(pts), chunk):
+    def blocked(a):
         p, k, frac = occluder_fractions(field, pts[a:a + chunk], dirs, half,
                                         normals=None if nrm is None else nrm[a:a + chunk])
         hit = frac < BLOCKED_BELOW
-        rows.append(p[hit] + a)
-        texels.append(k[hit])
-    rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+        return p[hit] + a, k[hit]
+
+    starts = range(0, len(pts), chunk)
+    if len(starts) > 1 and (threads or default_threads()) > 1:     # numpy frees the GIL
+        with ThreadPoolExecutor(max_workers=threads or default_threads()) as pool:
+            got = list(pool.map(blocked, starts))
+    else:
+        got = [blocked(a) for a in starts]
+    rows = np.concatenate([g[0] for g in got]) if got else np.zeros(0, np.int64)
+    texels = [g[1] for g in got]
     if len(rows) == 0:
         return bits
     return clear_bits(bits, rows, np.concatenate(texels))
