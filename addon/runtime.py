@@ -88,7 +88,7 @@ def _with_base(state, value: float):
 
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "data",
-                 "fingerprint", "closed_side", "textures", "dynamic")
+                 "fingerprint", "closed_side", "textures", "dynamic", "shape")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -105,6 +105,9 @@ class ObjectState:
         self.status = status
         #: a dynamic object's stored fields and motion since the precompute (addon.dynamic)
         self.dynamic = None
+        #: the geometry up to a dynamic object's rigid motion (its precompute's fingerprint;
+        #: ``fingerprint`` for the others): what a choice that survives motion keys on
+        self.shape = fingerprint
         self.data = {}               # per-method data loaded in Method.sync
         #: core.mesh.closed_side: which side of a closed mesh is its (black) inside
         self.closed_side = closed_side(arrays, fingerprint) if fingerprint else 0
@@ -242,6 +245,8 @@ class FrameState:
             st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
             st.dynamic = moving if status == "ok" else None
+            if st.dynamic is not None:
+                st.shape = data.fingerprint
             # the original material per slot, for methods with their own material settings
             st.data["material_names"] = [
                 slot.material.original.name if slot.material is not None else None

@@ -185,3 +185,22 @@ def test_keyframed_object_against_cycles(tmp_path, sky):
     truth = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=1024)
     err = bs.rel_l2(ours, truth)
     assert err < 0.05, err
+
+
+def test_auto_stored_choice_holds_while_a_dynamic_object_moves():
+    """AUTO's stored choice keys on a dynamic object's shape, not its pose: an animation
+    is not re-chosen live at every frame."""
+    scene, cube = _scene(detail="LOW")
+    bs.add_camera()
+    scene.prt.method = "AUTO"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    assert scene.prt.auto_choice
+    _move(cube, (0.8, 0.3, 0.8), (0.0, 0.0, 0.7))
+    state, out = _shade("AUTO")
+    assert any("stored choice" in w for w in state.warnings), state.warnings
+    assert not any("out of date" in w for w in state.warnings), state.warnings
+    assert all(np.isfinite(r).all() for r in out.values())
+    cube.scale = (1.0, 1.0, 0.5)        # non-uniform: stale, and the geometry changed
+    bpy.context.view_layer.update()
+    state, _ = _shade("AUTO")
+    assert any("out of date" in w for w in state.warnings), state.warnings

@@ -327,14 +327,15 @@ def _candidate_settings(state, candidates):
 
 
 def choice_key(state) -> dict:
-    """What a stored choice depends on, per part: the objects' names and geometry, the
+    """What a stored choice depends on, per part: the objects' names and geometry (a
+    dynamic object's up to its motion: a choice holds over an animation), the
     directions of their visibility, their materials, the lighting's content and strength,
     the error target, the candidates' other settings.  The world's rotation is left out
     (the same environment turned keeps the choice, as the measurement cache does) and so
     is the camera (a stored choice does not flip as the view moves; Choose re-chooses)."""
     env = env_key(state.world, state.resolution)
     return dict(
-        geometry=_digest(sorted((st.name, st.fingerprint) for st in state.objects)),
+        geometry=_digest(sorted((st.name, st.shape) for st in state.objects)),
         directions=int(state.resolution),
         materials=_digest(sorted((st.name, _materials_key(st)) for st in state.objects)),
         lighting=_digest(env[0], env[1]),
