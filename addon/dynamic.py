@@ -129,15 +129,25 @@ def _pose_key(motion) -> bytes:
     return np.round(motion[0], 6).tobytes()
 
 
+def reach(mover) -> tuple[np.ndarray, float]:
+    """Centre and radius (current world) of the sphere beyond which a dynamic object's
+    field casts nothing."""
+    data, (T, _R, scale) = mover.dynamic
+    centre = T[:3, :3] @ data.field.centre + T[:3, 3]
+    return centre, scale * data.field.radius * data.field.layout.outer
+
+
 def apply(state):
-    """Every object's visibility at the current poses of the dynamic objects (see the
-    module docstring); notes a dynamic object beyond its static field's box."""
+    """Poses every object a dynamic object's field reaches, and every dynamic object
+    (see the module docstring): status ``"posed"``, ``near`` the dynamic objects whose
+    fields reach it, and its bits the product, made when first read (cached per pose).
+    Notes a dynamic object beyond its static field's box."""
     movers = [st for st in state.objects if st.dynamic is not None]
     if not movers:
         return
     cube = directions.cubemap(state.resolution)
     poses = tuple((st.name, _pose_key(st.dynamic[1])) for st in movers)
-    scene = None
+    spheres = [reach(m) for m in movers]
     for st in movers:
         data = st.dynamic[0]
         if data.static is not None and \
@@ -145,26 +155,33 @@ def apply(state):
             state.note(f"'{st.name}' moved beyond where its animation went at the precompute: "
                        "the shadows static objects cast on it are extrapolated (press "
                        "Precompute for exact ones)")
+    scene = []
     for st in state.objects:
         if st.status != "ok":
             continue
-        others = [o for o in movers if o is not st]
-        if st.dynamic is not None and st.dynamic[0].static is not None and scene is None:
-            scene = _static_scene(state)
+        pos = np.asarray(st.points.positions, np.float64)
+        st.near = [m for m, (c, r) in zip(movers, spheres) if m is not st and len(pos) and
+                   float(np.min(np.sum((pos - c) ** 2, axis=1))) < r * r]
+        moved = st.dynamic is not None and (
+            st.dynamic[0].static is not None
+            or not np.allclose(st.dynamic[1][1], np.eye(3), atol=1e-9))
+        if not st.near and not moved:
+            continue
+        if st.dynamic is not None and st.dynamic[0].static is not None and not scene:
+            scene.append(_static_scene(state))
 
-        def product(st=st, others=others, scene=scene):
-            return _product(st, others, cube, scene)
+        def product(st=st, stored=st.bits):
+            key = (st.name, id(stored), state.resolution, poses)
+            return keys.held(_POSED, key, (stored,), lambda: _product(
+                st, stored, st.near, cube, scene[0] if scene else None))
 
-        key = (st.name, id(st.bits), state.resolution, poses)
-        bits = keys.held(_POSED, key, (st.bits,), product)
-        if bits is not st.bits:
-            st.bits = bits
-            st.status = "posed"
+        st.status = "posed"
+        st.pose(product)
 
 
-def _product(st, others, cube, scene):
+def _product(st, stored, others, cube, scene):
     pts = st.points
-    bits = st.bits
+    bits = stored
     if st.dynamic is not None:
         data, (T, R, _s) = st.dynamic
         if not np.allclose(R, np.eye(3), atol=1e-9):

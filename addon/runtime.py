@@ -87,8 +87,8 @@ def _with_base(state, value: float):
 
 
 class ObjectState:
-    __slots__ = ("name", "arrays", "points", "materials", "bits", "status", "data",
-                 "fingerprint", "closed_side", "textures", "dynamic", "shape")
+    __slots__ = ("name", "arrays", "points", "materials", "_bits", "_pose", "status", "data",
+                 "fingerprint", "closed_side", "textures", "dynamic", "shape", "near")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -98,6 +98,7 @@ class ObjectState:
         self.arrays = arrays
         self.points = points
         self.materials = materials
+        self._pose = None
         self.bits = bits
         #: "ok", "stale" (changed since its precompute), "missing" (never precomputed),
         #: "unshadowed" (hidden from renders, drawn in the viewport only, never traced) or
@@ -108,12 +109,31 @@ class ObjectState:
         #: the geometry up to a dynamic object's rigid motion (its precompute's fingerprint;
         #: ``fingerprint`` for the others): what a choice that survives motion keys on
         self.shape = fingerprint
+        #: the dynamic objects whose fields reach this one now (addon.dynamic.apply)
+        self.near = []
         self.data = {}               # per-method data loaded in Method.sync
         #: core.mesh.closed_side: which side of a closed mesh is its (black) inside
         self.closed_side = closed_side(arrays, fingerprint) if fingerprint else 0
         #: {slot: (core.textures.ColorSource, per-corner UVs or colours)}: the slots whose
         #: colour varies per pixel (addon.texture_export)
         self.textures = {}
+
+    @property
+    def bits(self):
+        """Visibility bits (P, 6N²/8): stored, or their product with the fields of the
+        dynamic objects near (made when first read: RSL reads the fields instead)."""
+        if self._pose is not None:
+            make, self._pose = self._pose, None
+            self._bits = make()
+        return self._bits
+
+    @bits.setter
+    def bits(self, value):
+        self._bits, self._pose = value, None
+
+    def pose(self, make):
+        """The bits become ``make()`` when next read (addon.dynamic)."""
+        self._pose = make
 
 
 class FrameState:
