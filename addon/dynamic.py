@@ -155,7 +155,6 @@ def apply(state):
             state.note(f"'{st.name}' moved beyond where its animation went at the precompute: "
                        "the shadows static objects cast on it are extrapolated (press "
                        "Precompute for exact ones)")
-    scene = []
     for st in state.objects:
         if st.status != "ok":
             continue
@@ -167,19 +166,17 @@ def apply(state):
             or not np.allclose(st.dynamic[1][1], np.eye(3), atol=1e-9))
         if not st.near and not moved:
             continue
-        if st.dynamic is not None and st.dynamic[0].static is not None and not scene:
-            scene.append(_static_scene(state))
 
         def product(st=st, stored=st.bits):
             key = (st.name, id(stored), state.resolution, poses)
             return keys.held(_POSED, key, (stored,), lambda: _product(
-                st, stored, st.near, cube, scene[0] if scene else None))
+                st, stored, st.near, cube, state))
 
         st.status = "posed"
         st.pose(product)
 
 
-def _product(st, stored, others, cube, scene):
+def _product(st, stored, others, cube, state):
     pts = st.points
     bits = stored
     if st.dynamic is not None:
@@ -188,10 +185,29 @@ def _product(st, stored, others, cube, scene):
             rows = rigid.stored_rows(pts, st.arrays, R)
             bits = shadow_fields.turned_bits(bits[rows], cube, R)
         if data.static is not None:
-            origins = visibility.ray_origins(pts.positions, pts.normals, data.offset)
-            bits = bits & shadow_fields.static_bits(data.static, scene, origins, pts.positions)
+            bits = bits & static_bits(st, state)
     for o in others:
         data, (T, R, _s) = o.dynamic
         bits = shadow_fields.block_by_field(bits, data.field, pts.positions, cube, T, R,
                                             normals=pts.normals)
     return bits
+
+
+def pose_key(state) -> tuple:
+    """The dynamic objects' current poses (what a product at them is keyed on)."""
+    return tuple((st.name, _pose_key(st.dynamic[1])) for st in state.objects
+                 if st.dynamic is not None)
+
+
+def static_bits(st, state):
+    """Packed visibility the static scene leaves at a dynamic object's points now (its
+    static field, blended over the corners each point sees), or None (a static object,
+    or no static occluders); cached per pose."""
+    if st.dynamic is None or st.dynamic[0].static is None:
+        return None
+    data = st.dynamic[0]
+    pts = st.points
+    key = (st.name, "static", id(data), state.resolution, pose_key(state))
+    return keys.held(_POSED, key, (data,), lambda: shadow_fields.static_bits(
+        data.static, _static_scene(state),
+        visibility.ray_origins(pts.positions, pts.normals, data.offset), pts.positions))

@@ -8,8 +8,8 @@ import dataclasses
 
 import numpy as np
 
-from ...core import brdf, directions, envmap, reference, rigid, rsl
-from .. import drawing, keys, storage
+from ...core import brdf, directions, envmap, reference, rigid, rsl, shadow_fields
+from .. import drawing, dynamic, keys, storage
 from . import Method, glossy_or_layered, register
 
 #: disk-map resolution of the BRDF SATs and visibility tables (§5.1: 32 x 32)
@@ -79,6 +79,32 @@ def object_visibility(st, resolution: int, kind: str, normals=None, rows=None) -
     return keys.per_visibility(
         _VISIBILITY, key, st.bits,
         lambda: derive_visibility(bits, normals, resolution))[kind]
+
+
+def field_visibility(st, evaluator, state, cos_tables) -> np.ndarray:
+    """Fig. 8's occluder factors of a posed object, (P, K): for each dynamic object near,
+    ``V_oj`` -- eq. 9 on its occluder field at the point for light ``j``'s square (centre
+    turned back into the field's frame, the same half side: the disk map is equal-area);
+    for a dynamic object, the static scene's share too, from its static field (a VDT per
+    point of the blended visibility, eq. 9 per light as the self VDTs)."""
+    pts = st.points
+    centres = np.asarray(evaluator.centres, np.float64)
+    half = np.asarray(evaluator.half, np.float64).reshape(-1)
+    # a square's centre may lie outside the occluder's cone while its edge overlaps it:
+    # widen the cone by the largest square's angular radius (solid angle 2 (2a)^2)
+    margin = 0.05 + float(np.sqrt(8.0 * half.max(initial=0.0) ** 2 / np.pi))
+    V = np.ones((pts.count, len(centres)), np.float64)
+    for mover in st.near:
+        data, (T, R, _s) = mover.dynamic
+        p, k, frac = shadow_fields.occluder_fractions(
+            data.field, shadow_fields.to_field_frame(T, pts.positions), centres @ R, half,
+            margin=margin, normals=np.asarray(pts.normals, np.float64) @ R)
+        V[p, k] *= frac
+    static = dynamic.static_bits(st, state)
+    if static is not None:
+        vdt = derive_visibility(static, pts.normals, state.resolution)["VDT"]
+        V *= evaluator.diffuse_factors(pts.normals, "VDT", vdt, cos_tables)[0]
+    return V
 
 
 # ------------------------------------------------------------------ storage (§5.1)
@@ -208,8 +234,6 @@ class RSLMethod(Method):
     def sync(self, state):
         import bpy
         for st in state.objects:
-            if st.status == "posed":    # bits with dynamic objects' fields: derived from them
-                continue
             ob = bpy.data.objects.get(st.name)
             got = storage.load(ob, BLOB, _STORED, _stored_tables, state.note)
             if got is None or len(got[0]) != st.points.count:
@@ -220,10 +244,13 @@ class RSLMethod(Method):
                                         st.arrays.positions, R0, probe)
                 if turn is None:
                     continue
-                st.data["rsl_rotation"] = turn
-                st.data["rsl_rows"] = rigid.stored_rows(st.points, st.arrays, turn)
-                state.note(f"RSL: {st.name} turned since precompute; its self-shadowing turns "
-                           "with it (shadows on other objects are not updated)")
+                if not np.allclose(turn, np.eye(3), atol=1e-9):
+                    st.data["rsl_rotation"] = turn
+                    st.data["rsl_rows"] = rigid.stored_rows(st.points, st.arrays, turn)
+                    if st.dynamic is None:
+                        state.note(f"RSL: {st.name} turned since precompute; its "
+                                   "self-shadowing turns with it (shadows on other objects "
+                                   "are not updated)")
             st.data["rsl"] = vdt
 
     def view_dependent(self, state) -> bool:
@@ -249,8 +276,13 @@ class RSLMethod(Method):
             rows = st.data.get("rsl_rows")
             vis = object_visibility(st, state.resolution, kind, normals, rows)
             rkey = (lkey, R.round(9).tobytes(), None if turn is None else turn.round(9).tobytes())
+            # Fig. 8: a posed object's stored VDTs times the fields of the dynamic objects
+            # near (and, for a dynamic one, the static scene's) at each light
+            fields = (st.status == "posed" and kind == "VDT" and st.data.get("rsl") is not None)
+            if fields:
+                rkey += (dynamic.pose_key(state),)
             radiance = None
-            if use_gpu:
+            if use_gpu and not fields:
                 try:
                     radiance = self._shade_gpu(st, ev, kind, vis, eye, view_dir, rkey, normals,
                                                turn)
@@ -258,9 +290,14 @@ class RSLMethod(Method):
                     state.note(f"RSL GPU pass failed ({exc}); shading with numpy")
                     use_gpu = False
             if radiance is None:
-                V, C = keys.per_visibility(
-                    _FACTORS, (st.name, id(st.bits), id(vis), kind, rkey), st.bits,
-                    lambda: ev.diffuse_factors(normals, kind, vis, cos_tables))
+                def factors(ev=ev, normals=normals, vis=vis, st=st, fields=fields):
+                    V, C = ev.diffuse_factors(normals, kind, vis, cos_tables)
+                    if fields:
+                        V = V * field_visibility(st, evaluator, state, cos_tables)
+                    return V, C
+
+                V, C = keys.per_visibility(_FACTORS, (st.name, id(vis), kind, rkey), vis,
+                                           factors)
                 radiance = np.zeros((pts.count, 3))
                 for mat, sel, vd in _groups(st, eye, view_dir, turn):
                     radiance[sel] = ev.shade(mat, brdf_tables(mat), normals[sel], vd,
