@@ -513,13 +513,17 @@ def _flat(radiance_per_object):
 
 def _facing_corners(state, eye, count):
     """(C,) bool over the concatenated corners of ``state.objects`` (``_flat``'s order):
-    the corner's normal faces ``eye``.  A corner seen from behind is the black inside of
-    a closed mesh in every frame, so its view-dependent value is not compared; None when
+    the corners compared.  A closed mesh's corner whose normal turns away from ``eye`` is
+    its inner side, drawn black (``core.mesh.closed_side``), so its view-dependent value
+    is left out; an open mesh shows its corners from both sides, so all count.  None when
     the corners do not line up with ``count`` values."""
     eye = np.asarray(eye, dtype=np.float64)
     parts = []
     for st in state.objects:
         a = st.arrays
+        if not getattr(st, "closed_side", 0):
+            parts.append(np.ones(len(a.corner_verts), bool))
+            continue
         p = np.asarray(a.positions, np.float64)[a.corner_verts]
         parts.append(((eye - p) * np.asarray(a.corner_normals, np.float64)).sum(axis=1) > 0.0)
     mask = np.concatenate(parts) if parts else np.zeros(0, bool)
@@ -643,8 +647,8 @@ class _SettingsProxy:
 def stability_table(resolution=16, method_ids=None, cases=None, progress=None) -> dict:
     """Every hard case × every registered method (REFERENCE first):
     ``{"methods": [ids], "cases": [{"name", "description", "cells": {id: {"finite",
-    "error" (rel-L2 vs REFERENCE of the per-corner radiance at the corners facing the
-    eye, or of pixels for per-pixel methods), "message", "max", "bound"
+    "error" (rel-L2 vs REFERENCE of the per-corner radiance at the corners the eye can
+    see the outer side of (:func:`_facing_corners`), or of pixels for per-pixel methods), "message", "max", "bound"
     (:func:`.report_cases.error_bound`), "within" (error <= bound; None without a
     bound)}}}]}``.  Runs in temporary scenes removed afterwards; the open scene is not
     touched."""

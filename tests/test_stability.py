@@ -75,11 +75,28 @@ def test_every_cell_is_within_its_methods_error_bound(table):
 
 
 def test_fully_occluded_points_are_black_for_every_method(table):
-    # the corners the camera inside the box faces are Suzanne's, all blocked: exactly 0
-    # (rel_l2 of an all-black REFERENCE is the method's own norm)
+    # from inside the box its corners are its inner side (drawn black, not compared);
+    # Suzanne's are all blocked: exactly 0 (rel_l2 of an all-black REFERENCE is the
+    # method's own norm)
     for mid, cell in _case(table, "fully occluded")["cells"].items():
         assert cell["error"] < 1e-6, (mid, cell["error"])
         assert cell["max"] > 0.1, mid         # the box's outside is lit: not a black scene
+
+
+def test_only_a_closed_meshs_side_turned_away_is_left_out():
+    from types import SimpleNamespace as NS
+    from prt_relight.addon import report
+
+    def obj(closed_side):     # two corners at the origin, normals +z and -z
+        arrays = NS(positions=np.zeros((1, 3)), corner_verts=np.array([0, 0]),
+                    corner_normals=np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]))
+        return NS(arrays=arrays, closed_side=closed_side)
+
+    state = NS(objects=[obj(1), obj(0)])
+    mask = report._facing_corners(state, (0.0, 0.0, 5.0), 4)
+    # the closed mesh's -z corner is its inner side (drawn black); the open mesh's is drawn
+    assert mask.tolist() == [True, False, True, True]
+    assert report._facing_corners(state, (0.0, 0.0, 5.0), 3) is None
 
 
 def test_stability_html_marks_an_error_above_its_bound():
