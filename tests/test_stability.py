@@ -68,10 +68,8 @@ def test_every_cell_is_within_its_methods_error_bound(table):
     over = [(c["name"], mid, cell["error"], cell["bound"]) for c in table["cases"]
             for mid, cell in c["cells"].items() if not cell["within"]]
     assert not over, over
-    # the bounds are not vacuous: the low-frequency basis is measurably off on the open
-    # grid, BLOCKS (all pixel basis at 6×16²) is not
-    cells = _case(table, "fully open")["cells"]
-    assert cells["SH"]["error"] > 0.01 and cells["BLOCKS"]["error"] < 1e-3
+    # the errors are measured, not REFERENCE against itself: SH draws no glossy layer
+    assert _case(table, "fully open")["cells"]["SH"]["error"] > 0.01
 
 
 def test_fully_occluded_points_are_black_for_every_method(table):
