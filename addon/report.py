@@ -648,10 +648,10 @@ def stability_table(resolution=16, method_ids=None, cases=None, progress=None) -
     """Every hard case × every registered method (REFERENCE first):
     ``{"methods": [ids], "cases": [{"name", "description", "cells": {id: {"finite",
     "error" (rel-L2 vs REFERENCE of the per-corner radiance at the corners the eye can
-    see the outer side of (:func:`_facing_corners`), or of pixels for per-pixel methods), "message", "max", "bound"
-    (:func:`.report_cases.error_bound`), "within" (error <= bound; None without a
-    bound)}}}]}``.  Runs in temporary scenes removed afterwards; the open scene is not
-    touched."""
+    see the outer side of (:func:`_facing_corners`), or of pixels for per-pixel
+    methods), "message", "max", "bound" (:func:`.report_cases.error_bound`), "within"
+    (error <= bound; None without a bound)}}}]}``.  Runs in temporary scenes removed
+    afterwards; the open scene is not touched."""
     method_list = [m for m, _, _ in sweep(method_ids)]
     seen = set()
     method_list = [m for m in method_list if not (m.id in seen or seen.add(m.id))]
