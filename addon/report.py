@@ -511,6 +511,25 @@ def _flat(radiance_per_object):
                            for r in radiance_per_object])
 
 
+def _facing_corners(state, eye, count):
+    """(C,) bool over the concatenated corners of ``state.objects`` (``_flat``'s order):
+    the corners compared.  A closed mesh's corner whose normal turns away from ``eye`` is
+    its inner side, drawn black (``core.mesh.closed_side``), so its view-dependent value
+    is left out; an open mesh shows its corners from both sides, so all count.  None when
+    the corners do not line up with ``count`` values."""
+    eye = np.asarray(eye, dtype=np.float64)
+    parts = []
+    for st in state.objects:
+        a = st.arrays
+        if not getattr(st, "closed_side", 0):
+            parts.append(np.ones(len(a.corner_verts), bool))
+            continue
+        p = np.asarray(a.positions, np.float64)[a.corner_verts]
+        parts.append(((eye - p) * np.asarray(a.corner_normals, np.float64)).sum(axis=1) > 0.0)
+    mask = np.concatenate(parts) if parts else np.zeros(0, bool)
+    return mask if len(mask) == count else None
+
+
 def _new_datablocks(before):
     collections = ("objects", "meshes", "materials", "worlds", "images", "cameras")
     return {c: [d for d in getattr(bpy.data, c) if d not in before[c]] for c in collections}
@@ -579,8 +598,11 @@ def _run_case(case, method_list, resolution, progress=None):
                         scene.prt.method = saved
                     err = core_report.rel_l2(pixels, ref_pixels)
                 elif ref is not None:
+                    facing = _facing_corners(state, eye, len(ref))
+                    if facing is None:
+                        facing = np.ones(len(ref), bool)
                     err = core_report.rel_l2(values[:, None, :], ref[:, None, :],
-                                             mask=np.ones((len(ref), 1), bool))
+                                             mask=facing[:, None])
                 else:
                     err = None
                 cells[m.id] = dict(finite=finite, error=err, message=msg, refused_ok=refused_ok,
@@ -625,15 +647,23 @@ class _SettingsProxy:
 def stability_table(resolution=16, method_ids=None, cases=None, progress=None) -> dict:
     """Every hard case × every registered method (REFERENCE first):
     ``{"methods": [ids], "cases": [{"name", "description", "cells": {id: {"finite",
-    "error" (rel-L2 of per-corner radiance vs REFERENCE, or of pixels for per-pixel
-    methods), "message", "max"}}}]}``.  Runs in temporary scenes removed afterwards;
-    the open scene is not touched."""
+    "error" (rel-L2 vs REFERENCE of the per-corner radiance at the corners the eye can
+    see the outer side of (:func:`_facing_corners`), or of pixels for per-pixel
+    methods), "message", "max", "bound" (:func:`.report_cases.error_bound`), "within"
+    (error <= bound; None without a bound)}}}]}``.  Runs in temporary scenes removed
+    afterwards; the open scene is not touched."""
     method_list = [m for m, _, _ in sweep(method_ids)]
     seen = set()
     method_list = [m for m in method_list if not (m.id in seen or seen.add(m.id))]
     table = dict(methods=[m.id for m in method_list], cases=[])
     for case in (cases if cases is not None else report_cases.stability_cases(method_ids)):
         cells = _run_case(case, method_list, resolution, progress)
+        for mid, cell in cells.items():
+            bound = report_cases.error_bound(case["name"], mid)
+            err = cell.get("error")
+            cell["bound"] = bound
+            cell["within"] = None if bound is None else (
+                err is not None and bool(np.isfinite(err)) and err <= bound)
         table["cases"].append(dict(name=case["name"], description=case.get("description", ""),
                                    cells=cells))
     return table

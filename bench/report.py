@@ -137,6 +137,9 @@ def main(argv=None):
             bad = [(c["name"], m) for c in run.report["stability"]["cases"]
                    for m, cell in c["cells"].items() if not cell["finite"]]
             summary.append(f"{name}: stability cells non-finite: {bad or 'none'}")
+            over = [(c["name"], m) for c in run.report["stability"]["cases"]
+                    for m, cell in c["cells"].items() if cell.get("within") is False]
+            summary.append(f"{name}: stability cells above their bound: {over or 'none'}")
         if args.docs and name == "demo":
             dst = scenes.ROOT / "docs/images/report"
             dst.mkdir(parents=True, exist_ok=True)

@@ -507,7 +507,8 @@ def write_html(path, report: dict) -> pathlib.Path:
 
 def stability_html(table: dict) -> str:
     """HTML of a stability table: ``table = {"methods": [...], "cases": [{"name",
-    "description", "cells": {method: {"finite", "error", "message"}}}]}``."""
+    "description", "cells": {method: {"finite", "error", "message", "bound"}}}]}``; an
+    error above its bound is marked."""
     esc = html.escape
     body = []
     for case in table["cases"]:
@@ -523,6 +524,11 @@ def stability_html(table: dict) -> str:
             err = cell.get("error")
             text = fin + (f" / {100 * err:.3g} %" if err is not None and np.isfinite(err)
                           else " / –")
+            bound = cell.get("bound")
+            if bound is not None:
+                over = err is None or not np.isfinite(err) or err > bound
+                text += (f" <span class='{'bad' if over else 'note'}'>"
+                         f"({'ABOVE its ' if over else ''}bound {100 * bound:.3g} %)</span>")
             if cell.get("message"):
                 text += f"<br><span class='note'>{esc(cell['message'][:120])}</span>"
             line.append(text)
