@@ -9,9 +9,26 @@ vec4 pair_fetch(float q, int stride, int c)
 }
 #endif
 
+/* the slot's textured colour input at this pixel (none: inInfo.z = -1): kd and the
+ * Fresnel terms are linear in the base colour c (F0 in clamp(c, 0, 1)), so they are the
+ * mix of their values at base colour 0 and 1 by c */
+void apply_colour_input()
+{
+  if (inInfo.z < -0.5) {
+    return;
+  }
+  vec3 c = input_colour(albedoTex, vUv, vAttr, inInfo, inMap0.xyz, inMap1.xyz, inMix);
+  vec3 cf = clamp(c, 0.0, 1.0);
+  kd.rgb = kdBlack.rgb + (kd.rgb - kdBlack.rgb) * c;
+  fresA.rgb = fresABlack.rgb + (fresA.rgb - fresABlack.rgb) * cf;
+  fresBd.rgb = fresBdBlack.rgb + (fresBd.rgb - fresBdBlack.rgb) * cf;
+  fresBs.rgb = fresBsBlack.rgb + (fresBs.rgb - fresBsBlack.rgb) * cf;
+}
+
 void main()
 {
   read_parameters();
+  apply_colour_input();
   vec3 n = normalize(vNrm);
   vec3 t, b;
   ssdf_frame(n, t, b);
@@ -77,7 +94,7 @@ void main()
     }
     vec3 mu = ndfMu * m * fres;
     for (int k = 0; k < cosLobes; k++) {
-      vec4 cl = texelFetch(paramTex, ivec2(10 + k, 0), 0);
+      vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + k, 0), 0);
       vec3 cw = cl.x * t + cl.y * b + cl.z * n;
       vec3 p;
       float lam, amp;

@@ -17,14 +17,20 @@
  *           flatTex   (pair pass) per flat point (normal, point index);
  *           paramTex  9 texels of scalar parameters (environment, SSDF, material slot),
  *                     read into the globals below (push constants are kept to 128 bytes),
- *                     texel 9 = (cosine lobe count, sharpness), texels 10.. = (local
+ *                     texel 9 = (cosine lobe count, sharpness), 10-13 the slot's textured
+ *                     colour input (texture_lib.glsl: info, mapping rows, mix colour),
+ *                     14-17 kd and the Fresnel terms at base colour 0 (4-7: at the slot's
+ *                     colour, or at 1 when textured), texels COS_TEXEL.. = (local
  *                     direction, amplitude) of the clamped-cosine SG mixture C*. */
+
+const int COS_TEXEL = 18;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
 
 int cosLobes;
 float cosLambda;
 int lightCount, ssdfRes, coeffTexels, envRes, envLevels, glossy, brdfModel, principled;
 float envStrength, envLambdaFirst, envRatio, envTop, roughness, ior, ndfLambda, ndfMu;
 vec4 kd, fresA, fresBd, fresBs, eye;
+vec4 inInfo, inMap0, inMap1, inMix, kdBlack, fresABlack, fresBdBlack, fresBsBlack;
 
 void read_parameters()
 {
@@ -53,6 +59,14 @@ void read_parameters()
   fresBd = texelFetch(paramTex, ivec2(6, 0), 0);
   fresBs = texelFetch(paramTex, ivec2(7, 0), 0);
   eye = texelFetch(paramTex, ivec2(8, 0), 0);
+  inInfo = texelFetch(paramTex, ivec2(10, 0), 0);
+  inMap0 = texelFetch(paramTex, ivec2(11, 0), 0);
+  inMap1 = texelFetch(paramTex, ivec2(12, 0), 0);
+  inMix = texelFetch(paramTex, ivec2(13, 0), 0);
+  kdBlack = texelFetch(paramTex, ivec2(14, 0), 0);
+  fresABlack = texelFetch(paramTex, ivec2(15, 0), 0);
+  fresBdBlack = texelFetch(paramTex, ivec2(16, 0), 0);
+  fresBsBlack = texelFetch(paramTex, ivec2(17, 0), 0);
   vec4 p9 = texelFetch(paramTex, ivec2(9, 0), 0);
   cosLobes = int(p9.x + 0.5);
   cosLambda = p9.y;   /* (position, 1) or (direction to camera, 0) */
@@ -214,7 +228,7 @@ bool diffuse_pair(int m, int j, vec3 n, vec3 t, vec3 b, vec4 W[16], bool withThe
   if (mu.r == 0.0 && mu.g == 0.0 && mu.b == 0.0) {
     return false;
   }
-  vec4 cl = texelFetch(paramTex, ivec2(10 + m, 0), 0);
+  vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
   vec3 cw = cl.x * t + cl.y * b + cl.z * n;
   vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
   vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */

@@ -6,6 +6,8 @@ in ``core/ssdf_sg.py`` and ``core/ssdf_sg_scene.py``; the method is ``ssdf_sg.py
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ...core import sg_brdf
@@ -27,12 +29,16 @@ _PAIR_TABLES = drawing.gpu_cache({}, limit=8)
 
 _SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"), ("FLOAT_2D", "envTex"),
              ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
+#: the main pass's textured inputs (texture_lib.glsl)
+_INPUT_SAMPLERS = (("FLOAT_2D", "albedoTex"),)
 
 
 def _fragment_source(main: str) -> str:
     """sg_common.glsl (the SG algebra, BRDF factors and cube-face lookup shared with the
-    material helpers' GLSL twin, tested against numpy there), ssdf_sg_lib.glsl, ``main``."""
-    return drawing.glsl_source("sg_common.glsl", "ssdf_sg_lib.glsl", main)
+    material helpers' GLSL twin, tested against numpy there), ssdf_sg_lib.glsl, ``main``
+    (the main pass also texture_lib.glsl: the slot's textured inputs)."""
+    extra = ("texture_lib.glsl",) if main == "ssdf_sg_frag.glsl" else ()
+    return drawing.glsl_source("sg_common.glsl", "ssdf_sg_lib.glsl", *extra, main)
 
 
 def _gpu_shader(flat: bool = False):
@@ -49,10 +55,11 @@ def _make_shader(flat: bool):
     for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
                         ("FLOAT", "closedSide")):
         info.push_constant(kind, ident)
-    for slot, (kind, ident) in enumerate(_SAMPLERS + ((("FLOAT_2D", "pairTex"),) if flat
-                                                     else ())):
+    for slot, (kind, ident) in enumerate(_SAMPLERS + _INPUT_SAMPLERS
+                                         + ((("FLOAT_2D", "pairTex"),) if flat else ())):
         info.sampler(slot, kind, ident)
-    inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"))
+    inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"),
+              ("VEC2", "uv"), ("VEC4", "attr"))
     for slot, (kind, ident) in enumerate(inputs + ((("VEC3", "triFlat"),) if flat else ())):
         info.vertex_in(slot, kind, ident)
     iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_flat_iface" if flat
@@ -61,6 +68,8 @@ def _make_shader(flat: bool):
     iface.smooth("VEC3", "vNrm")
     iface.smooth("VEC3", "vBary")
     iface.flat("VEC3", "vTri")
+    iface.smooth("VEC2", "vUv")
+    iface.smooth("VEC4", "vAttr")
     if flat:
         iface.flat("VEC3", "vFlat")
     info.vertex_out(iface)
@@ -156,21 +165,57 @@ def material_uniforms(material):
                 ndfMu=float(mu), fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0))
 
 
-def parameter_texture(env, mat, res, kt, eye4, cosine):
-    """The parameter texels read by ``read_parameters`` in ssdf_sg_frag.glsl: 9 scalars
-    texels, then (count, sharpness) and (local direction, amplitude) per cosine lobe."""
+#: texel of the first clamped-cosine lobe in the parameter texture
+COSINE_TEXEL = 18
+
+
+def parameter_texture(env, mat, res, kt, eye4, cosine, black=None, source=None):
+    """The parameter texels read by ``read_parameters`` in ssdf_sg_lib.glsl: 9 scalar
+    texels, (count, sharpness) of the cosine lobes; the slot's textured colour input
+    (``source``, a core.textures.ColorSource: texture_lib.glsl's info, mapping rows and
+    mix colour) with ``black``, the uniforms of the slot at base colour 0 (kd and the
+    Fresnel terms are linear in the base colour: the shader mixes ``black`` and ``mat``,
+    the slot at base colour 1, by the colour per pixel); then (local direction,
+    amplitude) per cosine lobe from :data:`COSINE_TEXEL`."""
     M = len(cosine.amplitudes)
-    p = np.zeros((1, 10 + M, 4), np.float32)
+    p = np.zeros((1, COSINE_TEXEL + M, 4), np.float32)
     p[0, 8] = eye4
     p[0, 9] = (M, cosine.sharpness, 0.0, 0.0)
-    p[0, 10:, :3] = cosine.directions
-    p[0, 10:, 3] = cosine.amplitudes
+    p[0, COSINE_TEXEL:, :3] = cosine.directions
+    p[0, COSINE_TEXEL:, 3] = cosine.amplitudes
     p[0, 0] = (env["envStrength"], env["lightCount"], res, kt)
     p[0, 1] = (env["envRes"], env["envLevels"], env["envLambdaFirst"], env["envRatio"])
     p[0, 2] = (env["envTop"], mat["glossy"], mat["brdfModel"], mat["principled"])
     p[0, 3] = (mat["roughness"], mat["ior"], mat["ndfLambda"], mat["ndfMu"])
     p[0, 4], p[0, 5], p[0, 6], p[0, 7] = mat["kd"], mat["fresA"], mat["fresBd"], mat["fresBs"]
+    tex = drawing.source_uniforms(source)
+    p[0, 10] = tex["texInfo"]
+    p[0, 11, :3], p[0, 12, :3] = tex["texMap0"], tex["texMap1"]
+    p[0, 13] = tex["mixColor"]
+    black = mat if black is None else black
+    p[0, 14], p[0, 15], p[0, 16], p[0, 17] = (black["kd"], black["fresA"], black["fresBd"],
+                                              black["fresBs"])
     return _texture(p)
+
+
+def slot_parameters(env, st, table, slot, res, kt, eye4, cosine):
+    """:func:`parameter_texture` of one material slot; a textured slot (``st.textures``)
+    with its SG material at base colour 1 and 0."""
+    source = st.textures.get(slot, (None, None))[0]
+    if source is None or slot >= len(st.materials) or slot in st.data.get("sg_own", {}):
+        return parameter_texture(env, material_uniforms(slot_material(table, slot)), res, kt,
+                                 eye4, cosine)
+    white, black = (material_uniforms(replace(st.materials[slot], diffuse_albedo=(v, v, v)))
+                    for v in (1.0, 0.0))
+    return parameter_texture(env, white, res, kt, eye4, cosine, black, source)
+
+
+def input_texture(st, slot):
+    """The GPU texture of a slot's textured colour input (white without one)."""
+    source = st.textures.get(slot, (None, None))[0]
+    if source is not None and source.texture is not None:
+        return drawing.albedo_texture(source.texture.pixels)
+    return drawing.white_texture()
 
 
 #: an object whose pair table would pass this many texels (256 MiB) is drawn without it
@@ -190,7 +235,8 @@ def object_batches(st, field, use_flat: bool = True) -> ObjectBatches:
     """Per material slot: per-corner position, normal, triangle points, barycentrics -- the
     flat triangles (:func:`flat_triangles`) in a second batch for the FLAT_PAIRS shader
     with their points' rows in the pair table."""
-    return keys.held(_BATCHES, (st.name, st.fingerprint, use_flat), (field,),
+    inputs = tuple(sorted((slot, id(values)) for slot, (_, values) in st.textures.items()))
+    return keys.held(_BATCHES, (st.name, st.fingerprint, use_flat, inputs), (field,),
                      lambda: _object_batches(st, use_flat))
 
 
@@ -209,6 +255,16 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
     row = np.full(len(pts.normals), -1, np.int64)
     row[flat_points] = np.arange(len(flat_points))
     tri_flat = np.repeat(row[pts.point_of_corner[tri]].astype(np.float32), 3, axis=0)
+    # a textured slot's UVs or colour attribute per corner (addon.texture_export)
+    uv = np.zeros((len(corner), 2), np.float32)
+    attr = np.ones((len(corner), 4), np.float32)
+    corner_slot = np.repeat(slots, 3)
+    for slot, (source, values) in st.textures.items():
+        sel = corner_slot == slot
+        if source.texture is not None:
+            uv[sel] = values[corner[sel]]
+        else:
+            attr[sel] = values[corner[sel]]
     draws = []
     for slot in np.unique(slots):
         for is_flat in (False, True):
@@ -217,7 +273,8 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
                 continue
             attrs = {"pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
                      "triPoints": np.ascontiguousarray(tri_points[sel]),
-                     "bary": np.ascontiguousarray(bary[sel])}
+                     "bary": np.ascontiguousarray(bary[sel]),
+                     "uv": np.ascontiguousarray(uv[sel]), "attr": np.ascontiguousarray(attr[sel])}
             if is_flat:
                 attrs["triFlat"] = np.ascontiguousarray(tri_flat[sel])
             draws.append((int(slot), is_flat,
@@ -302,9 +359,10 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
         batches = object_batches(st, field, use_flat=bool(diffuse_slots(table).any()))
         if len(batches.flat_points) * pair_texels(M, int(light_count)) > MAX_PAIR_TEXELS:
             batches = object_batches(st, field, use_flat=False)
-        params = {slot: parameter_texture(env_common, material_uniforms(slot_material(table, slot)),
-                                          field.resolution, kt, eye4, cosine)
+        params = {slot: slot_parameters(env_common, st, table, slot, field.resolution, kt,
+                                        eye4, cosine)
                   for slot in sorted({slot for slot, _, _ in batches.draws})}
+        inputs = {slot: input_texture(st, slot) for slot in params}
         pair_tex = None
         if len(batches.flat_points):
             key = (st.name, st.fingerprint, np.asarray(world.rotation).round(12).tobytes(),
@@ -314,8 +372,9 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
                 lambda: pair_table(st, field, batches.flat_points, env_tex, light_tex,
                                    next(iter(params.values())), int(light_count), M, rot))
 
-        def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
-                 eigen_tex=eigen_tex, pair_tex=pair_tex, side=float(st.closed_side)):
+        def draw(view_projection, batches=batches, params=params, inputs=inputs,
+                 coeff_tex=coeff_tex, eigen_tex=eigen_tex, pair_tex=pair_tex,
+                 side=float(st.closed_side)):
             for flat in (False, True):
                 todo = [(slot, batch) for slot, f, batch in batches.draws if f == flat]
                 if not todo:
@@ -329,6 +388,7 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
                     sh.uniform_sampler("pairTex", pair_tex)
                 for slot, batch in todo:
                     sh.uniform_sampler("paramTex", params[slot])
+                    sh.uniform_sampler("albedoTex", inputs[slot])
                     batch.draw(sh)
 
         draws.append(draw)
