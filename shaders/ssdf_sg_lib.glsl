@@ -17,20 +17,25 @@
  *           flatTex   (pair pass) per flat point (normal, point index);
  *           paramTex  9 texels of scalar parameters (environment, SSDF, material slot),
  *                     read into the globals below (push constants are kept to 128 bytes),
- *                     texel 9 = (cosine lobe count, sharpness), 10-13 the slot's textured
- *                     colour input (texture_lib.glsl: info, mapping rows, mix colour),
- *                     14-17 kd and the Fresnel terms at base colour 0 (4-7: at the slot's
- *                     colour, or at 1 when textured), texels COS_TEXEL.. = (local
- *                     direction, amplitude) of the clamped-cosine SG mixture C*. */
+ *                     texel 9 = (cosine lobe count, sharpness), 10-25 the slot's textured
+ *                     inputs (colour, roughness, metallic, specular IOR level; four texels
+ *                     each: texture_lib.glsl's info, mapping rows, mix colour), 26 the
+ *                     table's (roughness nodes, level nodes, metallic at its corners 0, 1),
+ *                     texels COS_TEXEL.. = (local direction, amplitude) of the clamped-cosine
+ *                     SG mixture C*; rows 1..: the slot's table (ssdf_sg_gpu.slot_table):
+ *                     per level node a row, per roughness node ENTRY texels: (lambda a^2,
+ *                     mu a^2, eta, -), kd, A, B_d, B_s at the (metallic, base colour)
+ *                     corners 00, 01, 10, 11. */
 
-const int COS_TEXEL = 18;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
+const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
+const int ENTRY = 17;       /* ENTRY_TEXELS */
 
 int cosLobes;
 float cosLambda;
 int lightCount, ssdfRes, coeffTexels, envRes, envLevels, glossy, brdfModel, principled;
 float envStrength, envLambdaFirst, envRatio, envTop, roughness, ior, ndfLambda, ndfMu;
 vec4 kd, fresA, fresBd, fresBs, eye;
-vec4 inInfo, inMap0, inMap1, inMix, kdBlack, fresABlack, fresBdBlack, fresBsBlack;
+
 
 void read_parameters()
 {
@@ -59,14 +64,6 @@ void read_parameters()
   fresBd = texelFetch(paramTex, ivec2(6, 0), 0);
   fresBs = texelFetch(paramTex, ivec2(7, 0), 0);
   eye = texelFetch(paramTex, ivec2(8, 0), 0);
-  inInfo = texelFetch(paramTex, ivec2(10, 0), 0);
-  inMap0 = texelFetch(paramTex, ivec2(11, 0), 0);
-  inMap1 = texelFetch(paramTex, ivec2(12, 0), 0);
-  inMix = texelFetch(paramTex, ivec2(13, 0), 0);
-  kdBlack = texelFetch(paramTex, ivec2(14, 0), 0);
-  fresABlack = texelFetch(paramTex, ivec2(15, 0), 0);
-  fresBdBlack = texelFetch(paramTex, ivec2(16, 0), 0);
-  fresBsBlack = texelFetch(paramTex, ivec2(17, 0), 0);
   vec4 p9 = texelFetch(paramTex, ivec2(9, 0), 0);
   cosLobes = int(p9.x + 0.5);
   cosLambda = p9.y;   /* (position, 1) or (direction to camera, 0) */

@@ -77,6 +77,34 @@ def test_mapping_transform_and_mix():
     np.testing.assert_allclose(src.combine([1.0, 0.5, 0.0]), [0.25, 0.125, 0.0])
 
 
+def test_scalar_inputs_per_point_and_their_variants():
+    """A scalar input is the colour's luminance, clamped; a point's value is the mean of its
+    corners'; variants quantize within half a step and rebuild the material at the values."""
+    from types import SimpleNamespace
+    from prt_relight.core import brdf
+    grey = _tex(np.array([[[0.2, 0.2, 0.2, 1.0], [2.0, 0.0, 0.0, 1.0]]], np.float32),
+                interpolation="CLOSEST", extension="EXTEND")
+    rough = textures.ScalarSource(textures.ColorSource(texture=grey), "Roughness")
+    uv = np.array([[0.1, 0.5], [0.9, 0.5], [0.1, 0.5], [0.9, 0.5]])
+    got = textures.point_values(rough, uv, np.array([0, 0, 1, 2]), 3)
+    np.testing.assert_allclose(got, [(0.2 + 2.0 * 0.2126) / 2, 0.2, 2.0 * 0.2126])
+    rng = np.random.default_rng(3)
+    values = rng.random(200)
+    grid, idx = textures.quantize(values, 9)
+    assert np.abs(grid[idx] - values).max() <= 0.5 * (grid[1] - grid[0]) + 1e-12
+    base = brdf.principled_material(base_color=(0.5, 0.4, 0.3), roughness=0.5)
+    points = SimpleNamespace(materials=np.zeros(200, np.int64))
+    mats, point_mat, slot_of = textures.point_variants(
+        [base], points, {0: {"Roughness": values}}, {}, levels=9)
+    assert len(mats) == 1 + len(np.unique(idx)) and set(slot_of[1:]) == {0}
+    np.testing.assert_allclose([mats[k].roughness for k in point_mat], grid[idx])
+    constants = {"IOR": 1.45, "Specular Tint": (1.0, 1.0, 1.0), "distribution": "MULTI_GGX"}
+    level = textures.material_at(base, {"Specular IOR Level": 0.25}, constants)
+    ref = brdf.principled_material(base_color=(0.5, 0.4, 0.3), roughness=0.5, ior=1.45,
+                                   specular_ior_level=0.25)
+    assert level == ref
+
+
 # --------------------------------------------------------------------------- Blender
 
 def _image(name, rgba, colorspace="Non-Color"):
@@ -402,3 +430,82 @@ def test_ssdf_sg_textured_error_is_its_untextured_error(tmp_path):
     print("SSDF_SG vs REFERENCE", errors)
     assert errors["textured"] < errors["plain"] + 0.005, errors
     assert errors["plain"] < 0.04, errors
+
+
+@pytest.mark.parametrize("socket, values, base", [
+    ("Roughness", (0.25, 0.75), dict(Metallic=0.3)),
+    ("Metallic", (0.0, 1.0), dict(Roughness=0.4)),
+    ("Specular IOR Level", (0.25, 0.75), dict(Roughness=0.35))])
+def test_ssdf_sg_reads_scalar_inputs_per_pixel(tmp_path, socket, values, base):
+    """A Non-Color checker of two values on Roughness / Metallic / Specular IOR Level: each
+    cell of the SSDF_SG frame is the frame of the constant input there (the values are
+    nodes of the shader's table, so exactly)."""
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    plane = _plane_from_above(pixels=16)
+    scene = bpy.context.scene
+    scene.prt.method = "SSDF_SG"
+    scene.prt.light_sources = 0
+    cells = np.zeros((2, 2, 4), np.float32)
+    cells[...] = values[0]
+    cells[0, 1, :3] = cells[1, 0, :3] = values[1]
+    cells[..., 3] = 1.0
+    img = _image("cells", cells)
+    inputs = dict(base, **{"Base Color": (0.7, 0.5, 0.3, 1.0)})
+    mat = bs.bsdf_material("Tex", "ShaderNodeBsdfPrincipled", **inputs)
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = img, "Closest"
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs[socket])
+    plane.data.materials.append(mat)
+    from prt_relight.addon import runtime
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    assert not any("driven by a node link" in w for w in state.warnings), state.warnings
+    bpy.ops.prt.precompute()
+    frame = bs.render_exr(tmp_path / "tex.exr")[::-1, :, :3]        # bottom row = v 0
+    n = frame.shape[0]
+    cell = (np.arange(n) * 2 // n)
+    second = (cell[:, None] + cell[None, :]) % 2 == 1              # where values[1] is
+    for k, v in enumerate(values):
+        bsdf.inputs[socket].default_value = v
+        mat.node_tree.links.remove(bsdf.inputs[socket].links[0]) if k == 0 else None
+        const = bs.render_exr(tmp_path / f"c{k}.exr")[::-1, :, :3]
+        sel = second if k else ~second
+        np.testing.assert_allclose(frame[sel], const[sel], rtol=2e-3, atol=1e-4)
+    assert abs(frame[second].mean() - frame[~second].mean()) > 0.01
+
+
+def test_sun_pass_reads_a_roughness_texture_per_pixel(tmp_path):
+    """The compact sources' pass (a sun lamp over a black world): each cell of a Roughness
+    checker (0.25 / 0.75, nodes of the pass's roughness table) shows the frame of that
+    constant roughness."""
+    bs.reset()
+    bs.add_world(image=bs.float_image("black", np.zeros((8, 16, 3), np.float32)))
+    plane = _plane_from_above(pixels=16)
+    sun = bpy.data.lights.new("Sun", "SUN")
+    sun.energy, sun.angle = 3.0, 0.1
+    lamp = bpy.data.objects.new("Sun", sun)
+    bpy.context.scene.collection.objects.link(lamp)
+    lamp.rotation_euler = (0.45, 0.0, 0.0)
+    cells = np.full((2, 2, 4), 0.25, np.float32)
+    cells[0, 1, :3] = cells[1, 0, :3] = 0.75
+    cells[..., 3] = 1.0
+    mat = bs.bsdf_material("Tex", "ShaderNodeBsdfPrincipled", Metallic=0.6,
+                           **{"Base Color": (0.7, 0.5, 0.3, 1.0)})
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = _image("cells", cells), "Closest"
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Roughness"])
+    plane.data.materials.append(mat)
+    bpy.ops.prt.precompute()
+    frame = bs.render_exr(tmp_path / "tex.exr")[::-1, :, :3]
+    n = frame.shape[0]
+    cell = np.arange(n) * 2 // n
+    second = (cell[:, None] + cell[None, :]) % 2 == 1
+    mat.node_tree.links.remove(bsdf.inputs["Roughness"].links[0])
+    for v, sel in ((0.25, ~second), (0.75, second)):
+        bsdf.inputs["Roughness"].default_value = v
+        const = bs.render_exr(tmp_path / f"c{v}.exr")[::-1, :, :3]
+        np.testing.assert_allclose(frame[sel], const[sel], rtol=2e-3, atol=1e-4)
+    assert abs(frame[second].mean() - frame[~second].mean()) > 0.02 * frame.mean()
