@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from ..core import brdf as core_brdf, lights as core_lights
-from . import drawing, keys
+from ..core import brdf as core_brdf, lights as core_lights, textures
+from . import drawing, keys, texture_export
 
 #: shadow map tile per source (texels per side)
 SHADOW_TILE = 2048
@@ -149,7 +149,7 @@ def _shader():
                             ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
             info.push_constant(kind, ident)
         for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex", "albedoTex",
-                                      "cubeTex")):
+                                      "cubeTex", "roughTex")):
             info.sampler(slot, "FLOAT_2D", ident)
         for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"), ("VEC2", "uv"),
                                               ("VEC4", "attr"))):
@@ -207,7 +207,9 @@ def _object_batches(st):
     """(depth batch, [(slot, surface batch)]) of one object, cached per geometry."""
     from gpu_extras.batch import batch_for_shader
     key = (st.name, st.fingerprint, tuple(sorted((slot, id(values)) for slot, (_, values)
-                                                 in st.textures.items())))
+                                                 in st.textures.items())),
+           tuple(sorted((slot, id(v)) for slot, got in st.inputs[0].items()
+                        for _, v in got.values())))
     got = _BATCHES.get(key)
     if got is not None:
         return got
@@ -226,9 +228,10 @@ def _object_batches(st):
         uv = np.zeros((int(sel.sum()), 2), np.float32)
         attr = np.ones((int(sel.sum()), 4), np.float32)
         source, values = st.textures.get(int(slot), (None, None))
-        if source is not None and source.texture is not None:
-            uv[:] = values[corner[sel]]
-        elif source is not None:
+        uvs = texture_export.slot_uvs(st, int(slot))
+        if uvs is not None:
+            uv[:] = uvs[1][corner[sel]]
+        if source is not None and source.texture is None:
             attr[:] = values[corner[sel]]
         surfaces.append((int(slot), batch_for_shader(_shader(), "TRIS", {
             "pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
@@ -376,6 +379,30 @@ def _cube_atlas(sources, casters):
 
 # --------------------------------------------------------------------------- parameters
 
+#: roughness nodes of a slot whose Roughness is textured (values i / (n - 1))
+ROUGHNESS_NODES = 17
+
+
+def slot_texels(st, slot, eye4) -> np.ndarray:
+    """The paramTex rows of one material slot: :func:`material_texels` of its material,
+    and with a textured Roughness (on the batch's UV map) the same rows at each of
+    :data:`ROUGHNESS_NODES` below them, with the roughness source in row 0 (texels 11-15,
+    lights_frag.glsl)."""
+    material = st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material()
+    p = material_texels(material, eye4, st.closed_side)
+    got = texture_export.shader_inputs(st, slot).get("Roughness")
+    if got is None:
+        return p
+    n = ROUGHNESS_NODES
+    nodes = [material_texels(textures.material_at(material, {"Roughness": i / (n - 1)}),
+                             eye4, st.closed_side) for i in range(n)]
+    u = drawing.source_uniforms(got[0].source)
+    p[0, 11] = (n, core_brdf.ALPHA_MIN, 0.0, 0.0)
+    p[0, 12], p[0, 15] = u["texInfo"], u["mixColor"]
+    p[0, 13, :3], p[0, 14, :3] = u["texMap0"], u["texMap1"]
+    return np.concatenate([p] + nodes, axis=0)
+
+
 def material_texels(material, eye4, closed_side=0) -> np.ndarray:
     """The paramTex rows of one material slot of an object (layout in lights_frag.glsl)."""
     p = np.zeros((4, max(TABLE, 10), 4), np.float32)
@@ -403,6 +430,13 @@ def material_texels(material, eye4, closed_side=0) -> np.ndarray:
     for j, w in enumerate(which):
         p[2 + j, :TABLE, :3] = core_brdf.multiscatter_factor(material, cos_o, w)
     return p
+
+
+def _input_texture(st, slot):
+    """The GPU texture of a slot's textured Roughness (white without one)."""
+    got = texture_export.shader_inputs(st, slot).get("Roughness")
+    return drawing.albedo_texture(got[0].source.texture.pixels) if got is not None \
+        else drawing.white_texture()
 
 
 def _texture(rgba):
@@ -443,11 +477,11 @@ def draws(state, eye, view_dir) -> list:
     out = []
     for st in state.objects:
         surfaces = _object_batches(st)[1]
-        params = {slot: _texture(material_texels(
-            st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material(), eye4,
-            st.closed_side)) for slot, _ in surfaces}
+        params = {slot: _texture(slot_texels(st, slot, eye4)) for slot, _ in surfaces}
+        rough = {slot: _input_texture(st, slot) for slot, _ in surfaces}
 
-        def draw(view_projection, surfaces=surfaces, params=params, textures=st.textures):
+        def draw(view_projection, surfaces=surfaces, params=params, textures=st.textures,
+                 rough=rough):
             sh = _shader()
             sh.bind()
             sh.uniform_float("viewProjection", view_projection)
@@ -462,6 +496,7 @@ def draws(state, eye, view_dir) -> list:
                 sh.uniform_sampler("albedoTex", drawing.albedo_texture(source.texture.pixels)
                                    if source is not None and source.texture is not None
                                    else drawing.white_texture())
+                sh.uniform_sampler("roughTex", rough[slot])
                 batch.draw(sh)
 
         out.append(draw)

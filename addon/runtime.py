@@ -14,7 +14,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..core import brdf as core_brdf, directions, envmap, mesh as core_mesh, visibility
+from ..core import (brdf as core_brdf, directions, envmap, mesh as core_mesh, textures,
+                    visibility)
 from . import dynamic, keys, lights, methods, scene_export, storage, texture_export
 from ..core.visibility import Cancelled  # noqa: F401  (raised by FrameState.tick)
 
@@ -81,14 +82,16 @@ def _with_base(state, value: float):
         twin = copy.copy(st)
         twin.data = st.data
         twin.materials = [replace(m, diffuse_albedo=(value, value, value))
-                          if i in st.textures else m for i, m in enumerate(st.materials)]
+                          if st.slot_of[i] in st.textures else m
+                          for i, m in enumerate(st.materials)]
         sub.objects.append(twin)
     return sub
 
 
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "_bits", "_pose", "status", "data",
-                 "fingerprint", "closed_side", "textures", "dynamic", "shape", "near")
+                 "fingerprint", "closed_side", "textures", "inputs", "slot_of", "dynamic",
+                 "shape", "near")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -117,6 +120,12 @@ class ObjectState:
         #: {slot: (core.textures.ColorSource, per-corner UVs or colours)}: the slots whose
         #: colour varies per pixel (addon.texture_export)
         self.textures = {}
+        #: {slot: {input: (core.textures.ScalarSource, per-corner UVs or colours)}} and
+        #: {slot: Principled constants}: textured scalar inputs (roughness, metallic, ...)
+        self.inputs = ({}, {})
+        #: the material slot of each entry of ``materials`` (per-point variants of
+        #: textured scalar inputs follow the slots, core.textures.point_variants)
+        self.slot_of = np.arange(len(materials))
 
     @property
     def bits(self):
@@ -225,9 +234,12 @@ class FrameState:
             textured = texture_export.slot_sources(ob, self.warnings)
             colours = {slot: texture_export.mean_albedo(src, values)
                        for slot, (src, values) in textured.items()}
+            scalars = texture_export.slot_scalars(ob, self.warnings)
+            means = {slot: texture_export.mean_scalars(inputs)
+                     for slot, inputs in scalars.items()}
             # lobes too narrow for the cubemap are drawn per pixel (addon/sharp.py)
             mats = [core_brdf.with_sharp_lobe(m, self.resolution)
-                    for m in scene_export.object_materials(ob, self.warnings, colours)]
+                    for m in scene_export.object_materials(ob, self.warnings, colours, means)]
             orig = ob.original
             data = orig.prt
             bits = None
@@ -267,6 +279,20 @@ class FrameState:
             st.dynamic = moving if status == "ok" else None
             if st.dynamic is not None:
                 st.shape = data.fingerprint
+            if scalars:
+                # per-vertex methods: each point's values, as material variants
+                constants = {slot: texture_export.principled_constants(
+                    ob.material_slots[slot].material) for slot in scalars}
+                per_point = {slot: {name: textures.point_values(
+                    scalar, values, points.point_of_corner, points.count)
+                    for name, (scalar, values) in inputs.items()}
+                    for slot, inputs in scalars.items()}
+                variants, point_mat, st.slot_of = textures.point_variants(
+                    mats, points, per_point, constants)
+                st.materials = [core_brdf.with_sharp_lobe(m, self.resolution)
+                                for m in variants]
+                st.points = replace(points, materials=point_mat)
+                st.inputs = (scalars, constants)
             # the original material per slot, for methods with their own material settings
             st.data["material_names"] = [
                 slot.material.original.name if slot.material is not None else None

@@ -133,7 +133,11 @@ def mesh_arrays(ob_eval) -> MeshArrays:
 
 # --------------------------------------------------------------------------- materials
 
-def _input_value(node, name, warnings, label):
+def _input_value(node, name, warnings, label, given=None):
+    """A socket's value: ``given[name]`` when a texture drives it (its mean,
+    addon.texture_export), else its default (warned when another link drives it)."""
+    if given and name in given:
+        return given[name]
     sock = node.inputs.get(name)
     if sock is None:
         return None
@@ -167,12 +171,12 @@ def _surface_node(material):
     return surf.links[0].from_node
 
 
-def _export_principled(node, warnings, label, colour=None) -> Material:
+def _export_principled(node, warnings, label, colour=None, given=None) -> Material:
     base = colour or _input_value(node, "Base Color", warnings, label) or (0.8, 0.8, 0.8)
-    rough = _input_value(node, "Roughness", warnings, label)
-    metal = _input_value(node, "Metallic", warnings, label)
+    rough = _input_value(node, "Roughness", warnings, label, given)
+    metal = _input_value(node, "Metallic", warnings, label, given)
     ior = _input_value(node, "IOR", warnings, label)
-    level = _input_value(node, "Specular IOR Level", warnings, label)
+    level = _input_value(node, "Specular IOR Level", warnings, label, given)
     tint = _input_value(node, "Specular Tint", warnings, label)
     for name, active, what in _PRINCIPLED_UNMODELLED:
         sock = node.inputs.get(name)
@@ -196,7 +200,7 @@ def _export_principled(node, warnings, label, colour=None) -> Material:
         distribution=dist)
 
 
-def export_material(material, warnings: list, colour=None) -> Material:
+def export_material(material, warnings: list, colour=None, given=None) -> Material:
     """Translate a Blender material into a core :class:`Material`.
 
     Supported: Diffuse BSDF (Lambert), Glossy BSDF (Beckmann, GGX, Multiscatter
@@ -208,6 +212,7 @@ def export_material(material, warnings: list, colour=None) -> Material:
     diffuse roughness are reported as not modelled).  ``None`` (no material)
     is Cycles' default surface :data:`DEFAULT_MATERIAL`.  Anything else falls
     back to the material's viewport colour as a Lambert surface, with a warning.
+    ``colour`` / ``given`` ({input: value}): the mean of a textured colour / scalar input.
     """
     if material is None:
         return DEFAULT_MATERIAL
@@ -227,7 +232,7 @@ def export_material(material, warnings: list, colour=None) -> Material:
         return Material(diffuse_albedo=color)
     if node.type in {"BSDF_GLOSSY", "BSDF_ANISOTROPIC"}:
         color = _input_value(node, "Color", warnings, label)
-        rough = _input_value(node, "Roughness", warnings, label)
+        rough = _input_value(node, "Roughness", warnings, label, given)
         dist = getattr(node, "distribution", "GGX")
         if dist not in {"BECKMANN", "GGX", "MULTI_GGX"}:
             warnings.append(f"{label}: glossy distribution {dist} is drawn as GGX")
@@ -239,7 +244,7 @@ def export_material(material, warnings: list, colour=None) -> Material:
         return Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=color,
                         roughness=float(rough), distribution=dist, fresnel="NONE")
     if node.type == "BSDF_PRINCIPLED":
-        return _export_principled(node, warnings, label, colour)
+        return _export_principled(node, warnings, label, colour, given)
     if node.type == "EMISSION":
         warnings.append(f"{label}: Emission is not a reflectance; drawn as black diffuse")
         return Material(diffuse_albedo=(0.0, 0.0, 0.0))
@@ -248,12 +253,13 @@ def export_material(material, warnings: list, colour=None) -> Material:
     return Material(diffuse_albedo=tuple(material.diffuse_color)[:3])
 
 
-def object_materials(ob_eval, warnings: list, colours=None) -> list:
+def object_materials(ob_eval, warnings: list, colours=None, scalars=None) -> list:
     """Core materials per material slot of an evaluated object (at least one).
     ``colours``: {slot: RGB} for slots whose colour input is textured (the mean colour of
-    the texture, addon.texture_export; drawn per pixel where a pass can)."""
-    colours = colours or {}
-    mats = [export_material(slot.material, warnings, colours.get(i))
+    the texture, addon.texture_export; drawn per pixel where a pass can); ``scalars``:
+    {slot: {input: mean value}} of its textured scalar inputs."""
+    colours, scalars = colours or {}, scalars or {}
+    mats = [export_material(slot.material, warnings, colours.get(i), scalars.get(i))
             for i, slot in enumerate(ob_eval.material_slots)]
     return mats or [DEFAULT_MATERIAL]
 

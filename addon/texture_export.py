@@ -5,8 +5,10 @@ Recognised (a Principled BSDF's *Base Color*, a Diffuse BSDF's *Color*): an Imag
 Linear / Cubic interpolation, Repeat / Extend / Clip / Mirror, packed or on disk, read in
 its colour space as Cycles does), a Color Attribute node, or a Mix node (colour mode,
 *Mix* or *Multiply*, a constant factor) between one of those and a constant colour.
-Anything else linked keeps the old behaviour: its default value and a warning naming the
-node.
+The scalar inputs of :data:`core.textures.SCALAR_INPUTS` (Principled *Roughness*,
+*Metallic*, *Specular IOR Level*, Glossy *Roughness*) driven by the same patterns are
+:class:`core.textures.ScalarSource` (the image's Color output, as a float).  Anything else
+linked keeps the old behaviour: its default value and a warning naming the node.
 """
 
 from __future__ import annotations
@@ -131,6 +133,105 @@ def slot_color_source(material):
     return color_source(node.inputs.get(COLOR_INPUTS[node.type]))
 
 
+#: the scalar inputs read per surface node
+SCALAR_INPUTS = {"BSDF_PRINCIPLED": ("Roughness", "Metallic", "Specular IOR Level"),
+                 "BSDF_GLOSSY": ("Roughness",)}
+
+
+def slot_scalar_sources(material) -> dict:
+    """{input name: ScalarSource} of a material's textured scalar inputs."""
+    node = _surface_node(material) if material is not None else None
+    if node is None or node.type not in SCALAR_INPUTS:
+        return {}
+    out = {}
+    for name in SCALAR_INPUTS[node.type]:
+        sock = node.inputs.get(name)
+        link = sock.links[0] if sock is not None and sock.is_linked and sock.links else None
+        if link is None or link.from_socket.name != "Color":
+            continue                  # e.g. an image's Alpha output: not read (warned)
+        src = color_source(sock)
+        if src is not None:
+            out[name] = textures.ScalarSource(src, name)
+    return out
+
+
+def principled_constants(material) -> dict | None:
+    """The Principled node's constant IOR, Specular Tint and distribution (what a textured
+    Specular IOR Level is combined with), or None."""
+    node = _surface_node(material) if material is not None else None
+    if node is None or node.type != "BSDF_PRINCIPLED":
+        return None
+    return {"IOR": float(node.inputs["IOR"].default_value),
+            "Specular Tint": tuple(node.inputs["Specular Tint"].default_value)[:3],
+            "distribution": getattr(node, "distribution", "MULTI_GGX")}
+
+
+def _corner_values(ob_eval, mat, source, warnings):
+    """The UVs or attribute colours per corner a source is read at, or None (warned)."""
+    if source.texture is not None:
+        values = corner_uvs(ob_eval, source.texture.uv_map)
+        if values is None:
+            warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no UV map for "
+                            "its image texture; drawn with the texture's mean")
+        return values
+    values = corner_colours(ob_eval, source.attribute)
+    if values is None:
+        warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no colour "
+                        f"attribute '{source.attribute}'; drawn with white")
+    return values
+
+
+def slot_scalars(ob_eval, warnings: list) -> dict:
+    """{slot: {input: (ScalarSource, corner values)}} of an evaluated object's textured
+    scalar inputs (UVs (C, 2) or attribute colours (C, 4), as :func:`slot_sources`)."""
+    out = {}
+    for slot, ms in enumerate(ob_eval.material_slots):
+        mat = ms.material
+        try:
+            found = slot_scalar_sources(mat)
+        except (RuntimeError, ExportError, envmap.EnvironmentError_, ValueError) as exc:
+            warnings.append(f"Material '{mat.name}': a texture cannot be read ({exc}); "
+                            "its inputs keep their default values")
+            continue
+        got = {}
+        for name, scalar in found.items():
+            values = _corner_values(ob_eval, mat, scalar.source, warnings)
+            if values is not None:
+                got[name] = (scalar, values)
+        if got:
+            out[slot] = got
+    return out
+
+
+def mean_scalars(inputs: dict) -> dict:
+    """{input: mean value over the corners} of one slot's :func:`slot_scalars` entry."""
+    return {name: float(np.mean(scalar.value(textures.corner_colours(scalar.source,
+                                                                     values)[:, :3])))
+            for name, (scalar, values) in inputs.items()}
+
+
+def slot_uvs(st, slot):
+    """(UV map name, per-corner UVs) a per-pixel pass's batch of a slot carries (``st``: an
+    addon.runtime.ObjectState): its colour texture's, else
+    its first textured scalar input's; None without an image texture."""
+    source, values = st.textures.get(slot, (None, None))
+    found = [(source, values)] + list(st.inputs[0].get(slot, {}).values())
+    for src, vals in found:
+        src = getattr(src, "source", src)
+        if src is not None and src.texture is not None:
+            return src.texture.uv_map, vals
+    return None
+
+
+def shader_inputs(st, slot) -> dict:
+    """{input: (ScalarSource, values)} of a slot's textured scalar inputs the shader reads
+    per pixel: images on the batch's UV map (others keep the slot's mean value)."""
+    uvs = slot_uvs(st, slot)
+    return {name: (s, v) for name, (s, v) in st.inputs[0].get(slot, {}).items()
+            if s.source.texture is not None and uvs is not None
+            and s.source.texture.uv_map == uvs[0]}
+
+
 def corner_uvs(ob_eval, uv_map: str = ""):
     """(C, 2) float32 UVs per face corner of the evaluated mesh (loops order), or None."""
     mesh = ob_eval.to_mesh()
@@ -187,21 +288,13 @@ def slot_sources(ob_eval, warnings: list) -> dict:
             continue
         if src is None:
             continue
-        if src.texture is not None:
-            values = corner_uvs(ob_eval, src.texture.uv_map)
-            if values is None:
-                warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no UV map for "
-                                "its image texture; drawn with the texture's mean colour")
-                continue
-        else:
-            values = corner_colours(ob_eval, src.attribute)
-            if values is None:
-                warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no colour "
-                                f"attribute '{src.attribute}'; drawn with white")
-                continue
-        out[slot] = (src, values)
+        values = _corner_values(ob_eval, mat, src, warnings)
+        if values is not None:
+            out[slot] = (src, values)
     return out
 
 
 __all__ = ["color_source", "slot_color_source", "slot_sources", "image_texture",
-           "corner_uvs", "corner_colours", "mean_albedo"]
+           "corner_uvs", "corner_colours", "mean_albedo", "slot_scalar_sources",
+           "principled_constants", "slot_scalars", "mean_scalars", "slot_uvs",
+           "shader_inputs"]

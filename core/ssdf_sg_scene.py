@@ -74,9 +74,15 @@ def world_sgs(world: envmap.WorldLighting, fit):
 # --------------------------------------------------------------------------- materials
 
 def sg_materials(materials) -> list:
-    """SG materials (core.brdf.Material converted; SGMaterial passed through)."""
-    return [m if isinstance(m, sg_brdf.SGMaterial) else sg_brdf.sg_material_from_brdf(m)
-            for m in materials]
+    """SG materials (core.brdf.Material converted, its Lambert part alone when its lobes
+    are drawn per pixel elsewhere (``per_pixel_lobe``); SGMaterial passed through)."""
+    out = []
+    for m in materials:
+        if not isinstance(m, sg_brdf.SGMaterial):
+            sg = sg_brdf.sg_material_from_brdf(m)
+            m = sg_brdf.without_glossy(sg) if m.per_pixel_lobe else sg
+        out.append(m)
+    return out
 
 
 def is_glossy(material: sg_brdf.SGMaterial) -> bool:

@@ -9,11 +9,17 @@ Texture node: texel centres at ``((i + 0.5) / W, (j + 0.5) / H)`` with row 0 at 
 *Closest*, *Linear* (bilinear) and *Cubic* (uniform cubic B-spline, as Cycles'
 ``interp_cubic``); *Repeat*, *Extend* (clamp to the edge), *Clip* (transparent black
 outside [0, 1]) and *Mirror*.
+
+A scalar input (Principled *Roughness*, *Metallic*, *Specular IOR Level*; Glossy
+*Roughness*) driven by one of those is a :class:`ScalarSource`: the colour read as a float
+the way Blender converts a colour socket into a float one (its luminance).  Per-vertex
+consumers take a shading point's value (the mean over its corners, :func:`point_values`),
+quantized into a few material variants (:func:`quantize`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -134,3 +140,105 @@ def mean_colour(source: ColorSource, corner_colours=None) -> np.ndarray:
     else:
         c = np.ones(3)
     return np.maximum(source.combine(c), 0.0)
+
+
+#: Blender's implicit colour -> float conversion (Cycles' ``linear_rgb_to_gray``: the
+#: luminance weights of the Linear Rec.709 working space)
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+#: the scalar inputs read per pixel / per point, with their ranges (Cycles' clamps)
+SCALAR_INPUTS = {"Roughness": (0.0, 1.0), "Metallic": (0.0, 1.0),
+                 "Specular IOR Level": (0.0, 1.0)}
+
+
+@dataclass
+class ScalarSource:
+    """A scalar input driven by a :class:`ColorSource` (its Color output, a float by
+    :data:`LUMINANCE`), clamped to the input's range."""
+
+    source: ColorSource
+    input: str = "Roughness"
+
+    def value(self, colour: np.ndarray) -> np.ndarray:
+        lo, hi = SCALAR_INPUTS[self.input]
+        return np.clip(self.source.combine(colour) @ LUMINANCE, lo, hi)
+
+
+def corner_colours(source: ColorSource, values: np.ndarray) -> np.ndarray:
+    """RGBA (C, 4) of a source at each corner: the texture at the corner UVs (C, 2), or the
+    attribute colours (C, 4) themselves."""
+    if source.texture is not None:
+        return sample(source.texture, values)
+    return np.asarray(values, dtype=np.float64)
+
+
+def point_values(scalar: ScalarSource, values: np.ndarray, point_of_corner: np.ndarray,
+                 count: int) -> np.ndarray:
+    """(P,) a scalar input per shading point: the mean of its corners' values (NaN for a
+    point without corners)."""
+    v = scalar.value(corner_colours(scalar.source, values)[:, :3])
+    total = np.bincount(point_of_corner, weights=v, minlength=count)
+    n = np.bincount(point_of_corner, minlength=count)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return total / n
+
+
+def quantize(values: np.ndarray, levels: int):
+    """(levels used (L,), index per value): ``values`` rounded to ``levels`` evenly spaced
+    values between their minimum and maximum (error at most half a step)."""
+    v = np.asarray(values, dtype=np.float64)
+    lo, hi = float(np.nanmin(v)), float(np.nanmax(v))
+    if hi - lo < 1e-6 or levels < 2:
+        return np.array([0.5 * (lo + hi)]), np.zeros(len(v), np.int64)
+    grid = np.linspace(lo, hi, levels)
+    idx = np.clip(np.rint((np.nan_to_num(v, nan=lo) - lo) / (hi - lo) * (levels - 1)), 0,
+                  levels - 1).astype(np.int64)
+    return grid, idx
+
+
+def material_at(material, values: dict, principled: dict | None = None):
+    """``material`` (core.brdf.Material) with the scalar inputs ``values`` ({input: value});
+    ``principled``: the Principled node's constant IOR, Specular Tint and distribution, which
+    a *Specular IOR Level* needs (it remaps the IOR and the dielectric F0)."""
+    from . import brdf
+    rough = float(values.get("Roughness", material.roughness))
+    metal = float(values.get("Metallic", material.metallic))
+    if "Specular IOR Level" in values and principled is not None:
+        out = brdf.principled_material(
+            base_color=material.diffuse_albedo, metallic=metal, roughness=rough,
+            ior=principled["IOR"], specular_ior_level=float(values["Specular IOR Level"]),
+            specular_tint=principled["Specular Tint"], distribution=principled["distribution"])
+        return replace(out, per_pixel_lobe=material.per_pixel_lobe)
+    return replace(material, roughness=min(max(rough, 0.0), 1.0),
+                   metallic=min(max(metal, 0.0), 1.0))
+
+
+def point_variants(materials: list, points, slots: dict, principled: dict, levels: int = 32):
+    """Per-vertex materials of textured scalar inputs: ``(materials, point materials (P,),
+    slot of each material)``.  ``slots``: {slot: {input: (P,) value per point}} (from
+    :func:`point_values`); each such slot's points get a variant of its material at their
+    values quantized (:func:`quantize`, at most ``levels`` variants per slot), appended to
+    ``materials``; ``principled``: {slot: :func:`material_at`'s constants}."""
+    out = list(materials)
+    slot_of = list(range(len(materials)))
+    point_mat = np.asarray(points.materials).copy()
+    for slot, inputs in slots.items():
+        sel = np.nonzero(point_mat == slot)[0]
+        if not len(sel) or slot >= len(materials):
+            continue
+        q = max(2, int(round(levels ** (1.0 / len(inputs)))))
+        grids, combo = {}, np.zeros(len(sel), np.int64)
+        for name, values in inputs.items():
+            grids[name], idx = quantize(values[sel], q)
+            combo = combo * q + idx
+        used, which = np.unique(combo, return_inverse=True)
+        for k, c in enumerate(used):
+            vals, rest = {}, int(c)
+            for name in reversed(list(inputs)):
+                grid = grids[name]
+                vals[name] = float(grid[min(rest % q, len(grid) - 1)])
+                rest //= q
+            out.append(material_at(materials[slot], vals, principled.get(slot)))
+            slot_of.append(slot)
+            point_mat[sel[which == k]] = len(out) - 1
+    return out, point_mat, np.asarray(slot_of, np.int64)

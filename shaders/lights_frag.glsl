@@ -16,9 +16,12 @@
  * paramTex (one material slot), row 0: 0 (albedo / pi, has diffuse), 1 (alpha,
  * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
  * weight, eta, -), (f0, -), (B, -) (core.brdf.sharp_lobes), 8 eye (w = 1 perspective),
- * 9 (core.mesh.closed_side of the object, -, -, -);
+ * 9 (core.mesh.closed_side of the object, -, -, -), 11 (roughness nodes n, alpha floor),
+ * 12-15 a textured Roughness (texture_lib.glsl's info, mapping rows, mix colour);
  * row 1: the Lambert base's view weight at mu = i / (TABLE - 1) (Principled layering),
- * rows 2, 3: each lobe's multiscatter factor at mu (core.brdf.multiscatter_factor).
+ * rows 2, 3: each lobe's multiscatter factor at mu (core.brdf.multiscatter_factor);
+ * with a textured Roughness rows 4k + 4 .. 4k + 7 the same four rows at roughness node
+ * k / (n - 1), interpolated at the pixel's roughness (addon/lights.py slot_texels).
  * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, kind:
  * 0 a disc, 1 point-like (radiance is then its irradiance)), 2..5 world-to-shadow-clip
  * columns, 6 (atlas tile origin x, y and size in texels, depth range in world units),
@@ -33,9 +36,39 @@
 #define BLOCKER_TAPS 16
 #define PCF_TAPS 24
 
+/* the roughness nodes the pixel lies between (nodeCount 1: the slot's own rows) */
+int nodeCount = 1, nodeRow0 = 0, nodeRow1 = 0;
+float nodeFrac = 0.0;
+
 vec4 param(int i, int row)
 {
-  return texelFetch(paramTex, ivec2(i, row), 0);
+  if (nodeCount < 2) {
+    return texelFetch(paramTex, ivec2(i, row), 0);
+  }
+  return mix(texelFetch(paramTex, ivec2(i, row + nodeRow0), 0),
+             texelFetch(paramTex, ivec2(i, row + nodeRow1), 0), nodeFrac);
+}
+
+/* a textured Roughness: select the nodes and return alpha (else -1) */
+float textured_alpha()
+{
+  vec4 t = texelFetch(paramTex, ivec2(11, 0), 0);
+  int n = int(t.x + 0.5);
+  if (n < 2) {
+    return -1.0;
+  }
+  vec4 info = texelFetch(paramTex, ivec2(12, 0), 0);
+  vec3 c = input_colour(roughTex, vUv, vAttr, info, texelFetch(paramTex, ivec2(13, 0), 0).xyz,
+                        texelFetch(paramTex, ivec2(14, 0), 0).xyz,
+                        texelFetch(paramTex, ivec2(15, 0), 0));
+  float r = clamp(dot(c, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0);
+  float x = r * float(n - 1);
+  int k = min(int(x), n - 2);
+  nodeCount = n;
+  nodeRow0 = 4 + 4 * k;
+  nodeRow1 = 8 + 4 * k;
+  nodeFrac = x - float(k);
+  return max(r * r, t.y);
 }
 
 vec4 source(int s, int i)
@@ -222,6 +255,7 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
 
 void main()
 {
+  float texAlpha = textured_alpha();
   float closedSide = param(9, 0).x;
   int sourceCount = textureSize(srcTex, 0).y;
   bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
@@ -244,7 +278,7 @@ void main()
     kd.rgb = input_colour(albedoTex, vUv, vAttr, texInfo, texMap0, texMap1, mixColor) / PI;
   }
   vec4 lobe = param(1, 0);
-  float a = max(lobe.x, 1e-4);
+  float a = texAlpha > 0.0 ? texAlpha : max(lobe.x, 1e-4);
   int dist = int(lobe.y);
   int lobes = int(lobe.z);
   bool glossy = lobe.w > 0.5 && lobes > 0;

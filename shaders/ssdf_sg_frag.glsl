@@ -9,9 +9,84 @@ vec4 pair_fetch(float q, int stride, int c)
 }
 #endif
 
+/* textured input k of the slot (0 colour, 1 roughness, 2 metallic, 3 specular IOR level)
+ * at this pixel; false when it has none */
+bool slot_input(sampler2D img, int k, out vec3 c)
+{
+  vec4 info = texelFetch(paramTex, ivec2(10 + 4 * k, 0), 0);
+  c = vec3(1.0);
+  if (info.z < -0.5) {
+    return false;
+  }
+  c = input_colour(img, vUv, vAttr, info, texelFetch(paramTex, ivec2(11 + 4 * k, 0), 0).xyz,
+                   texelFetch(paramTex, ivec2(12 + 4 * k, 0), 0).xyz,
+                   texelFetch(paramTex, ivec2(13 + 4 * k, 0), 0));
+  return true;
+}
+
+/* a scalar input's value: the colour as a float (core.textures.LUMINANCE), clamped */
+float scalar_of(vec3 c) { return clamp(dot(c, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0); }
+
+vec4 table_texel(int i, int j, int k) { return texelFetch(paramTex, ivec2(i * ENTRY + k, 1 + j), 0); }
+
+/* texel k of the table entry at fractional roughness node x and level node y */
+vec4 table_entry(float x, float y, int nr, int nl, int k)
+{
+  int i0 = min(int(x), nr - 1), j0 = min(int(y), nl - 1);
+  int i1 = min(i0 + 1, nr - 1), j1 = min(j0 + 1, nl - 1);
+  float fx = x - float(i0), fy = y - float(j0);
+  return mix(mix(table_texel(i0, j0, k), table_texel(i1, j0, k), fx),
+             mix(table_texel(i0, j1, k), table_texel(i1, j1, k), fx), fy);
+}
+
+/* the slot's textured inputs at this pixel: the NDF lobe and eta from the table at the
+ * pixel's roughness and level, kd and the Fresnel terms bilinear in (metallic, base
+ * colour) between the table's corners (exact: they are bilinear in the two) */
+void apply_inputs()
+{
+  vec4 t = texelFetch(paramTex, ivec2(26, 0), 0);
+  int nr = int(t.x + 0.5), nl = int(t.y + 0.5);
+  vec3 c, v;
+  bool coloured = slot_input(albedoTex, 0, c);
+  float x = 0.0, y = 0.0, mw = 0.0;
+  if (slot_input(roughTex, 1, v)) {
+    float r = scalar_of(v);
+    x = r * float(nr - 1);
+    roughness = max(r * r, SG_ALPHA_MIN);
+  }
+  if (slot_input(metalTex, 2, v)) {
+    mw = (scalar_of(v) - t.z) / max(t.w - t.z, 1e-6);
+  }
+  if (slot_input(levelTex, 3, v)) {
+    y = scalar_of(v) * float(nl - 1);
+  }
+  if (!coloured && x == 0.0 && y == 0.0 && mw == 0.0 && nr == 1 && nl == 1) {
+    return;
+  }
+  if (nr > 1 || nl > 1) {
+    vec4 e0 = table_entry(x, y, nr, nl, 0);
+    float a2 = roughness * roughness;
+    ndfLambda = max(e0.x / a2, 1e-4);
+    ndfMu = e0.y / a2;
+    ior = e0.z;
+  }
+  vec3 cf = clamp(c, 0.0, 1.0);
+  vec3 q[4];
+  for (int k = 0; k < 4; k++) {
+    vec3 lo = mix(table_entry(x, y, nr, nl, 1 + k).rgb, table_entry(x, y, nr, nl, 9 + k).rgb, mw);
+    vec3 hi = mix(table_entry(x, y, nr, nl, 5 + k).rgb, table_entry(x, y, nr, nl, 13 + k).rgb, mw);
+    q[k] = lo + (hi - lo) * (k == 0 ? c : cf);
+  }
+  kd.rgb = q[0];
+  fresA.rgb = q[1];
+  fresBd.rgb = q[2];
+  fresBs.rgb = q[3];
+}
+
 void main()
 {
   read_parameters();
+  apply_inputs();
   vec3 n = normalize(vNrm);
   vec3 t, b;
   ssdf_frame(n, t, b);
@@ -77,7 +152,7 @@ void main()
     }
     vec3 mu = ndfMu * m * fres;
     for (int k = 0; k < cosLobes; k++) {
-      vec4 cl = texelFetch(paramTex, ivec2(10 + k, 0), 0);
+      vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + k, 0), 0);
       vec3 cw = cl.x * t + cl.y * b + cl.z * n;
       vec3 p;
       float lam, amp;

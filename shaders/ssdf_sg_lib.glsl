@@ -17,14 +17,25 @@
  *           flatTex   (pair pass) per flat point (normal, point index);
  *           paramTex  9 texels of scalar parameters (environment, SSDF, material slot),
  *                     read into the globals below (push constants are kept to 128 bytes),
- *                     texel 9 = (cosine lobe count, sharpness), texels 10.. = (local
- *                     direction, amplitude) of the clamped-cosine SG mixture C*. */
+ *                     texel 9 = (cosine lobe count, sharpness), 10-25 the slot's textured
+ *                     inputs (colour, roughness, metallic, specular IOR level; four texels
+ *                     each: texture_lib.glsl's info, mapping rows, mix colour), 26 the
+ *                     table's (roughness nodes, level nodes, metallic at its corners 0, 1),
+ *                     texels COS_TEXEL.. = (local direction, amplitude) of the clamped-cosine
+ *                     SG mixture C*; rows 1..: the slot's table (ssdf_sg_gpu.slot_table):
+ *                     per level node a row, per roughness node ENTRY texels: (lambda a^2,
+ *                     mu a^2, eta, -), kd, A, B_d, B_s at the (metallic, base colour)
+ *                     corners 00, 01, 10, 11. */
+
+const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
+const int ENTRY = 17;       /* ENTRY_TEXELS */
 
 int cosLobes;
 float cosLambda;
 int lightCount, ssdfRes, coeffTexels, envRes, envLevels, glossy, brdfModel, principled;
 float envStrength, envLambdaFirst, envRatio, envTop, roughness, ior, ndfLambda, ndfMu;
 vec4 kd, fresA, fresBd, fresBs, eye;
+
 
 void read_parameters()
 {
@@ -214,7 +225,7 @@ bool diffuse_pair(int m, int j, vec3 n, vec3 t, vec3 b, vec4 W[16], bool withThe
   if (mu.r == 0.0 && mu.g == 0.0 && mu.b == 0.0) {
     return false;
   }
-  vec4 cl = texelFetch(paramTex, ivec2(10 + m, 0), 0);
+  vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
   vec3 cw = cl.x * t + cl.y * b + cl.z * n;
   vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
   vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */

@@ -7,6 +7,8 @@ void main()
   vNrm = nrm;
   vBary = bary;
   vTri = triPoints;
+  vUv = uv;
+  vAttr = attr;
 #ifdef FLAT_PAIRS
   vFlat = triFlat;   /* the three points' rows in the pair table */
 #endif

@@ -85,11 +85,13 @@ def environment_lighting(world, resolution: int, max_lobes: int = 8):
 
 
 def object_sg_materials(st):
-    """The SG material per slot of a synced object: the material's "PRT Reflectance"
-    settings (``addon/sg_material.py``) when synced, else converted from its Cycles
-    material."""
-    table = st.data.get("sg_materials")
-    return table if table is not None else scene.sg_materials(st.materials)
+    """The SG material per slot of a synced object: a material's own "PRT Reflectance"
+    model (``addon/sg_material.py``, kept by ``sync``), else its core material converted
+    (so a textured slot's base colour, which ``FrameState.shade`` sets to white and black,
+    reaches the SG material)."""
+    own = st.data.get("sg_own", {})
+    return [own[slot] if slot in own else sg for slot, sg
+            in enumerate(scene.sg_materials(st.materials))]
 
 
 def scene_fit(state, fields, fit, cosine):
@@ -227,20 +229,17 @@ class SSDFSGMethod(Method):
     def sync(self, state):
         import bpy
         for st in state.objects:
-            names = st.data.get("material_names")
-            if names is not None:
-                sgm = []
-                for slot, n in enumerate(names):
-                    mat = bpy.data.materials.get(n) if n else None
-                    m = sg_material.export_sg_material(mat, state.warnings)
-                    if slot < len(st.materials) and st.materials[slot].per_pixel_lobe:
-                        if sg_material.uses_blender_material(mat):
-                            m = sg_brdf.without_glossy(m)     # its lobes: addon/sharp.py
-                        else:                                 # its own SG model draws them
-                            st.materials[slot] = replace(st.materials[slot],
-                                                         per_pixel_lobe=False)
-                    sgm.append(m)
-                st.data["sg_materials"] = sgm
+            # slots with their own SG model (not the node tree); its lobes are drawn here,
+            # even when narrower than the cubemap (addon/sharp.py draws the node tree's)
+            own = {}
+            for slot, n in enumerate(st.data.get("material_names") or ()):
+                mat = bpy.data.materials.get(n) if n else None
+                if mat is None or sg_material.uses_blender_material(mat) \
+                        or slot >= len(st.materials):
+                    continue
+                own[slot] = sg_material.export_sg_material(mat, state.warnings)
+                st.materials[slot] = replace(st.materials[slot], per_pixel_lobe=False)
+            st.data["sg_own"] = own
         cube = directions.cubemap(state.resolution)
         res, budget, max_terms, occlusion = pca_settings(state.settings)
         derived_now = []

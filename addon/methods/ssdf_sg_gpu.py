@@ -6,6 +6,8 @@ in ``core/ssdf_sg.py`` and ``core/ssdf_sg_scene.py``; the method is ``ssdf_sg.py
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ...core import sg_brdf
@@ -13,6 +15,7 @@ from ...core.brdf import slot_material
 from ...core.ssdf_sg_scene import (cosine_amplitudes, diffuse_slots, flat_triangles,
                                    is_glossy, sg_materials)
 from .. import drawing, keys
+from ..texture_export import shader_inputs, slot_uvs
 
 # shaders ("shader", "shader_flat", "pairs"), the pair pass's "quad", the prefiltered
 # environment's "atlas" (per pyramid) and the light-lobe texture per cosine lobe count
@@ -27,12 +30,17 @@ _PAIR_TABLES = drawing.gpu_cache({}, limit=8)
 
 _SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"), ("FLOAT_2D", "envTex"),
              ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
+#: the main pass's textured inputs (texture_lib.glsl)
+_INPUT_SAMPLERS = (("FLOAT_2D", "albedoTex"), ("FLOAT_2D", "roughTex"), ("FLOAT_2D", "metalTex"),
+                   ("FLOAT_2D", "levelTex"))
 
 
 def _fragment_source(main: str) -> str:
     """sg_common.glsl (the SG algebra, BRDF factors and cube-face lookup shared with the
-    material helpers' GLSL twin, tested against numpy there), ssdf_sg_lib.glsl, ``main``."""
-    return drawing.glsl_source("sg_common.glsl", "ssdf_sg_lib.glsl", main)
+    material helpers' GLSL twin, tested against numpy there), ssdf_sg_lib.glsl, ``main``
+    (the main pass also texture_lib.glsl: the slot's textured inputs)."""
+    extra = ("texture_lib.glsl",) if main == "ssdf_sg_frag.glsl" else ()
+    return drawing.glsl_source("sg_common.glsl", "ssdf_sg_lib.glsl", *extra, main)
 
 
 def _gpu_shader(flat: bool = False):
@@ -49,10 +57,11 @@ def _make_shader(flat: bool):
     for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
                         ("FLOAT", "closedSide")):
         info.push_constant(kind, ident)
-    for slot, (kind, ident) in enumerate(_SAMPLERS + ((("FLOAT_2D", "pairTex"),) if flat
-                                                     else ())):
+    for slot, (kind, ident) in enumerate(_SAMPLERS + _INPUT_SAMPLERS
+                                         + ((("FLOAT_2D", "pairTex"),) if flat else ())):
         info.sampler(slot, kind, ident)
-    inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"))
+    inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"),
+              ("VEC2", "uv"), ("VEC4", "attr"))
     for slot, (kind, ident) in enumerate(inputs + ((("VEC3", "triFlat"),) if flat else ())):
         info.vertex_in(slot, kind, ident)
     iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_flat_iface" if flat
@@ -61,6 +70,8 @@ def _make_shader(flat: bool):
     iface.smooth("VEC3", "vNrm")
     iface.smooth("VEC3", "vBary")
     iface.flat("VEC3", "vTri")
+    iface.smooth("VEC2", "vUv")
+    iface.smooth("VEC4", "vAttr")
     if flat:
         iface.flat("VEC3", "vFlat")
     info.vertex_out(iface)
@@ -156,21 +167,124 @@ def material_uniforms(material):
                 ndfMu=float(mu), fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0))
 
 
-def parameter_texture(env, mat, res, kt, eye4, cosine):
-    """The parameter texels read by ``read_parameters`` in ssdf_sg_frag.glsl: 9 scalars
-    texels, then (count, sharpness) and (local direction, amplitude) per cosine lobe."""
+#: texel of the first clamped-cosine lobe in the parameter texture
+COSINE_TEXEL = 28
+#: table nodes over a textured Roughness / Specular IOR Level (values i / (n - 1))
+ROUGHNESS_NODES, LEVEL_NODES = 33, 9
+#: texels per table entry: (lambda a^2, mu a^2, eta, -), then kd, A, B_d, B_s at the four
+#: (base colour, metallic) corners
+ENTRY_TEXELS = 17
+#: the textured inputs a slot's shader reads, in sampler and texel order
+INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
+
+
+def parameter_texture(env, mat, res, kt, eye4, cosine, table=None, sources=None):
+    """The parameter texture read by ``read_parameters`` in ssdf_sg_lib.glsl.  Row 0: 9
+    scalar texels, (count, sharpness) of the cosine lobes, four texels per textured input
+    of :data:`INPUTS` (``sources``, core.textures.ColorSource or None: texture_lib.glsl's
+    info, mapping rows, mix colour) from texel 10, the table's (roughness nodes, level
+    nodes, metallic at corner 0 and 1) at 26, (local direction, amplitude) per cosine lobe
+    from :data:`COSINE_TEXEL`.  Rows 1..: ``table`` (:func:`slot_table`), one row per
+    Specular IOR Level node."""
     M = len(cosine.amplitudes)
-    p = np.zeros((1, 10 + M, 4), np.float32)
+    table = _slot_table_of(mat) if table is None else table
+    nl, nr = table["entries"].shape[:2]
+    width = max(COSINE_TEXEL + M, nr * ENTRY_TEXELS)
+    p = np.zeros((1 + nl, width, 4), np.float32)
     p[0, 8] = eye4
     p[0, 9] = (M, cosine.sharpness, 0.0, 0.0)
-    p[0, 10:, :3] = cosine.directions
-    p[0, 10:, 3] = cosine.amplitudes
+    p[0, COSINE_TEXEL:COSINE_TEXEL + M, :3] = cosine.directions
+    p[0, COSINE_TEXEL:COSINE_TEXEL + M, 3] = cosine.amplitudes
     p[0, 0] = (env["envStrength"], env["lightCount"], res, kt)
     p[0, 1] = (env["envRes"], env["envLevels"], env["envLambdaFirst"], env["envRatio"])
     p[0, 2] = (env["envTop"], mat["glossy"], mat["brdfModel"], mat["principled"])
     p[0, 3] = (mat["roughness"], mat["ior"], mat["ndfLambda"], mat["ndfMu"])
     p[0, 4], p[0, 5], p[0, 6], p[0, 7] = mat["kd"], mat["fresA"], mat["fresBd"], mat["fresBs"]
+    for k, name in enumerate(INPUTS):
+        tex = drawing.source_uniforms((sources or {}).get(name))
+        p[0, 10 + 4 * k] = tex["texInfo"]
+        p[0, 11 + 4 * k, :3], p[0, 12 + 4 * k, :3] = tex["texMap0"], tex["texMap1"]
+        p[0, 13 + 4 * k] = tex["mixColor"]
+    p[0, 26] = (nr, nl, *table["metallic"])
+    p[1:, :nr * ENTRY_TEXELS] = table["entries"].reshape(nl, nr * ENTRY_TEXELS, 4)
     return _texture(p)
+
+
+def _entry(uniforms, alpha):
+    """One table entry's texels from four corners' :func:`material_uniforms`."""
+    e = np.zeros((ENTRY_TEXELS, 4), np.float32)
+    u = uniforms[0]
+    e[0] = (u["ndfLambda"] * alpha * alpha, u["ndfMu"] * alpha * alpha, u["ior"], 0.0)
+    for c, v in enumerate(uniforms):
+        e[1 + 4 * c:5 + 4 * c] = (v["kd"], v["fresA"], v["fresBd"], v["fresBs"])
+    return e
+
+
+def _slot_table_of(uniforms):
+    """The one-entry table of a slot without textured inputs."""
+    a = max(uniforms["roughness"], 1e-30)
+    return {"entries": _entry([uniforms] * 4, a)[None, None], "metallic": (0.0, 0.0)}
+
+
+def slot_table(material, colour: bool, inputs, principled):
+    """The per-slot table of the shader's textured inputs: entries over the Roughness
+    nodes (``inputs`` has it) and Specular IOR Level nodes, each with kd and the Fresnel
+    terms at the (base colour, metallic) corners: base colour 1 and 0 when ``colour`` is
+    textured (else the slot's own), metallic 0 and 1 when textured (else the slot's own).
+    Those terms are bilinear in (base colour, metallic); roughness and level are
+    interpolated between nodes (NDF lobe as lambda a^2 and mu a^2, exact in a)."""
+    from ...core import textures
+    nr = ROUGHNESS_NODES if "Roughness" in inputs else 1
+    nl = LEVEL_NODES if "Specular IOR Level" in inputs and principled else 1
+    metal = (0.0, 1.0) if "Metallic" in inputs else (material.metallic,) * 2
+    entries = np.zeros((nl, nr, ENTRY_TEXELS, 4), np.float32)
+    for j in range(nl):
+        for i in range(nr):
+            vals = {}
+            if nr > 1:
+                vals["Roughness"] = i / (nr - 1)
+            if nl > 1:
+                vals["Specular IOR Level"] = j / (nl - 1)
+            corners = []
+            for m in metal[::-1]:               # corner 2 m_index + c_index: m 1 first
+                for c in (1.0, 0.0):
+                    base = (c, c, c) if colour else material.diffuse_albedo
+                    got = textures.material_at(replace(material, diffuse_albedo=base),
+                                               dict(vals, Metallic=m), principled)
+                    corners.append(material_uniforms(got))
+            entries[j, i] = _entry(corners[::-1], max(corners[0]["roughness"], 1e-30))
+    return {"entries": entries, "metallic": metal}
+
+
+# per slot: (material, inputs) -> its table (a few ms each once the BRDF tables are made)
+_TABLES = drawing.gpu_cache({}, limit=64)
+
+
+def slot_parameters(env, st, table, slot, res, kt, eye4, cosine):
+    """:func:`parameter_texture` of one material slot, with its textured inputs
+    (``st.textures``, :func:`shader_inputs`) and their table."""
+    source = st.textures.get(slot, (None, None))[0]
+    constants = st.inputs[1]
+    inputs = shader_inputs(st, slot)
+    own = slot >= len(st.materials) or slot in st.data.get("sg_own", {})
+    mat = material_uniforms(slot_material(table, slot))
+    if own or (source is None and not inputs):
+        return parameter_texture(env, mat, res, kt, eye4, cosine)
+    material = st.materials[slot]
+    key = (repr(material), source is not None, tuple(sorted(inputs)))
+    tab = keys.held(_TABLES, key, (), lambda: slot_table(
+        material, source is not None, inputs, constants.get(slot)))
+    sources = {"colour": source, **{name: s.source for name, (s, _) in inputs.items()}}
+    return parameter_texture(env, mat, res, kt, eye4, cosine, tab, sources)
+
+
+def input_textures(st, slot):
+    """The GPU textures of a slot's textured inputs (:data:`INPUTS`; white without one)."""
+    scalars = shader_inputs(st, slot)
+    sources = [st.textures.get(slot, (None, None))[0]] + [
+        scalars[name][0].source if name in scalars else None for name in INPUTS[1:]]
+    return [drawing.albedo_texture(s.texture.pixels) if s is not None and s.texture is not None
+            else drawing.white_texture() for s in sources]
 
 
 #: an object whose pair table would pass this many texels (256 MiB) is drawn without it
@@ -190,7 +304,10 @@ def object_batches(st, field, use_flat: bool = True) -> ObjectBatches:
     """Per material slot: per-corner position, normal, triangle points, barycentrics -- the
     flat triangles (:func:`flat_triangles`) in a second batch for the FLAT_PAIRS shader
     with their points' rows in the pair table."""
-    return keys.held(_BATCHES, (st.name, st.fingerprint, use_flat), (field,),
+    inputs = tuple(sorted((slot, id(values)) for slot, (_, values) in st.textures.items())) \
+        + tuple(sorted((slot, name, id(v)) for slot, got in st.inputs[0].items()
+                       for name, (_, v) in got.items()))
+    return keys.held(_BATCHES, (st.name, st.fingerprint, use_flat, inputs), (field,),
                      lambda: _object_batches(st, use_flat))
 
 
@@ -209,6 +326,18 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
     row = np.full(len(pts.normals), -1, np.int64)
     row[flat_points] = np.arange(len(flat_points))
     tri_flat = np.repeat(row[pts.point_of_corner[tri]].astype(np.float32), 3, axis=0)
+    # a textured slot's UVs and colour attribute per corner (addon.texture_export)
+    uv = np.zeros((len(corner), 2), np.float32)
+    attr = np.ones((len(corner), 4), np.float32)
+    corner_slot = np.repeat(slots, 3)
+    for slot in np.unique(slots):
+        sel = corner_slot == slot
+        uvs = slot_uvs(st, int(slot))
+        if uvs is not None:
+            uv[sel] = uvs[1][corner[sel]]
+        source, values = st.textures.get(int(slot), (None, None))
+        if source is not None and source.texture is None:
+            attr[sel] = values[corner[sel]]
     draws = []
     for slot in np.unique(slots):
         for is_flat in (False, True):
@@ -217,7 +346,8 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
                 continue
             attrs = {"pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
                      "triPoints": np.ascontiguousarray(tri_points[sel]),
-                     "bary": np.ascontiguousarray(bary[sel])}
+                     "bary": np.ascontiguousarray(bary[sel]),
+                     "uv": np.ascontiguousarray(uv[sel]), "attr": np.ascontiguousarray(attr[sel])}
             if is_flat:
                 attrs["triFlat"] = np.ascontiguousarray(tri_flat[sel])
             draws.append((int(slot), is_flat,
@@ -302,9 +432,10 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
         batches = object_batches(st, field, use_flat=bool(diffuse_slots(table).any()))
         if len(batches.flat_points) * pair_texels(M, int(light_count)) > MAX_PAIR_TEXELS:
             batches = object_batches(st, field, use_flat=False)
-        params = {slot: parameter_texture(env_common, material_uniforms(slot_material(table, slot)),
-                                          field.resolution, kt, eye4, cosine)
+        params = {slot: slot_parameters(env_common, st, table, slot, field.resolution, kt,
+                                        eye4, cosine)
                   for slot in sorted({slot for slot, _, _ in batches.draws})}
+        inputs = {slot: input_textures(st, slot) for slot in params}
         pair_tex = None
         if len(batches.flat_points):
             key = (st.name, st.fingerprint, np.asarray(world.rotation).round(12).tobytes(),
@@ -314,8 +445,9 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
                 lambda: pair_table(st, field, batches.flat_points, env_tex, light_tex,
                                    next(iter(params.values())), int(light_count), M, rot))
 
-        def draw(view_projection, batches=batches, params=params, coeff_tex=coeff_tex,
-                 eigen_tex=eigen_tex, pair_tex=pair_tex, side=float(st.closed_side)):
+        def draw(view_projection, batches=batches, params=params, inputs=inputs,
+                 coeff_tex=coeff_tex, eigen_tex=eigen_tex, pair_tex=pair_tex,
+                 side=float(st.closed_side)):
             for flat in (False, True):
                 todo = [(slot, batch) for slot, f, batch in batches.draws if f == flat]
                 if not todo:
@@ -329,6 +461,8 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
                     sh.uniform_sampler("pairTex", pair_tex)
                 for slot, batch in todo:
                     sh.uniform_sampler("paramTex", params[slot])
+                    for (_, name), tex in zip(_INPUT_SAMPLERS, inputs[slot]):
+                        sh.uniform_sampler(name, tex)
                     batch.draw(sh)
 
         draws.append(draw)
