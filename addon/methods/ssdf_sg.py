@@ -29,7 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...core import directions, sg_brdf, ssdf, ssdf_sg
+from ...core import directions, ssdf, ssdf_sg
 from ...core import ssdf_sg_scene as scene
 from .. import drawing, keys, sg_material
 from . import Method, register
