@@ -52,11 +52,13 @@ class DrawnSource:
     """A source as the pass draws it, in world space: a distant disc (the world's sources,
     sun lamps) or, with a ``position``, a local lamp (point or spot: a sphere of radius
     ``radius`` and power ``radiance`` (watts times colour); ``spot`` = (axis the lamp shines
-    along, cos of its half angle, smoothstep width))."""
+    along, cos of its half angle, smoothstep width); ``area`` = (half_x, half_y, ellipse) of
+    an area lamp: then ``radiance`` is its radiance, ``direction`` the way it faces and
+    ``radius`` that of the disc of its area (its shadow's softness))."""
 
-    __slots__ = ("direction", "radius", "radiance", "name", "position", "spot")
+    __slots__ = ("direction", "radius", "radiance", "name", "position", "spot", "area")
 
-    def __init__(self, direction, radius, radiance, name, position=None, spot=None):
+    def __init__(self, direction, radius, radiance, name, position=None, spot=None, area=None):
         self.direction = np.asarray(direction, np.float64) / max(np.linalg.norm(direction),
                                                                  1e-300)
         self.radius = float(radius)
@@ -66,6 +68,7 @@ class DrawnSource:
         self.name = name
         self.position = None if position is None else np.asarray(position, np.float64)
         self.spot = spot
+        self.area = area
 
     @property
     def point_like(self) -> bool:
@@ -110,9 +113,19 @@ def lamp_sources(lamps) -> list:
     """Blender lamps: a sun is a disc of half its angle whose strength is the irradiance
     at normal incidence (Cycles' distant light); a point or spot lamp a sphere of its
     radius giving Phi / (4 pi d^2) at normal incidence (Cycles), a spot masked by its
-    cone's smoothstep (core.sg_lighting)."""
+    cone's smoothstep (core.sg_lighting); an area lamp a rectangle or ellipse of
+    radiance Phi / (pi A) on its front side."""
     out = []
     for lamp in lamps:
+        if lamp.kind == "AREA":             # a one-sided Lambertian emitter of Phi / (pi A)
+            A = lamp.area
+            ellipse = lamp.shape in ("DISK", "ELLIPSE")
+            out.append(DrawnSource(lamp.direction, math.sqrt(A / math.pi),
+                                   np.asarray(lamp.color, np.float64) / (math.pi * A),
+                                   "area lamp", position=lamp.position,
+                                   area=(np.asarray(lamp.half_x, np.float64),
+                                         np.asarray(lamp.half_y, np.float64), ellipse)))
+            continue
         if lamp.kind in ("POINT", "SPOT"):
             spot = None
             if lamp.kind == "SPOT":
@@ -465,7 +478,13 @@ def draws(state, eye, view_dir) -> list:
     for k, (s, (tile, mats)) in enumerate(zip(local, cubes), start=len(distant)):
         src[k, 0] = (*s.position, s.radius)
         src[k, 1] = (*s.radiance, 2.0 if s.spot is None else 3.0)
-        if s.spot is not None:
+        if s.area is not None:
+            half_x, half_y, ellipse = s.area
+            src[k, 1, 3] = 5.0 if ellipse else 4.0
+            src[k, 2, :3] = s.direction
+            src[k, 4, :3] = half_x
+            src[k, 5, :3] = half_y
+        elif s.spot is not None:
             axis, cos_half, smooth = s.spot
             src[k, 2] = (*axis, cos_half)
             src[k, 3, 0] = smooth

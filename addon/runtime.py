@@ -326,8 +326,9 @@ class FrameState:
         # lamps are drawn per pixel (addon/lights.py), except the point and spot lamps of a
         # method that draws them itself (SSDF_SG: its spherical Gaussians, eq. 32-33)
         own = self.method_impl.draws_lamps
-        self.lamps = [lamp for lamp in lamps if lamp.kind != "SUN"] if own else []
-        self.drawn_lamps = [lamp for lamp in lamps if lamp.kind == "SUN" or not own]
+        mine = ("POINT", "SPOT") if own else ()
+        self.lamps = [lamp for lamp in lamps if lamp.kind in mine]
+        self.drawn_lamps = [lamp for lamp in lamps if lamp.kind not in mine]
         self.warnings += lamp_warnings
         self.method_impl.sync(self)
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings

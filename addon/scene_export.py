@@ -8,6 +8,7 @@ approximately are collected as warnings.
 
 from __future__ import annotations
 
+import math
 import os
 
 import bpy
@@ -267,8 +268,8 @@ def object_materials(ob_eval, warnings: list, colours=None, scalars=None) -> lis
 # --------------------------------------------------------------------------- lamps
 
 def export_lamps(depsgraph, warnings: list | None = None) -> list:
-    """Visible point/spot/sun lights as :class:`core.sg_lighting.Lamp` (eq. 32-33; area
-    lights are reported in ``warnings`` and skipped)."""
+    """Visible point/spot/sun/area lights as :class:`core.sg_lighting.Lamp` (eq. 32-33 for
+    point and spot lamps; others are reported in ``warnings`` and skipped)."""
     warnings = [] if warnings is None else warnings
     lamps = []
     for inst in depsgraph.object_instances:
@@ -288,8 +289,19 @@ def export_lamps(depsgraph, warnings: list | None = None) -> list:
             if light.type == "SPOT":
                 kw.update(spot_size=float(light.spot_size), spot_blend=float(light.spot_blend))
             lamps.append(sg_lighting.Lamp(light.type, **kw))
+        elif light.type == "AREA":
+            sx = float(light.size)
+            sy = sx if light.shape in ("SQUARE", "DISK") else float(light.size_y)
+            if getattr(light, "spread", math.pi) < math.pi - 1e-4:
+                warnings.append(f"Light '{ob.name}': area light spread below 180° is drawn "
+                                "as 180°")
+            lamp = sg_lighting.Lamp("AREA", color=color, position=M[:3, 3],
+                                    direction=direction, half_x=0.5 * sx * M[:3, 0],
+                                    half_y=0.5 * sy * M[:3, 1], shape=light.shape)
+            if lamp.area > 0.0:
+                lamps.append(lamp)
         else:
-            warnings.append(f"Light '{ob.name}': {light.type} lights are not modelled by SSDF_SG")
+            warnings.append(f"Light '{ob.name}': {light.type} lights are not supported")
     return lamps
 
 

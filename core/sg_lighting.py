@@ -464,14 +464,17 @@ LAMP_LAMBDA_MAX = 1e5
 class Lamp:
     """A Blender lamp in Cycles' units.
 
-    kind:      "POINT", "SPOT" or "SUN".
-    color:     RGB colour times power (POINT/SPOT, watts) or strength (SUN, W/m^2
+    kind:      "POINT", "SPOT", "SUN" or "AREA".
+    color:     RGB colour times power (POINT/SPOT/AREA, watts) or strength (SUN, W/m^2
                = irradiance at normal incidence).
-    position:  world position (POINT/SPOT).
-    direction: unit direction the lamp shines *towards* (SUN/SPOT: the object's -Z).
+    position:  world position (POINT/SPOT; AREA: its centre).
+    direction: unit direction the lamp shines *towards* (SUN/SPOT/AREA: the object's -Z).
     radius:    sphere radius (POINT/SPOT, ``shadow_soft_size``).
     angle:     angular diameter (SUN).
     spot_size, spot_blend: SPOT cone (full angle) and blend.
+    half_x, half_y: AREA: the world vectors from its centre to the middle of its edges
+               (its local x and y axes times half its size, object scale included).
+    shape:     AREA: "SQUARE", "RECTANGLE", "DISK" or "ELLIPSE".
     """
 
     kind: str
@@ -482,17 +485,29 @@ class Lamp:
     angle: float = 0.00918
     spot_size: float = math.radians(45.0)
     spot_blend: float = 0.15
+    half_x: tuple = (0.0, 0.0, 0.0)
+    half_y: tuple = (0.0, 0.0, 0.0)
+    shape: str = "SQUARE"
 
     def __post_init__(self):
         self.kind = str(self.kind).upper()
-        if self.kind not in ("POINT", "SPOT", "SUN"):
-            raise ValueError(f"lamp kind must be POINT, SPOT or SUN, got {self.kind!r}")
+        if self.kind not in ("POINT", "SPOT", "SUN", "AREA"):
+            raise ValueError(f"lamp kind must be POINT, SPOT, SUN or AREA, got {self.kind!r}")
         vals = [*np.ravel(self.color), *np.ravel(self.position), *np.ravel(self.direction),
-                self.radius, self.angle, self.spot_size, self.spot_blend]
+                self.radius, self.angle, self.spot_size, self.spot_blend,
+                *np.ravel(self.half_x), *np.ravel(self.half_y)]
         if not np.all(np.isfinite(np.asarray(vals, dtype=np.float64))):
             raise ValueError("lamp has NaN/Inf parameters")
         d = np.asarray(self.direction, dtype=np.float64)
         self.direction = d / max(np.linalg.norm(d), 1e-300)
+
+    @property
+    def area(self) -> float:
+        """An AREA lamp's emitting area (0 for the others)."""
+        if self.kind != "AREA":
+            return 0.0
+        full = 4.0 * float(np.linalg.norm(np.cross(self.half_x, self.half_y)))
+        return full * (math.pi / 4.0 if self.shape in ("DISK", "ELLIPSE") else 1.0)
 
 
 def _spot_attenuation(lamp: Lamp, to_point):

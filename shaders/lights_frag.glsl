@@ -28,7 +28,9 @@
  * 7 (shadow texel size in world units, the map's x axis in world space).  A local lamp:
  * 0 (position, sphere radius), 1 (power times colour, kind 2 point / 3 spot), 2 (spot
  * axis, cos of its half angle), 3 (spot smoothstep width), 6 (cubeTex tile origin x, y
- * and face size), 8..31 the six faces' world-to-clip columns. */
+ * and face size), 8..31 the six faces' world-to-clip columns.  An area lamp (kind 4 a
+ * rectangle, 5 an ellipse): 0 (centre, radius of a disc of its area), 1 (radiance), 2 (the
+ * way it faces), 4, 5 (its half axes), and its cube shadow map as a local lamp's. */
 
 #define NL 8
 #define NB 8
@@ -221,6 +223,10 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
   vec4 ftile = vec4(tile.x + float(face) * tile.z, tile.y, tile.z, 0.0);
   float d = length(v);
   float bias = 2.0 * texel;
+  /* receiver-plane bias: a tap `k` texels off reads the receiver's own plane up to
+   * k texel tan(incidence) nearer the lamp (grazing receivers must not shadow themselves) */
+  float cos_l = max(dot(ng, -v / max(length(v), 1e-12)), 0.1);
+  float slope = texel * sqrt(1.0 - cos_l * cos_l) / cos_l;
   mat2 turn = mat2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x),
                    -sin(6.2831853 * shift.x), cos(6.2831853 * shift.x));
   float uv_texel = 1.0 / tile.z;
@@ -230,7 +236,7 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
     float b = texelFetch(cubeTex, ivec2(ftile.xy + clamp(uv + turn * POISSON[k] * search
                                                          * uv_texel, 0.0, 1.0) * (tile.z - 1.0)),
                          0).r;
-    if (b < d - bias) {
+    if (b < d - bias - length(POISSON[k]) * search * slope) {
       blockers += 1.0;
       sum += b;
     }
@@ -246,9 +252,135 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
     float b = texelFetch(cubeTex, ivec2(ftile.xy + clamp(uv + turn * POISSON[k] * filter_radius
                                                          * uv_texel, 0.0, 1.0) * (tile.z - 1.0)),
                          0).r;
-    lit += b < d - bias ? 0.0 : 1.0;
+    lit += b < d - bias - length(POISSON[k]) * filter_radius * slope ? 0.0 : 1.0;
   }
   return lit / float(PCF_TAPS);
+}
+
+/* ---------------------------------------------------------------- area lamps */
+
+#define NA 16
+
+/* a point of an area lamp's shape for u in [0, 1)^2, uniform in area: the square as is,
+ * the disc by the concentric map (Shirley and Chiu 1997) */
+vec2 shape_point(vec2 u, bool ellipse)
+{
+  vec2 p = 2.0 * u - 1.0;
+  if (!ellipse || (p.x == 0.0 && p.y == 0.0)) {
+    return p;
+  }
+  float r, phi;
+  if (abs(p.x) > abs(p.y)) {
+    r = p.x;
+    phi = 0.25 * PI * (p.y / p.x);
+  }
+  else {
+    r = p.y;
+    phi = 0.5 * PI - 0.25 * PI * (p.x / p.y);
+  }
+  return r * vec2(cos(phi), sin(phi));
+}
+
+#define POLY 16
+
+/* integral of max(0, n.i) over the solid angle of a planar polygon (convex, vertices in
+ * order) seen from p: the polygon clipped to p's horizon (Sutherland-Hodgman), then
+ * Lambert's edge formula (1/2) sum acos(a.b) n.(a x b)/|a x b| -- exact */
+float polygon_cosine(vec3 p, vec3 n, vec3 verts[POLY], int count)
+{
+  vec3 clipped[POLY + 1];
+  int m = 0;
+  for (int k = 0; k < count; k++) {
+    vec3 a = verts[k] - p, b = verts[(k + 1) % count] - p;
+    float da = dot(a, n), db = dot(b, n);
+    if (da > 0.0) {
+      clipped[m++] = a;
+    }
+    if ((da > 0.0) != (db > 0.0) && m <= POLY) {
+      clipped[m++] = a + (b - a) * (da / (da - db));
+    }
+  }
+  float sum = 0.0;
+  for (int k = 0; k < m; k++) {
+    vec3 a = normalize(clipped[k]), b = normalize(clipped[(k + 1) % m]);
+    vec3 c = cross(a, b);
+    float l = length(c);
+    if (l > 1e-9) {
+      sum += acos(clamp(dot(a, b), -1.0, 1.0)) * dot(n, c) / l;
+    }
+  }
+  return 0.5 * abs(sum);
+}
+
+/* an area lamp (srcTex row 0 centre, 1 radiance, 2 the way it faces, 4 and 5 its half
+ * axes): the Lambert term exactly (polygon_cosine; an ellipse as the 16-gon of its area),
+ * the glossy lobes by NA stratified points on it and NB samples of the NDF that hit its
+ * front, combined by the balance heuristic */
+vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 ng, vec3 o, float cos_o, vec4 kd, vec3 wd,
+               float a, int dist, int lobes, bool glossy, float lam_o, vec3 ms0, vec3 ms1,
+               vec3 tx, vec3 ty, vec2 shift)
+{
+  vec3 centre = source(s, 0).xyz;
+  vec3 L = source(s, 1).rgb;
+  vec3 facing = source(s, 2).xyz;
+  vec3 hx = source(s, 4).xyz, hy = source(s, 5).xyz;
+  float area = 4.0 * length(cross(hx, hy)) * (ellipse ? 0.25 * PI : 1.0);
+  vec2 jitter = fract(shift + vec2(0.5));
+  vec3 sum = vec3(0.0);
+  if (kd.w > 0.5) {
+    vec3 verts[POLY];
+    int count = ellipse ? POLY : 4;
+    /* the regular 16-gon of the ellipse's area: radius scale sqrt(pi / (8 sin(pi / 8))) */
+    float grow = 1.0129870;
+    for (int k = 0; k < count; k++) {
+      vec2 c = ellipse ? grow * vec2(cos(2.0 * PI * float(k) / float(POLY)),
+                                     sin(2.0 * PI * float(k) / float(POLY)))
+                       : vec2(k == 1 || k == 2 ? 1.0 : -1.0, k >= 2 ? 1.0 : -1.0);
+      verts[k] = centre + c.x * hx + c.y * hy;
+    }
+    sum += kd.rgb * wd * polygon_cosine(vPos, n, verts, count) * L;
+  }
+  if (!glossy) {
+    return sum;
+  }
+  for (int l = 0; l < NA; l++) {
+    vec2 p = shape_point((vec2(float(l % 4), float(l / 4)) + jitter) * 0.25, ellipse);
+    vec3 w = centre + p.x * hx + p.y * hy - vPos;
+    float d2 = max(dot(w, w), 1e-12);
+    vec3 i = w * inversesqrt(d2);
+    float cos_l = -dot(i, facing);
+    if (cos_l <= 0.0 || dot(ng, i) <= 0.0) {
+      continue;
+    }
+    float pl = d2 / (cos_l * area);                 /* solid-angle pdf of the point */
+    sum += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L /
+           (float(NA) * pl + float(NB) * ndf_pdf(n, o, i, a, dist));
+  }
+  {
+    for (int b = 0; b < NB; b++) {
+      vec2 u = fract(vec2((float(b) + 0.5) / float(NB), radical_inverse(b + 7)) + shift.yx);
+      vec3 h = sample_ndf(dist, a, u, n, tx, ty);
+      float oh = dot(o, h);
+      if (oh <= 0.0) {
+        continue;
+      }
+      vec3 i = 2.0 * oh * h - o;
+      float denom = dot(i, facing);
+      if (denom >= 0.0 || dot(ng, i) <= 0.0) {
+        continue;
+      }
+      float t = dot(centre - vPos, facing) / denom;
+      vec3 rel = vPos + t * i - centre;
+      vec2 p = vec2(dot(rel, hx) / dot(hx, hx), dot(rel, hy) / dot(hy, hy));
+      if (t <= 0.0 || (ellipse ? dot(p, p) > 1.0 : max(abs(p.x), abs(p.y)) > 1.0)) {
+        continue;                                   /* misses the lamp */
+      }
+      float pl = t * t / (-denom * area);
+      sum += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L /
+             (float(NA) * pl + float(NB) * ndf_pdf(n, o, i, a, dist));
+    }
+  }
+  return sum;
 }
 
 /* ---------------------------------------------------------------- main */
@@ -295,7 +427,18 @@ void main()
     vec4 s1 = source(s, 1);
     vec3 c = s0.xyz;
     float r = s0.w;
-    float kind = s1.w;                /* 0 disc, 1 point-like direction, 2 point, 3 spot */
+    float kind = s1.w;      /* 0 disc, 1 point-like direction, 2 point, 3 spot, 4/5 area */
+    if (kind > 3.5) {                 /* an area lamp: a rectangle (4) or an ellipse (5) */
+      if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
+        continue;                                   /* behind its emitting side */
+      }
+      float Va = local_visibility(s, vPos, ng, s0.xyz, s0.w, shift);
+      if (Va > 0.0) {
+        color += Va * area_lamp(s, kind > 4.5, n, ng, o, cos_o, kd, wd, a, dist, lobes, glossy,
+                                lam_o, ms0, ms1, tx, ty, shift);
+      }
+      continue;
+    }
     if (kind > 1.5) {                 /* a local lamp: the sphere seen from here */
       vec3 to_lamp = s0.xyz - vPos;
       float d2 = max(dot(to_lamp, to_lamp), 1e-12);
