@@ -89,17 +89,18 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
     """
     normals = np.asarray(normals, dtype=np.float32)
     dirs = np.asarray(lighting.directions, dtype=np.float32)
-    dw = cube.solid_angles.astype(np.float32)
-    L = np.asarray(lighting.radiance, dtype=np.float32)
+    # L dw folded together; the bits multiply as 0/1 bytes (no bool or float copy)
+    Ldw = (np.asarray(lighting.radiance, dtype=np.float64)
+           * cube.solid_angles[:, None]).astype(np.float32)
     out = np.zeros((len(normals), 3), dtype=np.float32)
     block = block_points(cube.resolution)
+    bits = np.asarray(vis_bits, dtype=np.uint8)
 
     def block_irradiance(a, b):
         cos = normals[a:b] @ dirs.T
         np.maximum(cos, 0.0, out=cos)
-        cos *= unpack_visibility(vis_bits[a:b], cube.size)
-        cos *= dw
-        out[a:b] = cos @ L
+        np.multiply(cos, np.unpackbits(bits[a:b], axis=1, count=cube.size), out=cos)
+        out[a:b] = cos @ Ldw
 
     _for_blocks(len(normals), block, block_irradiance, tick)
     return out
@@ -118,7 +119,8 @@ def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> 
         np.maximum(w, 0.0, out=w)
         w *= dw
         total = w.sum(axis=1)
-        w *= unpack_visibility(vis_bits[a:b], cube.size)
+        np.multiply(w, np.unpackbits(np.asarray(vis_bits[a:b], np.uint8), axis=1,
+                                     count=cube.size), out=w)
         out[a:b] = w.sum(axis=1) / np.maximum(total, 1e-12)
 
     _for_blocks(len(normals), block, block_sky)

@@ -196,8 +196,8 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
 
 
 def unpack_visibility(bits: np.ndarray, count: int) -> np.ndarray:
-    """(P, nbytes) uint8 -> (P, count) bool."""
-    return np.unpackbits(np.asarray(bits, dtype=np.uint8), axis=1, count=count).astype(bool)
+    """(P, nbytes) uint8 -> (P, count) bool (a view of the unpacked 0/1 bytes: no copy)."""
+    return np.unpackbits(np.asarray(bits, dtype=np.uint8), axis=1, count=count).view(bool)
 
 
 def bytes_to_float24(bits: np.ndarray) -> np.ndarray:

@@ -485,7 +485,7 @@ void main()
       if (kd.w > 0.5 && clear) {
         sum += kd.rgb * wd * (PI * sr * sr * nc) * L;
       }
-      for (int l = 0; l < NL; l++) {
+      for (int l = 0; l < (glossy || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
         vec2 u = fract(vec2((float(l) + 0.5) / float(NL), radical_inverse(l)) + shift);
         vec3 i = cone_sample(c, cos_r, u);
         if (dot(ng, i) <= 0.0) {
