@@ -319,3 +319,18 @@ def render_offscreen(batches, background, view_projection, width, height, transp
         return np.array(buf, dtype=np.float32).reshape(height, width, 4)
     finally:
         offscreen.free()
+
+
+def triangle_corners(st):
+    """Per drawn corner (three per triangle, unshared) of a synced object: positions,
+    normals, the shading point of each of its triangle's corners and its barycentric
+    weights -- what the per-pixel passes interpolate stored per-point data with."""
+    arrays, pts = st.arrays, st.points
+    tri = arrays.triangles
+    corner = tri.reshape(-1)
+    pos = arrays.positions[arrays.corner_verts[corner]].astype(np.float32)
+    nrm = arrays.corner_normals[corner].astype(np.float32)
+    tri_points = np.repeat(pts.point_of_corner[tri].astype(np.float32), 3, axis=0)
+    bary = np.tile(np.eye(3, dtype=np.float32), (len(tri), 1))
+    return pos, nrm, tri_points, bary
+

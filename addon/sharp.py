@@ -72,13 +72,9 @@ def _batches(st, slots):
     got = _BATCHES.get(key)
     if got is not None:
         return got
-    arrays, pts = st.arrays, st.points
+    arrays = st.arrays
     tri = arrays.triangles
-    corner = tri.reshape(-1)
-    pos = arrays.positions[arrays.corner_verts[corner]].astype(np.float32)
-    nrm = arrays.corner_normals[corner].astype(np.float32)
-    tri_points = np.repeat(pts.point_of_corner[tri].astype(np.float32), 3, axis=0)
-    bary = np.tile(np.eye(3, dtype=np.float32), (len(tri), 1))
+    pos, nrm, tri_points, bary = drawing.triangle_corners(st)
     tri_slot = arrays.corner_materials[tri[:, 0]]
     out = []
     for slot in slots:

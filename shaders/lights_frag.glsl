@@ -127,6 +127,18 @@ vec3 cone_sample(vec3 c, float cos_r, vec2 u)
   return tx * (st * cos(phi)) + ty * (st * sin(phi)) + c * ct;
 }
 
+/* the direction of NDF sample b (sample_ndf's half vector mirrored about it), turned
+ * per pixel by shift; false when the half vector faces away from o */
+bool ndf_direction(int b, vec3 n, vec3 o, float a, int dist, vec3 tx, vec3 ty, vec2 shift,
+                   out vec3 i)
+{
+  vec2 u = fract(vec2((float(b) + 0.5) / float(NB), radical_inverse(b + 7)) + shift.yx);
+  vec3 h = sample_ndf(dist, a, u, n, tx, ty);
+  float oh = dot(o, h);
+  i = 2.0 * oh * h - o;
+  return oh > 0.0;
+}
+
 /* ---------------------------------------------------------------- shadow maps */
 
 const vec2 POISSON[24] = vec2[24](
@@ -356,29 +368,24 @@ vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 ng, vec3 o, float cos_o, vec4 k
     sum += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L /
            (float(NA) * pl + float(NB) * ndf_pdf(n, o, i, a, dist));
   }
-  {
-    for (int b = 0; b < NB; b++) {
-      vec2 u = fract(vec2((float(b) + 0.5) / float(NB), radical_inverse(b + 7)) + shift.yx);
-      vec3 h = sample_ndf(dist, a, u, n, tx, ty);
-      float oh = dot(o, h);
-      if (oh <= 0.0) {
-        continue;
-      }
-      vec3 i = 2.0 * oh * h - o;
-      float denom = dot(i, facing);
-      if (denom >= 0.0 || dot(ng, i) <= 0.0) {
-        continue;
-      }
-      float t = dot(centre - vPos, facing) / denom;
-      vec3 rel = vPos + t * i - centre;
-      vec2 p = vec2(dot(rel, hx) / dot(hx, hx), dot(rel, hy) / dot(hy, hy));
-      if (t <= 0.0 || (ellipse ? dot(p, p) > 1.0 : max(abs(p.x), abs(p.y)) > 1.0)) {
-        continue;                                   /* misses the lamp */
-      }
-      float pl = t * t / (-denom * area);
-      sum += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L /
-             (float(NA) * pl + float(NB) * ndf_pdf(n, o, i, a, dist));
+  for (int b = 0; b < NB; b++) {
+    vec3 i;
+    if (!ndf_direction(b, n, o, a, dist, tx, ty, shift, i)) {
+      continue;
     }
+    float denom = dot(i, facing);
+    if (denom >= 0.0 || dot(ng, i) <= 0.0) {
+      continue;
+    }
+    float t = dot(centre - vPos, facing) / denom;
+    vec3 rel = vPos + t * i - centre;
+    vec2 p = vec2(dot(rel, hx) / dot(hx, hx), dot(rel, hy) / dot(hy, hy));
+    if (t <= 0.0 || (ellipse ? dot(p, p) > 1.0 : max(abs(p.x), abs(p.y)) > 1.0)) {
+      continue;                                     /* misses the lamp */
+    }
+    float pl = t * t / (-denom * area);
+    sum += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L /
+           (float(NA) * pl + float(NB) * ndf_pdf(n, o, i, a, dist));
   }
   return sum;
 }
@@ -505,14 +512,9 @@ void main()
       }
       if (glossy) {
         for (int b = 0; b < NB; b++) {
-          vec2 u = fract(vec2((float(b) + 0.5) / float(NB), radical_inverse(b + 7)) + shift.yx);
-          vec3 h = sample_ndf(dist, a, u, n, tx, ty);
-          float oh = dot(o, h);
-          if (oh <= 0.0) {
-            continue;
-          }
-          vec3 i = 2.0 * oh * h - o;
-          if (dot(i, c) < cos_r || dot(ng, i) <= 0.0) {
+          vec3 i;
+          if (!ndf_direction(b, n, o, a, dist, tx, ty, shift, i) ||
+              dot(i, c) < cos_r || dot(ng, i) <= 0.0) {
             continue;                               /* misses the disc */
           }
           float pb = ndf_pdf(n, o, i, a, dist);

@@ -316,10 +316,7 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
     arrays, pts = st.arrays, st.points
     tri = arrays.triangles
     corner = tri.reshape(-1)
-    pos = arrays.positions[arrays.corner_verts[corner]].astype(np.float32)
-    nrm = arrays.corner_normals[corner].astype(np.float32)
-    tri_points = np.repeat(pts.point_of_corner[tri].astype(np.float32), 3, axis=0)
-    bary = np.tile(np.eye(3, dtype=np.float32), (len(tri), 1))
+    pos, nrm, tri_points, bary = drawing.triangle_corners(st)
     slots = arrays.corner_materials[tri[:, 0]]
     flat = flat_triangles(arrays, pts) if use_flat else np.zeros(len(tri), bool)
     flat_points = np.unique(pts.point_of_corner[tri[flat]])
