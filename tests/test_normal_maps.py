@@ -1,0 +1,115 @@
+"""Normal Map and Bump nodes (core/textures.py NormalSource): the perturbed normal against
+brute force (the geometric normal of the displaced surface by finite differences, a rotated
+tangent frame)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from prt_relight.core import textures
+
+
+def _frame(seed=0):
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    return q[:, 0], q[:, 1], np.cross(q[:, 0], q[:, 1])
+
+
+def _angle(a, b):
+    return np.degrees(np.arccos(np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)))
+
+
+def test_tangent_space_decode_is_the_frame_rotation():
+    T, B, N = _frame(1)
+    rng = np.random.default_rng(2)
+    local = rng.normal(size=(200, 3))
+    local[:, 2] = np.abs(local[:, 2]) + 0.2
+    local /= np.linalg.norm(local, axis=1, keepdims=True)
+    colour = 0.5 * (local + 1.0)
+    for sign in (1.0, -1.0):
+        # B = sign N x T: with sign -1 the map's green axis is -B
+        want = local[:, :1] * T + local[:, 1:2] * (sign * B) + local[:, 2:3] * N
+        got = textures.tangent_space_normals(colour, N, T, np.full(200, sign))
+        assert np.max(_angle(got, want)) < 1e-4
+    flat = textures.tangent_space_normals(colour, N, T, np.ones(200), strength=0.0)
+    assert np.max(_angle(flat, N[None])) < 1e-4
+    half = textures.tangent_space_normals(colour, N, T, np.ones(200), strength=0.5)
+    n1 = textures.tangent_space_normals(colour, N, T, np.ones(200))
+    want = (N + 0.5 * (n1 - N)) / np.linalg.norm(N + 0.5 * (n1 - N), axis=1, keepdims=True)
+    assert np.max(_angle(half, want)) < 1e-4
+
+
+def _height_field(u, v, amp=1.0):
+    h = amp * np.sin(2 * np.pi * 2 * u) * np.cos(2 * np.pi * 3 * v)
+    hu = amp * 2 * np.pi * 2 * np.cos(2 * np.pi * 2 * u) * np.cos(2 * np.pi * 3 * v)
+    hv = -amp * 2 * np.pi * 3 * np.sin(2 * np.pi * 2 * u) * np.sin(2 * np.pi * 3 * v)
+    return h, hu, hv
+
+
+def _height_texture(res, interpolation="LINEAR"):
+    c = (np.arange(res) + 0.5) / res
+    u, v = np.meshgrid(c, c)                     # row j at v = c[j]
+    h = _height_field(u, v)[0]
+    px = np.ones((res, res, 4), np.float32)
+    px[..., :3] = h[..., None]                   # grey: luminance = h
+    return textures.ColorSource(texture=textures.ImageTexture(px, interpolation=interpolation))
+
+
+def _bump_case(res, distance, strength=1.0, n=400, seed=3):
+    """Our bump normal and the displaced plane's normal by finite differences."""
+    e1, e2, N = _frame(seed)
+    su, sv = 2.0, 0.7                            # world length per unit u, v
+    rng = np.random.default_rng(seed)
+    uv = rng.random((n, 2))
+    src = textures.NormalSource("BUMP", _height_texture(res), strength, distance)
+    # a triangle's edges: not orthogonal in UV, any basis of the plane does
+    duv = np.array([[0.01, 0.002], [-0.003, 0.012]])
+    dp = duv[:, :1] * su * e1 + duv[:, 1:] * sv * e2
+    got = textures.perturbed_normals(src, uv, np.tile(N, (n, 1)),
+                                     dp=np.broadcast_to(dp, (n, 2, 3)),
+                                     duv=np.broadcast_to(duv, (n, 2, 2)))
+
+    def surface(u, v):                           # the plane displaced by d h along N
+        return (u * su)[:, None] * e1 + (v * sv)[:, None] * e2 + \
+            (distance * _height_field(u, v)[0])[:, None] * N
+    eps = 1e-6
+    u, v = uv[:, 0], uv[:, 1]
+    pu = (surface(u + eps, v) - surface(u - eps, v)) / (2 * eps)
+    pv = (surface(u, v + eps) - surface(u, v - eps)) / (2 * eps)
+    brute = np.cross(pu, pv)
+    brute /= np.linalg.norm(brute, axis=1, keepdims=True)
+    if strength != 1.0:
+        brute = strength * brute + (1 - strength) * N
+        brute /= np.linalg.norm(brute, axis=1, keepdims=True)
+    return got, brute, N
+
+
+@pytest.mark.parametrize("res,bound", [(64, 1.0), (256, 0.07), (1024, 0.005)])
+def test_bump_against_the_displaced_surface(res, bound):
+    """UV-space central differences of the bilinear texture against the exact normal of
+    the displaced plane (it equals Cycles' bump of the exact height on a plane)."""
+    got, brute, N = _bump_case(res, distance=0.05)
+    err = _angle(got, brute)
+    tilt = _angle(brute, N[None])
+    print(f"{res}²: max {err.max():.3f}°, mean {err.mean():.4f}° (tilt up to {tilt.max():.1f}°)")
+    assert tilt.max() > 20.0                     # the bumps are not negligible
+    assert err.max() < bound
+
+
+def test_bump_strength_inversion_and_flat_height():
+    got, brute, N = _bump_case(512, distance=0.05, strength=0.4)
+    assert np.max(_angle(got, brute)) < 0.2
+    up, _, _ = _bump_case(512, distance=0.05)
+    down, _, _ = _bump_case(512, distance=-0.05)     # inverted: mirrored about N
+    mirrored = 2 * (up @ N)[:, None] * N - up
+    assert np.max(_angle(down, mirrored)) < 1e-4
+    flat = textures.ColorSource(texture=textures.ImageTexture(np.full((8, 8, 4), 0.3,
+                                                                      np.float32)))
+    e1, e2, N = _frame(5)
+    n = textures.perturbed_normals(textures.NormalSource("BUMP", flat), np.random.rand(9, 2),
+                                   np.tile(N, (9, 1)), dp=np.broadcast_to(np.stack([e1, e2]),
+                                                                          (9, 2, 3)),
+                                   duv=np.broadcast_to(np.eye(2), (9, 2, 2)))
+    assert np.max(_angle(n, N[None])) < 1e-9
