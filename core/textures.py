@@ -332,6 +332,38 @@ def bump_normals(normal, gradient, distance=1.0, strength=1.0):
     return np.where(np.linalg.norm(n, axis=-1, keepdims=True) > 0.0, n, N)
 
 
+def valid_reflection_normal(ng, o, n):
+    """Cycles' bump map correction (``ensure_valid_specular_reflection``): ``n`` turned
+    toward ``ng`` just enough that the mirror reflection of the view ``o`` is at least
+    ``min(0.9 o.ng, 0.01)`` above the surface (all unit, (P, 3))."""
+    ng, o, n = (np.asarray(a, np.float64) for a in (ng, o, n))
+    r = 2.0 * np.sum(n * o, axis=-1, keepdims=True) * n - o
+    iz = np.sum(o * ng, axis=-1, keepdims=True)
+    t = np.minimum(0.9 * iz, 0.01)
+    x = _unit(n - np.sum(n * ng, axis=-1, keepdims=True) * ng)
+    ix = np.sum(o * x, axis=-1, keepdims=True)
+    a = ix * ix + iz * iz
+    b = 2.0 * (a + iz * t)
+    c = (t + iz) ** 2
+    root = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nz2 = np.where(ix < 0.0, 0.25 * (b + root) / a, 0.25 * (b - root) / a)
+    bent = np.sqrt(np.maximum(1.0 - nz2, 0.0)) * x + np.sqrt(np.maximum(nz2, 0.0)) * ng
+    return np.where(np.sum(ng * r, axis=-1, keepdims=True) >= t, n, bent)
+
+
+def bump_shadowing(ng, n, i):
+    """Cycles' factor on a diffuse closure whose normal ``n`` is not the surface's ``ng``
+    (Chiang et al. 2019, "Taming the shadow terminator"): ``g = (ng.i) / ((n.i) (n.ng))``,
+    1 for g >= 1, 0 for g < 0, else ``-g^3 + g^2 + g``."""
+    cos_i = np.sum(n * i, axis=-1)
+    den = cos_i * np.sum(n * ng, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = np.where(den != 0.0, np.sum(ng * i, axis=-1) / np.where(den != 0.0, den, 1.0), 0.0)
+    out = -g ** 3 + g * g + g
+    return np.where(g >= 1.0, 1.0, np.where(g < 0.0, 0.0, out))
+
+
 def perturbed_normals(normal_source: NormalSource, uv, normal, tangent=None, sign=None,
                       dp=None, duv=None):
     """(P, 3) the mapped normal at P points: ``uv`` (P, 2), the interpolated ``normal``;

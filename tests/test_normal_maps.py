@@ -113,3 +113,102 @@ def test_bump_strength_inversion_and_flat_height():
                                                                           (9, 2, 3)),
                                    duv=np.broadcast_to(np.eye(2), (9, 2, 2)))
     assert np.max(_angle(n, N[None])) < 1e-9
+
+
+# --------------------------------------------------------------------------- Blender
+
+def _ridges(res=128, amp=0.08, k=4):
+    """A tangent-space normal image of ridges along v (h = amp sin(2 pi k u) on a unit
+    UV square), top row first, and the height itself."""
+    u = (np.arange(res) + 0.5) / res
+    hu = amp * 2 * np.pi * k * np.cos(2 * np.pi * k * u)
+    n = np.stack([-hu, np.zeros(res), np.ones(res)], axis=1)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    img = np.ones((res, res, 3), np.float32)
+    img[:] = 0.5 * (n[None, :, :] + 1.0)
+    h = np.repeat((amp * np.sin(2 * np.pi * k * u))[None, :, None], 3, axis=2)
+    return img, np.ascontiguousarray(np.broadcast_to(h, (res, res, 3)), np.float32)
+
+
+def _mapped_plane(kind, size=2.0, **node_inputs):
+    """A grid with a Principled material whose Normal is a Normal Map or Bump node on a
+    generated Non-Color image (None: no link, drawn flat)."""
+    import bpy
+    from . import blender_scene as bs
+    plane = bs.add_ground(size=size, cuts=8)
+    mat = bpy.data.materials.new("mapped")
+    nt = mat.node_tree
+    bsdf = nt.nodes["Principled BSDF"]
+    normal_img, height = _ridges()
+    if kind is not None:
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = bs.float_image(kind, normal_img if kind == "NORMAL_MAP" else height)
+        node = nt.nodes.new("ShaderNodeNormalMap" if kind == "NORMAL_MAP" else "ShaderNodeBump")
+        for key, value in node_inputs.items():
+            node.inputs[key].default_value = value
+        nt.links.new(tex.outputs["Color"], node.inputs["Color" if kind == "NORMAL_MAP"
+                                                       else "Height"])
+        nt.links.new(node.outputs["Normal"], bsdf.inputs["Normal"])
+    plane.data.materials.append(mat)
+    return plane
+
+
+def _low_sun_world():
+    """One bright pixel 20° above the horizon, toward -x, over a dim sky."""
+    from . import blender_scene as bs
+    el = math.radians(20.0)
+    sky = bs.sun_image(256, 128, (-math.cos(el), 0.0, math.sin(el)), radiance=2e4)
+    sky += 0.02
+    bs.add_world(image=bs.float_image("sky", sky))
+
+
+def _broad_sky_world():
+    """A smooth sky, brightest 30° above the horizon toward -x (no compact source is split
+    off: every method shades all of it from its transfer)."""
+    from . import blender_scene as bs
+    h, w = 64, 128
+    theta = (np.arange(h) + 0.5) / h * np.pi
+    phi = 2 * np.pi * (0.5 - (np.arange(w) + 0.5) / w)      # u = 0.5 - atan2(y, x) / 2 pi
+    d = np.stack(np.broadcast_arrays(np.sin(theta)[:, None] * np.cos(phi)[None],
+                                     np.sin(theta)[:, None] * np.sin(phi)[None],
+                                     np.cos(theta)[:, None]), axis=-1)
+    s = np.array([-math.cos(math.radians(30)), 0.0, math.sin(math.radians(30))])
+    sky = 0.05 + 2.0 * np.maximum(d @ s, 0.0) ** 2
+    bs.add_world(image=bs.float_image("sky", np.repeat(sky[..., None], 3, axis=2)))
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("registered_addon")
+@pytest.mark.parametrize("kind,world", [("NORMAL_MAP", "sun"), ("BUMP", "sun"),
+                                        ("NORMAL_MAP", "sky")])
+def test_mapped_plane_against_cycles(tmp_path, kind, world):
+    """Direct light only; the ridges face toward and away from a 20° sun (drawn per pixel
+    by the sources' pass for every method) or a broad sky (SSDF_SG per pixel, REFERENCE
+    per vertex: the normal map ignored): drawn with the mapped normal the frame follows
+    Cycles', drawn flat it does not."""
+    import bpy
+    from . import blender_scene as bs
+    bs.reset()
+    (_low_sun_world if world == "sun" else _broad_sky_world)()
+    # the bump's distance makes the same ridges as the normal image (its height in UV units
+    # over a plane 2 units wide: distance 1 / 2 in world units per UV unit)
+    plane = _mapped_plane(kind, **({"Distance": 2.0} if kind == "BUMP" else {}))
+    bs.add_camera(location=(0.0, 0.0, 3.0), rotation=(0.0, 0.0, 0.0))
+    bs.set_resolution(64, 64)
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    truth = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=1024)
+    errors = {}
+    for method in ("REFERENCE", "SSDF_SG"):
+        bpy.context.scene.prt.method = method
+        errors[method] = bs.rel_l2(bs.render_exr(tmp_path / f"{method}.exr"), truth)
+    # drawn flat: the Normal link removed
+    links = plane.active_material.node_tree.links
+    links.remove(plane.active_material.node_tree.nodes["Principled BSDF"].inputs["Normal"]
+                 .links[0])
+    for method in ("REFERENCE", "SSDF_SG"):
+        bpy.context.scene.prt.method = method
+        errors[method + " flat"] = bs.rel_l2(bs.render_exr(tmp_path / f"{method}f.exr"),
+                                             truth)
+    print(kind, world, {k: round(v, 4) for k, v in errors.items()})
+    for method in ("REFERENCE", "SSDF_SG") if world == "sun" else ("SSDF_SG",):
+        assert errors[method] < 0.5 * errors[method + " flat"], errors
