@@ -212,3 +212,85 @@ def test_mapped_plane_against_cycles(tmp_path, kind, world):
     print(kind, world, {k: round(v, 4) for k, v in errors.items()})
     for method in ("REFERENCE", "SSDF_SG") if world == "sun" else ("SSDF_SG",):
         assert errors[method] < 0.5 * errors[method + " flat"], errors
+
+
+def test_bump_map_correction_is_the_least_turn_that_lifts_the_reflection():
+    """Against a scan of normals in the plane of (ng, n): the steepest one whose mirror
+    reflection of the view is at the threshold above the surface."""
+    rng = np.random.default_rng(7)
+    ng = np.array([0.0, 0.0, 1.0])
+    checked = 0
+    for _ in range(200):
+        o = rng.normal(size=3)
+        o[2] = abs(o[2]) + 0.05
+        o /= np.linalg.norm(o)
+        n = rng.normal(size=3)
+        n[2] = abs(n[2])
+        n /= np.linalg.norm(n)
+        got = textures.valid_reflection_normal(ng[None], o[None], n[None])[0]
+        r = 2 * (n @ o) * n - o
+        t = min(0.9 * o[2], 0.01)
+        if r[2] >= t:
+            assert np.allclose(got, n)
+            continue
+        checked += 1
+        x = n - n[2] * ng
+        x /= np.linalg.norm(x)
+        tilt = np.linspace(0.0, np.arccos(n[2]), 20001)
+        cand = np.sin(tilt)[:, None] * x + np.cos(tilt)[:, None] * ng
+        lift = (2 * (cand @ o)[:, None] * cand - o)[:, 2]
+        best = cand[np.nonzero(lift >= t)[0].max()]
+        assert np.degrees(np.arccos(min(got @ best, 1.0))) < 0.05
+        assert (2 * (got @ o) * got - o)[2] == pytest.approx(t, abs=1e-6)
+    assert checked > 30
+
+
+def test_terminator_factor_limits():
+    ng = np.array([[0.0, 0.0, 1.0]])
+    i = np.array([[0.0, 0.6, 0.8]])
+    assert textures.bump_shadowing(ng, ng, i)[0] == 1.0           # unmapped: no change
+    n = np.array([[0.0, -0.6, 0.8]])                               # turned away from i
+    assert textures.bump_shadowing(ng, n, i)[0] == 1.0            # g >= 1
+    below = np.array([[0.0, -0.99, -0.14]])                       # faces n, under the surface
+    assert textures.bump_shadowing(ng, n, below)[0] == 0.0
+    g = np.linspace(0.0, 1.0, 11)
+    f = -g ** 3 + g * g + g                                        # smooth up to 1 at g = 1
+    assert f[-1] == 1.0 and np.all(np.diff(f) > 0)
+
+
+def _evaluated(ob):
+    import bpy
+    bpy.context.view_layer.update()
+    return ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
+
+
+@pytest.mark.usefixtures("registered_addon")
+def test_export_reads_both_nodes_tangents_and_warns_other_links():
+    import bpy
+    from prt_relight.addon import texture_export
+    from . import blender_scene as bs
+    bs.reset()
+    plane = _mapped_plane("NORMAL_MAP", Strength=0.7)
+    plane.rotation_euler = (0.0, 0.0, math.pi / 2)                 # tangents turn with it
+    ob = _evaluated(plane)
+    warnings = []
+    got = texture_export.slot_normals(ob, warnings)
+    src, uvs, tng = got[0]
+    assert warnings == [] and src.kind == "NORMAL_MAP" and src.strength == pytest.approx(0.7)
+    assert uvs.shape == (len(tng), 2)
+    # the grid's u runs along its local x, turned to world y; bitangent sign +1
+    np.testing.assert_allclose(tng, np.tile([0.0, 1.0, 0.0, 1.0], (len(tng), 1)), atol=1e-5)
+    nt = plane.active_material.node_tree
+    bump = nt.nodes.new("ShaderNodeBump")
+    bump.invert = True
+    bump.inputs["Distance"].default_value = 0.3
+    nt.links.new(nt.nodes["Image Texture"].outputs["Color"], bump.inputs["Height"])
+    nt.links.new(bump.outputs["Normal"], nt.nodes["Principled BSDF"].inputs["Normal"])
+    ob = _evaluated(plane)
+    src = texture_export.slot_normals(ob, warnings)[0][0]
+    assert src.kind == "BUMP" and src.distance == pytest.approx(-0.3)
+    coord = nt.nodes.new("ShaderNodeNewGeometry")
+    nt.links.new(coord.outputs["Normal"], nt.nodes["Principled BSDF"].inputs["Normal"])
+    ob = _evaluated(plane)
+    assert texture_export.slot_normals(ob, warnings) == {}
+    assert len(warnings) == 1 and "'Geometry'" in warnings[0], warnings
