@@ -419,7 +419,8 @@ def slot_normals(ob_eval, warnings: list) -> dict:
     return out
 
 
-__all__ = ["normal_source", "corner_tangents", "slot_normals", "shader_normal", "color_source", "slot_color_source", "slot_sources", "image_texture",
+__all__ = ["normal_source", "corner_tangents", "slot_normals", "shader_normal",
+           "color_source", "slot_color_source", "slot_sources", "image_texture",
            "corner_uvs", "corner_colours", "mean_albedo", "slot_scalar_sources",
            "principled_constants", "slot_scalars", "mean_scalars", "slot_uvs",
            "shader_inputs"]

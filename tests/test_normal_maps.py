@@ -93,7 +93,8 @@ def test_bump_against_the_displaced_surface(res, bound):
     got, brute, N = _bump_case(res, distance=0.05)
     err = _angle(got, brute)
     tilt = _angle(brute, N[None])
-    print(f"{res}²: max {err.max():.3f}°, mean {err.mean():.4f}° (tilt up to {tilt.max():.1f}°)")
+    print(f"{res}²: max {err.max():.3f}°, mean {err.mean():.4f}° "
+          f"(tilt up to {tilt.max():.1f}°)")
     assert tilt.max() > 20.0                     # the bumps are not negligible
     assert err.max() < bound
 
