@@ -162,14 +162,14 @@ def _shader():
                             ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
             info.push_constant(kind, ident)
         for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex", "albedoTex",
-                                      "cubeTex", "roughTex")):
+                                      "cubeTex", "roughTex", "normalTex")):
             info.sampler(slot, "FLOAT_2D", ident)
         for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"), ("VEC2", "uv"),
-                                              ("VEC4", "attr"))):
+                                              ("VEC4", "attr"), ("VEC4", "tng"))):
             info.vertex_in(slot, kind, ident)
         iface = gpu.types.GPUStageInterfaceInfo("prt_lights_iface")
         for kind, ident in (("VEC3", "vPos"), ("VEC3", "vNrm"), ("VEC2", "vUv"),
-                            ("VEC4", "vAttr")):
+                            ("VEC4", "vAttr"), ("VEC4", "vTng")):
             iface.smooth(kind, ident)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
@@ -221,6 +221,7 @@ def _object_batches(st):
     from gpu_extras.batch import batch_for_shader
     key = (st.name, st.fingerprint, tuple(sorted((slot, id(values)) for slot, (_, values)
                                                  in st.textures.items())),
+           tuple(sorted((slot, id(got[2])) for slot, got in st.normals.items())),
            tuple(sorted((slot, id(v)) for slot, got in st.inputs[0].items()
                         for _, v in got.values())))
     got = _BATCHES.get(key)
@@ -246,9 +247,13 @@ def _object_batches(st):
             uv[:] = uvs[1][corner[sel]]
         if source is not None and source.texture is None:
             attr[:] = values[corner[sel]]
+        tng = np.zeros((int(sel.sum()), 4), np.float32)
+        mapped = texture_export.shader_normal(st, int(slot))
+        if mapped is not None:
+            tng[:] = mapped[1][corner[sel]]
         surfaces.append((int(slot), batch_for_shader(_shader(), "TRIS", {
             "pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
-            "uv": uv, "attr": attr})))
+            "uv": uv, "attr": attr, "tng": tng})))
     if len(_BATCHES) >= 64:
         _BATCHES.pop(next(iter(_BATCHES)))
     got = _BATCHES[key] = (depth, surfaces)
@@ -403,6 +408,13 @@ def slot_texels(st, slot, eye4) -> np.ndarray:
     lights_frag.glsl)."""
     material = st.materials[slot] if 0 <= slot < len(st.materials) else core_brdf.Material()
     p = material_texels(material, eye4, st.closed_side)
+    mapped = texture_export.shader_normal(st, slot)
+    if mapped is not None:                  # texels 16-20: the normal or bump map
+        src = mapped[0]
+        u = drawing.source_uniforms(src.source)
+        p[0, 16] = (1.0 if src.kind == "NORMAL_MAP" else 2.0, src.strength, src.distance, 0.0)
+        p[0, 17], p[0, 20] = u["texInfo"], u["mixColor"]
+        p[0, 18, :3], p[0, 19, :3] = u["texMap0"], u["texMap1"]
     got = texture_export.shader_inputs(st, slot).get("Roughness")
     if got is None:
         return p
@@ -452,6 +464,13 @@ def _input_texture(st, slot):
         else drawing.white_texture()
 
 
+def _normal_texture(st, slot):
+    """The GPU texture of a slot's normal or bump map (white without one)."""
+    mapped = texture_export.shader_normal(st, slot)
+    return drawing.albedo_texture(mapped[0].source.texture.pixels) if mapped is not None \
+        else drawing.white_texture()
+
+
 def _texture(rgba):
     return drawing.float_texture(np.ascontiguousarray(rgba, dtype=np.float32))
 
@@ -498,9 +517,10 @@ def draws(state, eye, view_dir) -> list:
         surfaces = _object_batches(st)[1]
         params = {slot: _texture(slot_texels(st, slot, eye4)) for slot, _ in surfaces}
         rough = {slot: _input_texture(st, slot) for slot, _ in surfaces}
+        bumps = {slot: _normal_texture(st, slot) for slot, _ in surfaces}
 
         def draw(view_projection, surfaces=surfaces, params=params, textures=st.textures,
-                 rough=rough):
+                 rough=rough, bumps=bumps):
             sh = _shader()
             sh.bind()
             sh.uniform_float("viewProjection", view_projection)
@@ -516,6 +536,7 @@ def draws(state, eye, view_dir) -> list:
                                    if source is not None and source.texture is not None
                                    else drawing.white_texture())
                 sh.uniform_sampler("roughTex", rough[slot])
+                sh.uniform_sampler("normalTex", bumps[slot])
                 batch.draw(sh)
 
         out.append(draw)

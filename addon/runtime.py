@@ -90,7 +90,7 @@ def _with_base(state, value: float):
 
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "_bits", "_pose", "status", "data",
-                 "fingerprint", "closed_side", "textures", "inputs", "slot_of", "dynamic",
+                 "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of", "dynamic",
                  "shape", "near")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
@@ -123,6 +123,10 @@ class ObjectState:
         #: {slot: {input: (core.textures.ScalarSource, per-corner UVs or colours)}} and
         #: {slot: Principled constants}: textured scalar inputs (roughness, metallic, ...)
         self.inputs = ({}, {})
+        #: {slot: (core.textures.NormalSource, per-corner UVs (C, 2), per-corner world
+        #: tangents and bitangent signs (C, 4))}: normal- or bump-mapped slots (drawn per
+        #: pixel by the sources' pass and SSDF_SG; the per-vertex transport ignores them)
+        self.normals = {}
         #: the material slot of each entry of ``materials`` (per-point variants of
         #: textured scalar inputs follow the slots, core.textures.point_variants)
         self.slot_of = np.arange(len(materials))
@@ -276,6 +280,7 @@ class FrameState:
                 self.warnings.append(data.coarse_warning)
             st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
+            st.normals = texture_export.slot_normals(ob, self.warnings)
             st.dynamic = moving if status == "ok" else None
             if st.dynamic is not None:
                 st.shape = data.fingerprint

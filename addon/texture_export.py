@@ -9,6 +9,12 @@ The scalar inputs of :data:`core.textures.SCALAR_INPUTS` (Principled *Roughness*
 *Metallic*, *Specular IOR Level*, Glossy *Roughness*) driven by the same patterns are
 :class:`core.textures.ScalarSource` (the image's Color output, as a float).  Anything else
 linked keeps the old behaviour: its default value and a warning naming the node.
+A surface node's *Normal* (Principled, Diffuse, Glossy) driven by a Normal Map node
+(tangent space, an image on its Color, constant Strength) or a Bump node (an image's Color
+on its Height, constant Strength and Distance, no Normal chained in) is a
+:class:`core.textures.NormalSource`, with the mesh's per-corner tangents
+(``mesh.calc_tangents``) for the map's UV map; anything else linked there is warned by name
+and ignored (the surface normal).
 """
 
 from __future__ import annotations
@@ -213,9 +219,13 @@ def mean_scalars(inputs: dict) -> dict:
 def slot_uvs(st, slot):
     """(UV map name, per-corner UVs) a per-pixel pass's batch of a slot carries (``st``: an
     addon.runtime.ObjectState): its colour texture's, else
-    its first textured scalar input's; None without an image texture."""
+    its first textured scalar input's, else its normal map's; None without an image
+    texture."""
     source, values = st.textures.get(slot, (None, None))
     found = [(source, values)] + list(st.inputs[0].get(slot, {}).values())
+    normal = st.normals.get(slot)
+    if normal is not None:
+        found.append(normal[:2])
     for src, vals in found:
         src = getattr(src, "source", src)
         if src is not None and src.texture is not None:
@@ -230,6 +240,16 @@ def shader_inputs(st, slot) -> dict:
     return {name: (s, v) for name, (s, v) in st.inputs[0].get(slot, {}).items()
             if s.source.texture is not None and uvs is not None
             and s.source.texture.uv_map == uvs[0]}
+
+
+def shader_normal(st, slot):
+    """(NormalSource, per-corner tangents (C, 4)) of a slot's normal or bump map when its
+    image is on the batch's UV map (else None: drawn with the surface normal)."""
+    got = st.normals.get(slot)
+    uvs = slot_uvs(st, slot)
+    if got is None or uvs is None or got[0].source.texture.uv_map != uvs[0]:
+        return None
+    return got[0], got[2]
 
 
 def corner_uvs(ob_eval, uv_map: str = ""):
@@ -294,7 +314,113 @@ def slot_sources(ob_eval, warnings: list) -> dict:
     return out
 
 
-__all__ = ["color_source", "slot_color_source", "slot_sources", "image_texture",
+#: the surface nodes whose Normal input is read
+NORMAL_NODES = ("BSDF_PRINCIPLED", "BSDF_DIFFUSE", "BSDF_GLOSSY")
+
+
+def _image_on(socket):
+    """The Image Texture node whose Color output drives ``socket`` (None otherwise)."""
+    if socket is None or not socket.is_linked or not socket.links:
+        return None
+    link = socket.links[0]
+    if link.is_muted or link.from_node.type != "TEX_IMAGE" or link.from_socket.name != "Color":
+        return None
+    return link.from_node
+
+
+def normal_source(material):
+    """(NormalSource or None, the tangents' UV map name, the node that drives Normal but
+    is not read (or None))."""
+    node = _surface_node(material) if material is not None else None
+    if node is None or node.type not in NORMAL_NODES:
+        return None, "", None
+    src = _linked(node.inputs.get("Normal"))
+    if src is None:
+        return None, "", None
+    if src.type == "NORMAL_MAP":
+        img = _image_on(src.inputs["Color"])
+        tex = image_texture(img) if img is not None else None
+        if (tex is None or src.space != "TANGENT" or src.inputs["Strength"].is_linked):
+            return None, "", src
+        return (textures.NormalSource("NORMAL_MAP", textures.ColorSource(texture=tex),
+                                      float(src.inputs["Strength"].default_value)),
+                src.uv_map or tex.uv_map, None)
+    if src.type == "BUMP":
+        img = _image_on(src.inputs["Height"])
+        tex = image_texture(img) if img is not None else None
+        if (tex is None or src.inputs["Normal"].is_linked or src.inputs["Strength"].is_linked
+                or src.inputs["Distance"].is_linked):
+            return None, "", src
+        distance = float(src.inputs["Distance"].default_value)
+        return (textures.NormalSource("BUMP", textures.ColorSource(texture=tex),
+                                      float(src.inputs["Strength"].default_value),
+                                      -distance if src.invert else distance),
+                tex.uv_map, None)
+    return None, "", src
+
+
+def corner_tangents(ob_eval, uv_map: str = ""):
+    """(C, 4) world-space unit tangents per face corner and the bitangent sign (MikkTSpace,
+    ``mesh.calc_tangents`` on ``uv_map`` or the active UV map), or None when the mesh has
+    no such UV map or a face of more than four corners."""
+    mesh = ob_eval.to_mesh()
+    try:
+        layers = mesh.uv_layers
+        if not len(layers):
+            return None
+        layer = (layers.get(uv_map) if uv_map else None) or layers.active
+        try:
+            mesh.calc_tangents(uvmap=layer.name)
+        except RuntimeError:
+            return None
+        n = len(mesh.loops)
+        t = np.empty(n * 3, dtype=np.float32)
+        sign = np.empty(n, dtype=np.float32)
+        mesh.loops.foreach_get("tangent", t)
+        mesh.loops.foreach_get("bitangent_sign", sign)
+    finally:
+        ob_eval.to_mesh_clear()
+    M = np.array(ob_eval.matrix_world, dtype=np.float64)[:3, :3]
+    tw = t.reshape(-1, 3).astype(np.float64) @ M.T          # a surface direction: M t
+    length = np.linalg.norm(tw, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tw = np.where(length > 0.0, tw / length, 0.0)
+    # a mirroring transform flips the world bitangent N x T against the object's
+    flip = -1.0 if np.linalg.det(M) < 0.0 else 1.0
+    return np.concatenate([tw, (sign * flip)[:, None]], axis=1).astype(np.float32)
+
+
+def slot_normals(ob_eval, warnings: list) -> dict:
+    """{slot: (NormalSource, per-corner UVs (C, 2), per-corner tangents (C, 4))} of an
+    evaluated object's normal- or bump-mapped slots; other nodes driving Normal warned."""
+    out = {}
+    for slot, ms in enumerate(ob_eval.material_slots):
+        mat = ms.material
+        try:
+            src, uv_map, other = normal_source(mat)
+        except (RuntimeError, ExportError, envmap.EnvironmentError_, ValueError) as exc:
+            warnings.append(f"Material '{mat.name}': its normal map cannot be read ({exc}); "
+                            "drawn with the surface normal")
+            continue
+        if other is not None:
+            warnings.append(f"Material '{mat.name}': '{other.bl_label}' ('{other.name}') "
+                            "drives Normal and is not supported; drawn with the surface "
+                            "normal")
+        if src is None:
+            continue
+        uvs = corner_uvs(ob_eval, src.source.texture.uv_map)
+        tangents = corner_tangents(ob_eval, uv_map) if uvs is not None else None
+        if tangents is None:
+            warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no UV map (or a "
+                            "face of more than 4 corners) for its normal map; drawn with "
+                            "the surface normal")
+            continue
+        out[slot] = (src, uvs, tangents)
+    return out
+
+
+__all__ = ["normal_source", "corner_tangents", "slot_normals", "shader_normal",
+           "color_source", "slot_color_source", "slot_sources", "image_texture",
            "corner_uvs", "corner_colours", "mean_albedo", "slot_scalar_sources",
            "principled_constants", "slot_scalars", "mean_scalars", "slot_uvs",
            "shader_inputs"]

@@ -15,6 +15,13 @@ A scalar input (Principled *Roughness*, *Metallic*, *Specular IOR Level*; Glossy
 the way Blender converts a colour socket into a float one (its luminance).  Per-vertex
 consumers take a shading point's value (the mean over its corners, :func:`point_values`),
 quantized into a few material variants (:func:`quantize`).
+
+A surface node's *Normal* input driven by a Normal Map node (tangent space) or a Bump node
+reading an image is a :class:`NormalSource`; :func:`perturbed_normals` is the shaders'
+per-pixel normal (``texture_lib.glsl`` ``mapped_normal``), as Cycles' ``svm_node_normal_map``
+and ``svm_node_set_bump`` compute it, except that the bump's height derivative is taken by
+finite differences of the texture in UV space (one texel each way) instead of Cycles'
+screen-space differences.
 """
 
 from __future__ import annotations
@@ -242,3 +249,132 @@ def point_variants(materials: list, points, slots: dict, principled: dict, level
             slot_of.append(slot)
             point_mat[sel[which == k]] = len(out) - 1
     return out, point_mat, np.asarray(slot_of, np.int64)
+
+
+# --------------------------------------------------------------------------- normals
+
+NORMAL_KINDS = ("NORMAL_MAP", "BUMP")
+
+
+@dataclass
+class NormalSource:
+    """What drives a surface node's Normal: a Normal Map node (tangent space; its Color an
+    image) or a Bump node (its Height the image's colour as a float, :data:`LUMINANCE`).
+    ``distance`` is the Bump node's Distance, negated when it is inverted."""
+
+    kind: str
+    source: ColorSource
+    strength: float = 1.0
+    distance: float = 1.0
+
+
+def _unit(v):
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 1e-30, v / np.where(n > 1e-30, n, 1.0), 0.0)
+
+
+def tangent_space_normals(colour, normal, tangent, sign, strength=1.0):
+    """Cycles' tangent-space Normal Map: ``x = 2 c - 1``, ``B = sign N x T``,
+    ``n = normalize(x T + y B + z N)`` with the (unnormalised) interpolated N and T, then
+    ``normalize(N + strength (n - N))`` when strength is not 1 (N unit)."""
+    x = 2.0 * np.asarray(colour, np.float64)[..., :3] - 1.0
+    N = np.asarray(normal, np.float64)
+    T = np.asarray(tangent, np.float64)
+    B = np.asarray(sign, np.float64)[..., None] * np.cross(N, T)
+    n = _unit(x[..., :1] * T + x[..., 1:2] * B + x[..., 2:3] * N)
+    Nu = _unit(N)
+    if strength != 1.0:
+        n = _unit(Nu + (n - Nu) * max(float(strength), 0.0))
+    return np.where(np.linalg.norm(n, axis=-1, keepdims=True) > 0.0, n, Nu)
+
+
+def height(source: ColorSource, uv) -> np.ndarray:
+    """(P,) the Bump node's Height at UVs: the image's colour as a float, unclamped."""
+    return source.combine(sample(source.texture, uv)[:, :3]) @ LUMINANCE
+
+
+def height_derivatives(source: ColorSource, uv) -> np.ndarray:
+    """(P, 2) dh/du, dh/dv by central differences one texel each way (the step in u and
+    v is one texel of the mapped image along that axis)."""
+    tex = source.texture
+    H, W = tex.pixels.shape[:2]
+    A = tex.transform[:, :2]
+    uv = np.asarray(uv, np.float64).reshape(-1, 2)
+    out = np.empty_like(uv)
+    for axis in range(2):
+        step = 1.0 / max(float(np.hypot(A[0, axis] * W, A[1, axis] * H)), 1e-12)
+        d = np.zeros(2)
+        d[axis] = step
+        out[:, axis] = (height(source, uv + d) - height(source, uv - d)) / (2.0 * step)
+    return out
+
+
+def surface_gradient(normal, dp1, dp2, dh1, dh2):
+    """The height's gradient in N's plane from its change dh1, dh2 along two surface steps
+    dp1, dp2 (Cycles' Bump: ``(dh1 R1 + dh2 R2) / det``, R1 = dp2 x N, R2 = N x dp1; with a
+    triangle's edges and the UV derivative this is exact on the triangle)."""
+    N = np.asarray(normal, np.float64)
+    r1, r2 = np.cross(dp2, N), np.cross(N, dp1)
+    det = np.sum(dp1 * r1, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = (np.asarray(dh1)[..., None] * r1 + np.asarray(dh2)[..., None] * r2) / det
+    return np.where(np.abs(det) > 1e-30, g, 0.0)
+
+
+def bump_normals(normal, gradient, distance=1.0, strength=1.0):
+    """Cycles' Bump: ``n = normalize(N - distance grad h)``, then
+    ``normalize(s n + (1 - s) N)`` (N unit, s the strength, at least 0)."""
+    N = _unit(np.asarray(normal, np.float64))
+    n = _unit(N - float(distance) * np.asarray(gradient, np.float64))
+    s = max(float(strength), 0.0)
+    n = _unit(s * n + (1.0 - s) * N)
+    return np.where(np.linalg.norm(n, axis=-1, keepdims=True) > 0.0, n, N)
+
+
+def valid_reflection_normal(ng, o, n):
+    """Cycles' bump map correction (``ensure_valid_specular_reflection``): ``n`` turned
+    toward ``ng`` just enough that the mirror reflection of the view ``o`` is at least
+    ``min(0.9 o.ng, 0.01)`` above the surface (all unit, (P, 3))."""
+    ng, o, n = (np.asarray(a, np.float64) for a in (ng, o, n))
+    r = 2.0 * np.sum(n * o, axis=-1, keepdims=True) * n - o
+    iz = np.sum(o * ng, axis=-1, keepdims=True)
+    t = np.minimum(0.9 * iz, 0.01)
+    x = _unit(n - np.sum(n * ng, axis=-1, keepdims=True) * ng)
+    ix = np.sum(o * x, axis=-1, keepdims=True)
+    a = ix * ix + iz * iz
+    b = 2.0 * (a + iz * t)
+    c = (t + iz) ** 2
+    root = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nz2 = np.where(ix < 0.0, 0.25 * (b + root) / a, 0.25 * (b - root) / a)
+    bent = np.sqrt(np.maximum(1.0 - nz2, 0.0)) * x + np.sqrt(np.maximum(nz2, 0.0)) * ng
+    return np.where(np.sum(ng * r, axis=-1, keepdims=True) >= t, n, bent)
+
+
+def bump_shadowing(ng, n, i):
+    """Cycles' factor on a diffuse closure whose normal ``n`` is not the surface's ``ng``
+    (Chiang et al. 2019, "Taming the shadow terminator"): ``g = (ng.i) / ((n.i) (n.ng))``,
+    1 for g >= 1, 0 for g < 0, else ``-g^3 + g^2 + g``."""
+    cos_i = np.sum(n * i, axis=-1)
+    den = cos_i * np.sum(n * ng, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = np.where(den != 0.0, np.sum(ng * i, axis=-1) / np.where(den != 0.0, den, 1.0), 0.0)
+    out = -g ** 3 + g * g + g
+    return np.where(g >= 1.0, 1.0, np.where(g < 0.0, 0.0, out))
+
+
+def perturbed_normals(normal_source: NormalSource, uv, normal, tangent=None, sign=None,
+                      dp=None, duv=None):
+    """(P, 3) the mapped normal at P points: ``uv`` (P, 2), the interpolated ``normal``;
+    a Normal Map needs ``tangent`` (P, 3) and ``sign`` (P,), a Bump ``dp`` (P, 2, 3) two
+    surface steps (a triangle's edges) and ``duv`` (P, 2, 2) the UV change along them."""
+    src = normal_source.source
+    if normal_source.kind == "NORMAL_MAP":
+        colour = src.combine(sample(src.texture, uv))
+        return tangent_space_normals(colour, normal, tangent, sign, normal_source.strength)
+    dh = height_derivatives(src, uv)
+    dh1 = np.sum(dh * duv[:, 0], axis=-1)
+    dh2 = np.sum(dh * duv[:, 1], axis=-1)
+    g = surface_gradient(normal, dp[:, 0], dp[:, 1], dh1, dh2)
+    return bump_normals(normal, g, normal_source.distance, normal_source.strength)

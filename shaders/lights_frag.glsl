@@ -18,6 +18,8 @@
  * weight, eta, -), (f0, -), (B, -) (core.brdf.sharp_lobes), 8 eye (w = 1 perspective),
  * 9 (core.mesh.closed_side of the object, -, -, -), 11 (roughness nodes n, alpha floor),
  * 12-15 a textured Roughness (texture_lib.glsl's info, mapping rows, mix colour);
+ * 16 a normal or bump map (kind 0 none / 1 Normal Map / 2 Bump, strength, distance, -),
+ * 17-20 its image (info, mapping rows, mix colour: texture_lib.glsl mapped_normal);
  * row 1: the Lambert base's view weight at mu = i / (TABLE - 1) (Principled layering),
  * rows 2, 3: each lobe's multiscatter factor at mu (core.brdf.multiscatter_factor);
  * with a textured Roughness rows 4k + 4 .. 4k + 7 the same four rows at roughness node
@@ -405,8 +407,22 @@ void main()
   vec3 n = normalize(vNrm);
   vec3 ng = normalize(cross(dFdx(vPos), dFdy(vPos)));
   ng = dot(ng, n) < 0.0 ? -ng : ng;
+  /* a normal or bump map: the Lambert and glossy terms use the mapped normal, visibility
+   * and the horizon tests the surface's */
+  vec4 nmap = texelFetch(paramTex, ivec2(16, 0), 0);
+  bool mapped = nmap.x > 0.5;
+  if (mapped) {
+    n = mapped_normal(normalTex, vUv, vPos, vNrm, vTng.xyz, vTng.w, nmap,
+                      texelFetch(paramTex, ivec2(17, 0), 0),
+                      texelFetch(paramTex, ivec2(18, 0), 0).xyz,
+                      texelFetch(paramTex, ivec2(19, 0), 0).xyz,
+                      texelFetch(paramTex, ivec2(20, 0), 0));
+  }
   vec4 eye = param(8, 0);
   vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+  if (mapped && dot(ng, o) > 0.0) {
+    n = valid_reflection_normal(ng, o, n);   /* Cycles' bump map correction */
+  }
   float cos_o = dot(n, o);
   if (cos_o < COS_VIEW_MIN) {
     o = normalize(o + (COS_VIEW_MIN - cos_o) * n);
@@ -476,7 +492,7 @@ void main()
     vec3 sum = vec3(0.0);
     if (kind > 0.5) {                               /* point-like: its irradiance */
       if (dot(ng, c) > 0.0) {
-        sum = (kd.rgb * wd * max(dot(n, c), 0.0) +
+        sum = (kd.rgb * wd * max(dot(n, c), 0.0) * (mapped ? bump_shadowing(ng, n, c) : 1.0) +
                (glossy ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
                        : vec3(0.0))) * s1.rgb;
       }
@@ -490,7 +506,8 @@ void main()
       float sr = sin(r);
       bool clear = nc >= sr && dot(ng, c) >= sr;
       if (kd.w > 0.5 && clear) {
-        sum += kd.rgb * wd * (PI * sr * sr * nc) * L;
+        /* a mapped normal's terminator factor at the disc's centre */
+        sum += kd.rgb * wd * (PI * sr * sr * nc) * L * (mapped ? bump_shadowing(ng, n, c) : 1.0);
       }
       for (int l = 0; l < (glossy || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
         vec2 u = fract(vec2((float(l) + 0.5) / float(NL), radical_inverse(l)) + shift);
@@ -500,7 +517,8 @@ void main()
         }
         vec3 f = vec3(0.0);
         if (kd.w > 0.5 && !clear) {
-          f += kd.rgb * wd * max(dot(n, i), 0.0) * (omega / float(NL));
+          f += kd.rgb * wd * max(dot(n, i), 0.0) * (omega / float(NL)) *
+               (mapped ? bump_shadowing(ng, n, i) : 1.0);
         }
         if (glossy) {
           float pl = 1.0 / omega;

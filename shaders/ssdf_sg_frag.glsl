@@ -83,6 +83,26 @@ void apply_inputs()
   fresBs.rgb = q[3];
 }
 
+/* a normal or bump map (texel 27: kind, strength, distance; its image's texture_lib
+ * parameters after the cosine lobes): the cosine lobes' and the glossy lobe's frame at this
+ * pixel (Wang et al. 2009 shade per pixel in the normal map's frame), with Cycles' bump map
+ * correction toward the surface normal n */
+void mapped_frame(vec3 n, vec3 o)
+{
+  vec4 nmap = texelFetch(paramTex, ivec2(27, 0), 0);
+  if (nmap.x < 0.5) {
+    return;
+  }
+  int base = COS_TEXEL + cosLobes;
+  vec3 m = mapped_normal(normalTex, vUv, vPos, vNrm, vTng.xyz, vTng.w, nmap,
+                         texelFetch(paramTex, ivec2(base, 0), 0),
+                         texelFetch(paramTex, ivec2(base + 1, 0), 0).xyz,
+                         texelFetch(paramTex, ivec2(base + 2, 0), 0).xyz,
+                         texelFetch(paramTex, ivec2(base + 3, 0), 0));
+  lobeN = dot(n, o) > 0.0 ? valid_reflection_normal(n, o, m) : m;
+  ssdf_frame(lobeN, lobeT, lobeB);
+}
+
 void main()
 {
   read_parameters();
@@ -90,6 +110,11 @@ void main()
   vec3 n = normalize(vNrm);
   vec3 t, b;
   ssdf_frame(n, t, b);
+  lobeN = n;
+  lobeT = t;
+  lobeB = b;
+  vec3 view = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+  mapped_frame(n, view);
   vec4 W[16];
   bool perPixelSSDF = glossy != 0;
 #ifndef FLAT_PAIRS
@@ -136,14 +161,15 @@ void main()
   vec3 color = kd.rgb * rd * envStrength;
   /* eq. 41 with the one-lobe isotropic NDF view slice (eq. 17-22) */
   if (glossy != 0) {
-    vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
-    float c = dot(o, n);
-    vec3 pw = 2.0 * c * n - o;
+    vec3 o = view;
+    vec3 nl = lobeN;
+    float c = dot(o, nl);
+    vec3 pw = 2.0 * c * nl - o;
     pw = pw / max(length(pw), 1e-30);
     float tau = max(4.0 * abs(c), 4.0 * COS_MIN);
     float lam_w = min(ndfLambda / tau, LAMBDA_MAX);
-    float cos_i = dot(n, pw);
-    float cos_o = dot(n, o);
+    float cos_i = dot(nl, pw);
+    float cos_o = dot(nl, o);
     float m = m_factor(cos_i, cos_o, c) * (c > 0.0 ? 1.0 : 0.0);
     float cf = clamp(c, 0.0, 1.0);
     vec3 fres = fresA.rgb + fresBd.rgb * sg_fresnel_eq14(cf, ior) + fresBs.rgb * pow(1.0 - cf, 5.0);
@@ -153,7 +179,7 @@ void main()
     vec3 mu = ndfMu * m * fres;
     for (int k = 0; k < cosLobes; k++) {
       vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + k, 0), 0);
-      vec3 cw = cl.x * t + cl.y * b + cl.z * n;
+      vec3 cw = cl.x * lobeT + cl.y * lobeB + cl.z * nl;
       vec3 p;
       float lam, amp;
       amp = sg_product(cw, cosLambda, pw, lam_w, p, lam);

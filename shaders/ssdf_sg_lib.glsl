@@ -215,6 +215,10 @@ float m_factor(float cos_i, float cos_o, float h_dot_i)
  * scene fit left the pair out; else the pair's weight w = mu * c_m * amp * int(hemisphere),
  * its f_h slope k and (withTheta) the SSDF's angle theta at the product lobe's axis, so the pair
  * adds w * fh_hat_slope(theta, k) to R_d.  Everything but theta depends on n alone. */
+/* the cosine lobes' frame: the surface's (n, t, b), or a normal map's at this pixel (the
+ * SSDF stays in the surface's frame: visibility is the geometry's) */
+vec3 lobeN, lobeT, lobeB;
+
 bool diffuse_pair(int m, int j, vec3 n, vec3 t, vec3 b, vec4 W[16], bool withTheta,
                   out float theta, out vec3 w, out float k)
 {
@@ -226,7 +230,7 @@ bool diffuse_pair(int m, int j, vec3 n, vec3 t, vec3 b, vec4 W[16], bool withThe
     return false;
   }
   vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
-  vec3 cw = cl.x * t + cl.y * b + cl.z * n;
+  vec3 cw = cl.x * lobeT + cl.y * lobeB + cl.z * lobeN;
   vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
   vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */
   vec3 p;

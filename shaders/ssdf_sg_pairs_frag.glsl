@@ -21,6 +21,9 @@ void main()
   vec3 n = normalize(fp.xyz);
   vec3 t, b;
   ssdf_frame(n, t, b);
+  lobeN = n;
+  lobeT = t;
+  lobeB = b;
   vec4 W[16];
   point_weights(fp.w, W);
   float theta, k;

@@ -9,6 +9,7 @@ void main()
   vTri = triPoints;
   vUv = uv;
   vAttr = attr;
+  vTng = tng;
 #ifdef FLAT_PAIRS
   vFlat = triFlat;   /* the three points' rows in the pair table */
 #endif

@@ -85,3 +85,85 @@ vec3 input_colour(sampler2D img, vec2 uv, vec4 attr, vec4 info, vec3 map0, vec3 
   vec3 c = info.z < 0.5 ? image_texture(img, uv, info, map0, map1).rgb : attr.rgb;
   return max(combine_colour(c, info.w, mixColor), vec3(0.0));
 }
+
+/* core.textures.perturbed_normals: the Normal Map (kind 1, tangent space) or Bump (kind 2)
+ * node's normal at this pixel.  N, T: the interpolated (unnormalised) normal and tangent,
+ * sgn the bitangent sign; nmap = (kind, strength, distance, -); info, map0/1, mixColor the
+ * image's texture_lib parameters.  The bump's height derivative: central differences one
+ * texel each way in UV; its surface gradient from the screen derivatives of P and uv (on a
+ * triangle exactly core.textures.surface_gradient with its edges). */
+float bump_height(sampler2D img, vec2 uv, vec4 info, vec3 map0, vec3 map1, vec4 mixColor)
+{
+  vec3 c = combine_colour(image_texture(img, uv, info, map0, map1).rgb, info.w, mixColor);
+  return dot(c, vec3(0.2126, 0.7152, 0.0722));
+}
+
+vec3 mapped_normal(sampler2D img, vec2 uv, vec3 P, vec3 N, vec3 T, float sgn, vec4 nmap,
+                   vec4 info, vec3 map0, vec3 map1, vec4 mixColor)
+{
+  int kind = int(nmap.x + 0.5);
+  vec3 Nu = normalize(N);
+  if (kind == 0) {
+    return Nu;
+  }
+  float strength = max(nmap.y, 0.0);
+  vec3 n;
+  if (kind == 1) {
+    vec3 x = 2.0 * combine_colour(image_texture(img, uv, info, map0, map1).rgb, info.w,
+                                  mixColor) - 1.0;
+    n = x.x * T + x.y * (sgn * cross(N, T)) + x.z * N;
+    n = dot(n, n) > 1e-30 ? normalize(n) : Nu;
+    if (strength != 1.0) {
+      n = Nu + (n - Nu) * strength;
+      n = dot(n, n) > 1e-30 ? normalize(n) : Nu;
+    }
+    return n;
+  }
+  ivec2 size = textureSize(img, 0);
+  vec2 step = 1.0 / max(vec2(length(vec2(map0.x, map1.x) * vec2(size)),
+                             length(vec2(map0.y, map1.y) * vec2(size))), vec2(1e-12));
+  vec2 dh = vec2(bump_height(img, uv + vec2(step.x, 0.0), info, map0, map1, mixColor) -
+                 bump_height(img, uv - vec2(step.x, 0.0), info, map0, map1, mixColor),
+                 bump_height(img, uv + vec2(0.0, step.y), info, map0, map1, mixColor) -
+                 bump_height(img, uv - vec2(0.0, step.y), info, map0, map1, mixColor)) /
+            (2.0 * step);
+  vec3 dp1 = dFdx(P), dp2 = dFdy(P);
+  vec2 duv1 = dFdx(uv), duv2 = dFdy(uv);
+  vec3 r1 = cross(dp2, Nu), r2 = cross(Nu, dp1);
+  float det = dot(dp1, r1);
+  vec3 g = abs(det) > 1e-30 ? (dot(dh, duv1) * r1 + dot(dh, duv2) * r2) / det : vec3(0.0);
+  n = Nu - nmap.z * g;
+  n = dot(n, n) > 1e-30 ? normalize(n) : Nu;
+  n = strength * n + (1.0 - strength) * Nu;
+  return dot(n, n) > 1e-30 ? normalize(n) : Nu;
+}
+
+/* core.textures.bump_shadowing: Cycles' smooth terminator on a diffuse closure with a
+ * mapped normal n (Chiang et al. 2019) */
+float bump_shadowing(vec3 ng, vec3 n, vec3 i)
+{
+  float den = dot(n, i) * dot(n, ng);
+  float g = den != 0.0 ? dot(ng, i) / den : 0.0;
+  return g >= 1.0 ? 1.0 : (g < 0.0 ? 0.0 : g * (1.0 + g - g * g));
+}
+
+/* core.textures.valid_reflection_normal: Cycles' bump map correction of a mapped normal n
+ * (unit ng, view o) */
+vec3 valid_reflection_normal(vec3 ng, vec3 o, vec3 n)
+{
+  vec3 r = 2.0 * dot(n, o) * n - o;
+  float iz = dot(o, ng);
+  float t = min(0.9 * iz, 0.01);
+  if (dot(ng, r) >= t) {
+    return n;
+  }
+  vec3 x = n - dot(n, ng) * ng;
+  x = dot(x, x) > 1e-30 ? normalize(x) : n;
+  float ix = dot(o, x);
+  float a = ix * ix + iz * iz;
+  float b = 2.0 * (a + iz * t);
+  float c = (t + iz) * (t + iz);
+  float root = sqrt(max(b * b - 4.0 * a * c, 0.0));
+  float nz2 = ix < 0.0 ? 0.25 * (b + root) / a : 0.25 * (b - root) / a;
+  return sqrt(max(1.0 - nz2, 0.0)) * x + sqrt(max(nz2, 0.0)) * ng;
+}

@@ -15,7 +15,7 @@ from ...core.brdf import slot_material
 from ...core.ssdf_sg_scene import (cosine_amplitudes, diffuse_slots, flat_triangles,
                                    is_glossy, sg_materials)
 from .. import drawing, keys
-from ..texture_export import shader_inputs, slot_uvs
+from ..texture_export import shader_inputs, shader_normal, slot_uvs
 
 # shaders ("shader", "shader_flat", "pairs"), the pair pass's "quad", the prefiltered
 # environment's "atlas" (per pyramid) and the light-lobe texture per cosine lobe count
@@ -32,7 +32,7 @@ _SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"), ("FLOAT_2
              ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
 #: the main pass's textured inputs (texture_lib.glsl)
 _INPUT_SAMPLERS = (("FLOAT_2D", "albedoTex"), ("FLOAT_2D", "roughTex"), ("FLOAT_2D", "metalTex"),
-                   ("FLOAT_2D", "levelTex"))
+                   ("FLOAT_2D", "levelTex"), ("FLOAT_2D", "normalTex"))
 
 
 def _fragment_source(main: str) -> str:
@@ -61,7 +61,7 @@ def _make_shader(flat: bool):
                                          + ((("FLOAT_2D", "pairTex"),) if flat else ())):
         info.sampler(slot, kind, ident)
     inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"),
-              ("VEC2", "uv"), ("VEC4", "attr"))
+              ("VEC2", "uv"), ("VEC4", "attr"), ("VEC4", "tng"))
     for slot, (kind, ident) in enumerate(inputs + ((("VEC3", "triFlat"),) if flat else ())):
         info.vertex_in(slot, kind, ident)
     iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_flat_iface" if flat
@@ -72,6 +72,7 @@ def _make_shader(flat: bool):
     iface.flat("VEC3", "vTri")
     iface.smooth("VEC2", "vUv")
     iface.smooth("VEC4", "vAttr")
+    iface.smooth("VEC4", "vTng")
     if flat:
         iface.flat("VEC3", "vFlat")
     info.vertex_out(iface)
@@ -178,18 +179,19 @@ ENTRY_TEXELS = 17
 INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
 
 
-def parameter_texture(env, mat, res, kt, eye4, cosine, table=None, sources=None):
+def parameter_texture(env, mat, res, kt, eye4, cosine, table=None, sources=None, normal=None):
     """The parameter texture read by ``read_parameters`` in ssdf_sg_lib.glsl.  Row 0: 9
     scalar texels, (count, sharpness) of the cosine lobes, four texels per textured input
     of :data:`INPUTS` (``sources``, core.textures.ColorSource or None: texture_lib.glsl's
     info, mapping rows, mix colour) from texel 10, the table's (roughness nodes, level
     nodes, metallic at corner 0 and 1) at 26, (local direction, amplitude) per cosine lobe
     from :data:`COSINE_TEXEL`.  Rows 1..: ``table`` (:func:`slot_table`), one row per
-    Specular IOR Level node."""
+    Specular IOR Level node.  ``normal``: a core.textures.NormalSource drawn per pixel
+    (texel 27: kind, strength, distance; its image's four texels after the cosine lobes)."""
     M = len(cosine.amplitudes)
     table = _slot_table_of(mat) if table is None else table
     nl, nr = table["entries"].shape[:2]
-    width = max(COSINE_TEXEL + M, nr * ENTRY_TEXELS)
+    width = max(COSINE_TEXEL + M + 4, nr * ENTRY_TEXELS)
     p = np.zeros((1 + nl, width, 4), np.float32)
     p[0, 8] = eye4
     p[0, 9] = (M, cosine.sharpness, 0.0, 0.0)
@@ -206,6 +208,13 @@ def parameter_texture(env, mat, res, kt, eye4, cosine, table=None, sources=None)
         p[0, 11 + 4 * k, :3], p[0, 12 + 4 * k, :3] = tex["texMap0"], tex["texMap1"]
         p[0, 13 + 4 * k] = tex["mixColor"]
     p[0, 26] = (nr, nl, *table["metallic"])
+    if normal is not None:
+        tex = drawing.source_uniforms(normal.source)
+        p[0, 27] = (1.0 if normal.kind == "NORMAL_MAP" else 2.0, normal.strength,
+                    normal.distance, 0.0)
+        k = COSINE_TEXEL + M
+        p[0, k], p[0, k + 3] = tex["texInfo"], tex["mixColor"]
+        p[0, k + 1, :3], p[0, k + 2, :3] = tex["texMap0"], tex["texMap1"]
     p[1:, :nr * ENTRY_TEXELS] = table["entries"].reshape(nl, nr * ENTRY_TEXELS, 4)
     return _texture(p)
 
@@ -268,21 +277,26 @@ def slot_parameters(env, st, table, slot, res, kt, eye4, cosine):
     inputs = shader_inputs(st, slot)
     own = slot >= len(st.materials) or slot in st.data.get("sg_own", {})
     mat = material_uniforms(slot_material(table, slot))
+    mapped = shader_normal(st, slot)
+    normal = mapped[0] if mapped is not None else None
     if own or (source is None and not inputs):
-        return parameter_texture(env, mat, res, kt, eye4, cosine)
+        return parameter_texture(env, mat, res, kt, eye4, cosine, normal=normal)
     material = st.materials[slot]
     key = (repr(material), source is not None, tuple(sorted(inputs)))
     tab = keys.held(_TABLES, key, (), lambda: slot_table(
         material, source is not None, inputs, constants.get(slot)))
     sources = {"colour": source, **{name: s.source for name, (s, _) in inputs.items()}}
-    return parameter_texture(env, mat, res, kt, eye4, cosine, tab, sources)
+    return parameter_texture(env, mat, res, kt, eye4, cosine, tab, sources, normal)
 
 
 def input_textures(st, slot):
-    """The GPU textures of a slot's textured inputs (:data:`INPUTS`; white without one)."""
+    """The GPU textures of a slot's textured inputs (:data:`INPUTS`, then its normal or bump
+    map; white without one)."""
     scalars = shader_inputs(st, slot)
+    mapped = shader_normal(st, slot)
     sources = [st.textures.get(slot, (None, None))[0]] + [
-        scalars[name][0].source if name in scalars else None for name in INPUTS[1:]]
+        scalars[name][0].source if name in scalars else None for name in INPUTS[1:]] + [
+        mapped[0].source if mapped is not None else None]
     return [drawing.albedo_texture(s.texture.pixels) if s is not None and s.texture is not None
             else drawing.white_texture() for s in sources]
 
@@ -306,7 +320,8 @@ def object_batches(st, field, use_flat: bool = True) -> ObjectBatches:
     with their points' rows in the pair table."""
     inputs = tuple(sorted((slot, id(values)) for slot, (_, values) in st.textures.items())) \
         + tuple(sorted((slot, name, id(v)) for slot, got in st.inputs[0].items()
-                       for name, (_, v) in got.items()))
+                       for name, (_, v) in got.items())) \
+        + tuple(sorted((slot, id(got[2])) for slot, got in st.normals.items()))
     return keys.held(_BATCHES, (st.name, st.fingerprint, use_flat, inputs), (field,),
                      lambda: _object_batches(st, use_flat))
 
@@ -319,6 +334,9 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
     pos, nrm, tri_points, bary = drawing.triangle_corners(st)
     slots = arrays.corner_materials[tri[:, 0]]
     flat = flat_triangles(arrays, pts) if use_flat else np.zeros(len(tri), bool)
+    # a normal-mapped slot's lobes turn per pixel: never drawn from the pair table
+    mapped = [slot for slot in st.normals if shader_normal(st, slot) is not None]
+    flat &= ~np.isin(slots, mapped)
     flat_points = np.unique(pts.point_of_corner[tri[flat]])
     row = np.full(len(pts.normals), -1, np.int64)
     row[flat_points] = np.arange(len(flat_points))
@@ -326,8 +344,12 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
     # a textured slot's UVs and colour attribute per corner (addon.texture_export)
     uv = np.zeros((len(corner), 2), np.float32)
     attr = np.ones((len(corner), 4), np.float32)
+    tng = np.zeros((len(corner), 4), np.float32)
     corner_slot = np.repeat(slots, 3)
     for slot in np.unique(slots):
+        got = shader_normal(st, int(slot))
+        if got is not None:
+            tng[corner_slot == slot] = got[1][corner[corner_slot == slot]]
         sel = corner_slot == slot
         uvs = slot_uvs(st, int(slot))
         if uvs is not None:
@@ -344,7 +366,8 @@ def _object_batches(st, use_flat: bool) -> ObjectBatches:
             attrs = {"pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
                      "triPoints": np.ascontiguousarray(tri_points[sel]),
                      "bary": np.ascontiguousarray(bary[sel]),
-                     "uv": np.ascontiguousarray(uv[sel]), "attr": np.ascontiguousarray(attr[sel])}
+                     "uv": np.ascontiguousarray(uv[sel]), "attr": np.ascontiguousarray(attr[sel]),
+                     "tng": np.ascontiguousarray(tng[sel])}
             if is_flat:
                 attrs["triFlat"] = np.ascontiguousarray(tri_flat[sel])
             draws.append((int(slot), is_flat,
