@@ -100,7 +100,8 @@ def render_view(scene, depsgraph):
     projection = cam_eval.calc_matrix_camera(depsgraph, x=width, y=height,
                                              scale_x=r.pixel_aspect_x, scale_y=r.pixel_aspect_y)
     persp = not (cam_eval.type == "CAMERA" and cam_eval.data.type == "ORTHO")
-    return cam_eval.matrix_world.inverted(), projection, width, height, persp
+    # the camera object's scale is no part of the view (Blender renders it so)
+    return cam_eval.matrix_world.normalized().inverted(), projection, width, height, persp
 
 
 def render_camera(scene, depsgraph) -> dict | None:

@@ -1,0 +1,98 @@
+"""Hard or bad input an artist hits, each with what must happen: a clear message and the
+scene unchanged, or a correct finite frame (docs/reliability.md lists every case with
+the test that checks it, here or in another test file)."""
+
+from __future__ import annotations
+
+import errno
+import json
+
+import bpy
+import numpy as np
+import pytest
+
+from prt_relight.addon import runtime, storage
+
+from . import blender_scene as bs
+
+pytestmark = pytest.mark.usefixtures("registered_addon")
+
+METHODS = ["REFERENCE", "SSDF_SG", "RSL", "BLOCKS", "SH", "WAVELET"]
+
+
+def _scene(hdri="sunset", cuts=8):
+    """A 4 m ground, a coarse smooth ball above it (no material), a camera: ~350 points."""
+    bs.reset()
+    bs.add_world(path=bs.hdri_path(hdri))
+    bs.add_ground(size=4.0, cuts=cuts)
+    bpy.ops.mesh.primitive_uv_sphere_add(location=(0.0, 0.0, 1.0), radius=0.8, segments=12,
+                                         ring_count=6)
+    bpy.ops.object.shade_smooth()
+    bs.add_camera()
+    bs.set_resolution(32, 24)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 1
+    return scene
+
+
+def _sync():
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    return state
+
+
+def _stored():
+    """Every object's stored blobs by name: what a refused operation must leave as it was."""
+    out = {}
+    for ob in bpy.data.objects:
+        store = ob.get(storage.STORE)
+        out[ob.name] = {} if store is None else {n: bytes(store[n]["blob"]) for n in store.keys()}
+    return out
+
+
+def _data_counts():
+    """How many datablocks of each kind (Blender's own Render Result image left out)."""
+    counts = {kind: len(getattr(bpy.data, kind)) for kind in
+              ("objects", "meshes", "materials", "worlds", "scenes", "cameras")}
+    counts["images"] = sum(i.type != "RENDER_RESULT" for i in bpy.data.images)
+    return counts
+
+
+def _frame(path, low=0.02, high=50.0):
+    """F12 of the scene camera: finite, non-negative, something lit and nothing absurd."""
+    frame = bs.render_exr(path)
+    assert np.isfinite(frame).all()
+    assert frame.min() >= 0.0
+    lit = frame[..., 3] > 0.5
+    assert lit.mean() > 0.2
+    assert low < frame[lit][:, :3].mean() < high, frame[lit][:, :3].mean()
+    return frame
+
+
+def _refused(match):
+    """``prt.precompute`` refuses with ``match`` in its message and changes nothing."""
+    before, counts = _stored(), _data_counts()
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.prt.precompute()
+    assert _stored() == before and _data_counts() == counts
+    assert bpy.context.scene.prt.precompute_id == ""
+
+
+def test_whole_scene_scaled_by_1e_4_or_1e4_draws_the_same_frame(tmp_path):
+    """Select all, scale by 1e-4 or 1e4 (camera included, clip range with it): the ray
+    offset is relative to the scene's size and the camera's scale is no part of its view
+    (Blender renders it so), so the frame is the unit-scale frame."""
+    _scene()
+    bpy.ops.prt.precompute()
+    unit = _frame(tmp_path / "unit.exr")
+    for s in (1e-4, 1e4):
+        _scene()
+        for ob in bpy.data.objects:
+            ob.location = [c * s for c in ob.location]
+            ob.scale = [c * s for c in ob.scale]
+        cam = bpy.context.scene.camera.data
+        cam.clip_start *= s
+        cam.clip_end *= s
+        assert bpy.ops.prt.precompute() == {"FINISHED"}
+        frame = _frame(tmp_path / f"{s}.exr")
+        np.testing.assert_allclose(frame, unit, atol=2e-3 * unit.max())
