@@ -96,3 +96,29 @@ def test_whole_scene_scaled_by_1e_4_or_1e4_draws_the_same_frame(tmp_path):
         assert bpy.ops.prt.precompute() == {"FINISHED"}
         frame = _frame(tmp_path / f"{s}.exr")
         np.testing.assert_allclose(frame, unit, atol=2e-3 * unit.max())
+
+
+# --------------------------------------------------------------------------- camera
+
+def test_no_camera_precomputes_refuses_f12_and_auto_chooses_at_its_probes(monkeypatch):
+    """Without a camera the precompute runs, F12 is refused by Blender's own message,
+    and AUTO chooses at its probe views.  In -b its GPU passes first needed a Workbench
+    render, which failed with "Cannot render, no camera": the choice was never made."""
+    from prt_relight.addon import drawing
+    from prt_relight.addon.methods import auto
+    scene = _scene()
+    bpy.data.objects.remove(bpy.data.objects["Camera"])
+    assert scene.camera is None
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    with pytest.raises(RuntimeError, match="no camera"):
+        bpy.ops.render.render()
+    every = auto.AutoMethod.candidates
+    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
+        lambda: [c for c in every() if c[0].id in ("SH",)]))
+    monkeypatch.setattr(drawing, "_GPU_READY", False)       # as in a fresh `blender -b`
+    scene.prt.method = "AUTO"
+    counts = _data_counts()
+    assert bpy.ops.prt.auto_choose() == {"FINISHED"}
+    record = json.loads(scene.prt.auto_choice)
+    assert record["camera"] is None and record["objects"]
+    assert _data_counts() == counts                # the temporary context scene is gone
