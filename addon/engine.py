@@ -10,7 +10,7 @@ import numpy as np
 from gpu_extras.presets import draw_texture_2d
 from mathutils import Matrix
 
-from ..core import pixel_filter
+from ..core import envmap, pixel_filter
 from ..core.visibility import Cancelled
 from . import drawing, lights, sharp
 from .runtime import FrameState, TexturedRadiance
@@ -36,7 +36,7 @@ def _background(state: FrameState):
         tex = cached[1]
     else:
         if world.image is not None:
-            img = world.image
+            img = envmap.display_equirect(world.image)     # at most 8k wide on the GPU
             rgba = np.ones(img.shape[:2] + (4,), dtype=np.float32)
             rgba[:, :, :3] = img
         else:

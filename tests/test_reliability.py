@@ -122,3 +122,36 @@ def test_no_camera_precomputes_refuses_f12_and_auto_chooses_at_its_probes(monkey
     record = json.loads(scene.prt.auto_choice)
     assert record["camera"] is None and record["objects"]
     assert _data_counts() == counts                # the temporary context scene is gone
+
+
+def test_16k_world_is_drawn_from_a_halved_texture(tmp_path, monkeypatch):
+    """A 16384 x 8192 world made F12 fail (a 2 GiB RGBA32F texture: gpu.texture.new
+    failed).  Wider than envmap.DISPLAY_MAX_WIDTH the background and sharp lobes draw
+    from halvings that keep the energy; the lighting is still resampled from the full
+    image.  Checked with the limit at 64 on a 256-wide sky (the 16k image itself: by
+    hand, docs/reliability.md)."""
+    from prt_relight.core import envmap
+    rng = np.random.default_rng(1)
+    sky = rng.uniform(0.1, 1.0, (128, 256, 3)).astype(np.float32)
+    halved = envmap.halve_equirect(sky, rows=7)             # in bands of rows, as for 16k
+    edges = np.cos(np.linspace(0.0, np.pi, 129))
+    band = (edges[:-1] - edges[1:])[:, None]
+    e_full = (sky * band[..., None]).sum(axis=(0, 1)) / 256
+    e2 = np.cos(np.linspace(0.0, np.pi, 65))
+    e_half = (halved * (e2[:-1] - e2[1:])[:, None, None]).sum(axis=(0, 1)) / 128
+    np.testing.assert_allclose(e_half, e_full, rtol=1e-5)
+    assert envmap.display_equirect(sky, 64).shape == (32, 64, 3)
+    assert envmap.display_equirect(sky) is sky
+
+    scene = _scene()
+    scene.world.node_tree.nodes["Environment Texture"].image = bs.float_image("sky", sky)
+    scene.render.film_transparent = False
+    bpy.data.objects["Sphere"].data.materials.append(
+        bs.bsdf_material("Mirror", "ShaderNodeBsdfGlossy", Roughness=0.0))
+    bpy.ops.prt.precompute()
+    full = bs.render_exr(tmp_path / "full.exr", transparent=False)
+    monkeypatch.setattr(envmap, "DISPLAY_MAX_WIDTH", 64)
+    shown = bs.render_exr(tmp_path / "shown.exr", transparent=False)
+    assert np.isfinite(shown).all()
+    # the same mean radiance, the background blurred to 64 columns
+    np.testing.assert_allclose(shown[..., :3].mean(), full[..., :3].mean(), rtol=0.05)
