@@ -52,17 +52,38 @@ def ensure_gpu(scene):
     global _GPU_READY
     if _GPU_READY or not bpy.app.background:
         return
+    if scene.camera is None:
+        # a render needs a camera: render a temporary scene of one camera instead, and
+        # remove all it made (the scene's own data is left as it is)
+        tmp = bpy.data.scenes.new("PRT GPU context")
+        cam_data = bpy.data.cameras.new("PRT GPU context")
+        cam = bpy.data.objects.new("PRT GPU context", cam_data)
+        try:
+            tmp.collection.objects.link(cam)
+            tmp.camera = cam
+            _workbench_render(tmp)
+        finally:
+            bpy.data.objects.remove(cam)
+            bpy.data.cameras.remove(cam_data)
+            bpy.data.scenes.remove(tmp)
+        return
     r = scene.render
     saved = (r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage)
     try:
-        r.engine = "BLENDER_WORKBENCH"
-        r.resolution_x = r.resolution_y = 8
-        r.resolution_percentage = 100
-        with bpy.context.temp_override(scene=scene):
-            bpy.ops.render.render()
-        _GPU_READY = True
+        _workbench_render(scene)
     finally:
         r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
+
+
+def _workbench_render(scene):
+    global _GPU_READY
+    r = scene.render
+    r.engine = "BLENDER_WORKBENCH"
+    r.resolution_x = r.resolution_y = 8
+    r.resolution_percentage = 100
+    with bpy.context.temp_override(scene=scene):
+        bpy.ops.render.render()
+    _GPU_READY = True
 
 
 def redraw_viewports(self=None, context=None):

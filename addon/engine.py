@@ -10,7 +10,7 @@ import numpy as np
 from gpu_extras.presets import draw_texture_2d
 from mathutils import Matrix
 
-from ..core import pixel_filter
+from ..core import envmap, pixel_filter
 from ..core.visibility import Cancelled
 from . import drawing, lights, sharp
 from .runtime import FrameState, TexturedRadiance
@@ -36,7 +36,7 @@ def _background(state: FrameState):
         tex = cached[1]
     else:
         if world.image is not None:
-            img = world.image
+            img = envmap.display_equirect(world.image)     # at most 8k wide on the GPU
             rgba = np.ones(img.shape[:2] + (4,), dtype=np.float32)
             rgba[:, :, :3] = img
         else:
@@ -100,7 +100,8 @@ def render_view(scene, depsgraph):
     projection = cam_eval.calc_matrix_camera(depsgraph, x=width, y=height,
                                              scale_x=r.pixel_aspect_x, scale_y=r.pixel_aspect_y)
     persp = not (cam_eval.type == "CAMERA" and cam_eval.data.type == "ORTHO")
-    return cam_eval.matrix_world.inverted(), projection, width, height, persp
+    # the camera object's scale is no part of the view (Blender renders it so)
+    return cam_eval.matrix_world.normalized().inverted(), projection, width, height, persp
 
 
 def render_camera(scene, depsgraph) -> dict | None:

@@ -90,7 +90,7 @@ def _camera_matrices(scene, depsgraph, width, height):
     r = scene.render
     projection = cam.calc_matrix_camera(depsgraph, x=width, y=height,
                                         scale_x=r.pixel_aspect_x, scale_y=r.pixel_aspect_y)
-    return cam.matrix_world.inverted(), projection, cam.data.type != "ORTHO"
+    return cam.matrix_world.normalized().inverted(), projection, cam.data.type != "ORTHO"
 
 
 def _settings_snapshot(scene):

@@ -125,8 +125,9 @@ def _mip_texture(world):
         if img is None:
             atlas, levels = np.zeros((1, 1, 4), np.float32), 0
         else:
-            atlas = envmap.equirect_mip_atlas(img)
-            levels = len(envmap.equirect_mip_sizes(*img.shape[:2]))
+            shown = envmap.display_equirect(img)          # level 0: the background's texture
+            atlas = envmap.equirect_mip_atlas(shown)
+            levels = len(envmap.equirect_mip_sizes(*shown.shape[:2]))
         got = (_texture(atlas), levels)
         _MIPS.clear()
         _MIPS[key] = got
@@ -159,7 +160,7 @@ def draws(state, eye, view_dir, background) -> list:
         return []
     env_tex, rotation, strength = background
     world = state.full_world if state.full_world is not None else state.world
-    env_size = (1, 1) if world.image is None else world.image.shape[:2]
+    env_size = (1, 1) if world.image is None else envmap.display_equirect(world.image).shape[:2]
     mip_tex, levels = _mip_texture(world)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
     out = []

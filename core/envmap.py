@@ -280,6 +280,55 @@ def equirect_mip_sizes(height: int, width: int, min_width: int = 4) -> list:
     return sizes
 
 
+#: Widest equirect the engine uploads to the GPU to draw the background and the sharp
+#: lobes' level 0 (a 16k image is 2 GiB as RGBA32F, more than a GPU texture may hold);
+#: wider images are drawn from :func:`display_equirect`.  The lighting is always
+#: resampled from the full image.
+DISPLAY_MAX_WIDTH = 8192
+_DISPLAY_CACHE = Cache(1)
+
+
+def halve_equirect(image: np.ndarray, rows: int = 512) -> np.ndarray:
+    """One level below an equirect (H, W, 3): each pixel the solid-angle-weighted mean of
+    its (up to) 2 x 2 parents, as :func:`equirect_mip_atlas` makes its levels (energy kept);
+    float32, computed ``rows`` output rows at a time so a 16k image needs no float64 copy."""
+    img = np.asarray(image)
+    H, W = img.shape[:2]
+    h, w = (H + 1) // 2, (W + 1) // 2
+    edges = np.cos(np.linspace(0.0, np.pi, H + 1))
+    band = edges[:-1] - edges[1:]
+    out = np.empty((h, w, 3), np.float32)
+    for r0 in range(0, h, rows):
+        r1 = min(h, r0 + rows)
+        a, b = 2 * r0, min(H, 2 * r1)
+        padded = np.zeros((2 * (r1 - r0), 2 * w, 3))
+        weight = np.zeros((2 * (r1 - r0), 2 * w))
+        padded[:b - a, :W] = img[a:b, :, :3] * band[a:b, None, None]
+        weight[:b - a, :W] = band[a:b, None]
+        num = padded.reshape(r1 - r0, 2, w, 2, 3).sum(axis=(1, 3))
+        den = weight.reshape(r1 - r0, 2, w, 2).sum(axis=(1, 3))
+        out[r0:r1] = num / np.maximum(den, 1e-300)[..., None]
+    return out
+
+
+def display_equirect(image: np.ndarray, max_width: int | None = None) -> np.ndarray:
+    """``image`` halved (:func:`halve_equirect`) until at most ``max_width`` columns wide
+    (default :data:`DISPLAY_MAX_WIDTH`): what the GPU draws of a world image; the image
+    itself when it is narrow enough.  Kept for the newest image."""
+    limit = DISPLAY_MAX_WIDTH if max_width is None else int(max_width)
+    if image.shape[1] <= limit:
+        return image
+    key = (id(image), image.shape, limit)
+    got = _DISPLAY_CACHE.get(key)
+    if got is not None and got[0] is image:
+        return got[1]
+    level = image
+    while level.shape[1] > limit:
+        level = halve_equirect(level)
+    _DISPLAY_CACHE[key] = (image, level)
+    return level
+
+
 def equirect_mip_atlas(image: np.ndarray, min_width: int = 4) -> np.ndarray:
     """The levels 1, 2, ... below an equirect image (H, W, 3), stacked top to bottom in
     one RGBA float32 array of ``W_1`` columns (level ``l`` in its first ``W_l``
