@@ -49,7 +49,6 @@ _GPU_READY = False
 
 def ensure_gpu(scene):
     """In ``-b`` the gpu module needs one Workbench render before offscreen drawing."""
-    global _GPU_READY
     if _GPU_READY or not bpy.app.background:
         return
     if scene.camera is None:
