@@ -7,6 +7,7 @@
 #   make demo    render the demo into out/demo
 #   make bench   run the precompute benchmark
 #   make bench-scale  production scale: 25k-500k vertices (time, memory, storage, AUTO)
+#   make bench-dynamic  shadow fields: precompute/storage per detail, frames with 1/4/16 dynamic objects
 #   make report  speed/error report of every method into out/report
 #   make clean   remove dist/, out/, caches   (make distclean: also .venv, wheels/)
 
@@ -32,7 +33,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test demo bench bench-scale bench-methods report clean distclean
+.PHONY: setup apt venv wheels validate build test demo bench bench-scale bench-dynamic bench-methods report clean distclean
 
 setup: apt venv
 
@@ -99,6 +100,14 @@ bench: setup
 SCALE_ARGS ?=
 bench-scale: setup
 	$(VENV_PY) bench/bench_scale.py $(SCALE_ARGS)
+
+# Dynamic objects (shadow fields, addon/dynamic.py): field precompute time and stored size
+# per detail (LOW/MEDIUM/HIGH), and frame time with 1/4/16 dynamic objects against the same
+# scene static, relit and moved (about 5 minutes on 2 cores; DYNAMIC_ARGS="--big" adds a
+# 60k-vertex object, "--append docs/measurements.md" records the run).
+DYNAMIC_ARGS ?=
+bench-dynamic: setup
+	$(VENV_PY) bench/bench_dynamic.py $(DYNAMIC_ARGS)
 
 # Each method against REFERENCE on its held-out scenes (long: tens of minutes on 2 cores).
 bench-methods: setup
