@@ -146,7 +146,6 @@ def apply(state):
     if not movers:
         return
     cube = directions.cubemap(state.resolution)
-    poses = tuple((st.name, _pose_key(st.dynamic[1])) for st in movers)
     spheres = [reach(m) for m in movers]
     for st in movers:
         data = st.dynamic[0]
@@ -167,7 +166,11 @@ def apply(state):
         if not st.near and not moved:
             continue
 
-        def product(st=st, stored=st.bits):
+        # keyed on the poses it depends on: its own and those of the objects near it
+        own = (_pose_key(st.dynamic[1]),) if st.dynamic is not None else ()
+        poses = own + tuple((m.name, _pose_key(m.dynamic[1])) for m in st.near)
+
+        def product(st=st, stored=st.bits, poses=poses):
             key = (st.name, id(stored), state.resolution, poses)
             return keys.held(_POSED, key, (stored,), lambda: _product(
                 st, stored, st.near, cube, state))
@@ -207,7 +210,7 @@ def static_bits(st, state):
         return None
     data = st.dynamic[0]
     pts = st.points
-    key = (st.name, "static", id(data), state.resolution, pose_key(state))
+    key = (st.name, "static", id(data), state.resolution, _pose_key(st.dynamic[1]))
     return keys.held(_POSED, key, (data,), lambda: shadow_fields.static_bits(
         data.static, _static_scene(state),
         visibility.ray_origins(pts.positions, pts.normals, data.offset), pts.positions))

@@ -141,6 +141,7 @@ class PrecomputeJob:
         t2 = time.perf_counter()
         self._shadow_fields(cube, threads)
         t1 += bvh
+        t_fields = time.perf_counter()
         self.stage = "checking the tessellation"
         for i, o in enumerate(self.objects):
             o.blob = writers[i].finish()
@@ -150,7 +151,7 @@ class PrecomputeJob:
         t3 = time.perf_counter()
         self.timings.update(build_bvh=bvh, rays=t2 - t1, ray_count=stats["rays"],
                             rays_per_second=stats["rays"] / max(t2 - t1, 1e-9),
-                            tessellation_check=t3 - t2, encode=stream.seconds)
+                            tessellation_check=t3 - t_fields, encode=stream.seconds)
         self.stage = f"deriving {method.label}"
         self.progress_done = 0
         self.derived = method.derive(self)

@@ -21,8 +21,9 @@ from ..core.visibility import Cancelled  # noqa: F401  (raised by FrameState.tic
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
 LAST_MESSAGES: list = []
-# Decoded visibility per stored blob (storage.key).
-_VIS_CACHE = keys.cache(16)
+# Decoded visibility per stored blob (storage.key): room for every object of a big scene,
+# else each sync decodes them again and everything keyed on the bits is made anew
+_VIS_CACHE = keys.cache(128)
 
 
 def stored_visibility(ob_orig, points: int, nbytes: int, note=None):

@@ -471,8 +471,12 @@ def turned_bits(bits: np.ndarray, cube: Cubemap, turn) -> np.ndarray:
     """Packed rows of visibility traced at the precompute's pose, read along the turned
     directions (nearest texel)."""
     idx = turn_texels(cube, turn)
-    vis = np.unpackbits(np.asarray(bits, np.uint8), axis=1, count=cube.size)
-    return np.packbits(vis[:, idx], axis=1)
+    bits = np.asarray(bits, np.uint8)
+    out = np.empty_like(bits)
+    for a in range(0, len(bits), 4096):            # rows in chunks: bounded temporaries
+        vis = np.unpackbits(bits[a:a + 4096], axis=1, count=cube.size)
+        out[a:a + 4096] = np.packbits(vis[:, idx], axis=1)
+    return out
 
 
 
