@@ -51,27 +51,24 @@ def ensure_gpu(scene):
     """In ``-b`` the gpu module needs one Workbench render before offscreen drawing."""
     if _GPU_READY or not bpy.app.background:
         return
+    cam_data = cam = None
     if scene.camera is None:
-        # a render needs a camera: render a temporary scene of one camera instead, and
-        # remove all it made (the scene's own data is left as it is)
-        tmp = bpy.data.scenes.new("PRT GPU context")
+        # a render needs a camera: a temporary one in this scene, removed afterwards (a
+        # temporary scene will not do: removing it frees the render's GPU context)
         cam_data = bpy.data.cameras.new("PRT GPU context")
         cam = bpy.data.objects.new("PRT GPU context", cam_data)
-        try:
-            tmp.collection.objects.link(cam)
-            tmp.camera = cam
-            _workbench_render(tmp)
-        finally:
-            bpy.data.objects.remove(cam)
-            bpy.data.cameras.remove(cam_data)
-            bpy.data.scenes.remove(tmp)
-        return
+        scene.collection.objects.link(cam)
+        scene.camera = cam
     r = scene.render
     saved = (r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage)
     try:
         _workbench_render(scene)
     finally:
         r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
+        if cam is not None:
+            scene.camera = None
+            bpy.data.objects.remove(cam)
+            bpy.data.cameras.remove(cam_data)
 
 
 def _workbench_render(scene):

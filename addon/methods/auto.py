@@ -302,6 +302,11 @@ def drive(steps, tick=None):
             tick(fraction)
 
 
+def bpy_background() -> bool:
+    import bpy
+    return bool(bpy.app.background)
+
+
 def _depsgraph(scene):
     """The evaluated depsgraph of ``scene`` (the context's when it is the context scene)."""
     import bpy
@@ -431,8 +436,9 @@ class AutoMethod(Method):
         the scene cannot be drawn."""
         from ..engine import render_camera
         from ..drawing import ensure_gpu
-        if scene.camera is None:
+        if scene.camera is None and bpy_background():
             ensure_gpu(scene)       # in -b: candidates' GPU passes are timed as frames run them
+            depsgraph = _depsgraph(scene)   # its temporary camera came and went: anew
         state = runtime.FrameState()
         state.sync(depsgraph)
         if state.error:
