@@ -374,7 +374,7 @@ def test_no_camera_precomputes_refuses_f12_and_auto_chooses_at_its_probes(monkey
     assert bpy.ops.prt.auto_choose() == {"FINISHED"}
     record = json.loads(scene.prt.auto_choice)
     assert record["camera"] is None and record["objects"]
-    assert _data_counts() == counts                # the temporary context scene is gone
+    assert _data_counts() == counts                # the temporary camera is gone
 
 
 # --------------------------------------------------------------------------- after the precompute
