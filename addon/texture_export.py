@@ -187,17 +187,25 @@ def _corner_values(ob_eval, mat, source, warnings):
     return values
 
 
+def _read(mat, read, warnings: list, what: str, instead: str):
+    """``(True, read(mat))``, or ``(False, None)`` with a warning naming the material when
+    its image cannot be read (``what`` cannot be read ...; ``instead``)."""
+    try:
+        return True, read(mat)
+    except (RuntimeError, ExportError, envmap.EnvironmentError_, ValueError) as exc:
+        warnings.append(f"Material '{mat.name}': {what} cannot be read ({exc}); {instead}")
+        return False, None
+
+
 def slot_scalars(ob_eval, warnings: list) -> dict:
     """{slot: {input: (ScalarSource, corner values)}} of an evaluated object's textured
     scalar inputs (UVs (C, 2) or attribute colours (C, 4), as :func:`slot_sources`)."""
     out = {}
     for slot, ms in enumerate(ob_eval.material_slots):
         mat = ms.material
-        try:
-            found = slot_scalar_sources(mat)
-        except (RuntimeError, ExportError, envmap.EnvironmentError_, ValueError) as exc:
-            warnings.append(f"Material '{mat.name}': a texture cannot be read ({exc}); "
-                            "its inputs keep their default values")
+        ok, found = _read(mat, slot_scalar_sources, warnings, "a texture",
+                          "its inputs keep their default values")
+        if not ok:
             continue
         got = {}
         for name, scalar in found.items():
@@ -300,11 +308,9 @@ def slot_sources(ob_eval, warnings: list) -> dict:
     out = {}
     for slot, ms in enumerate(ob_eval.material_slots):
         mat = ms.material
-        try:
-            src = slot_color_source(mat)
-        except (RuntimeError, ExportError, envmap.EnvironmentError_, ValueError) as exc:
-            warnings.append(f"Material '{mat.name}': its texture cannot be read ({exc}); "
-                            "drawn with its default colour")
+        ok, src = _read(mat, slot_color_source, warnings, "its texture",
+                        "drawn with its default colour")
+        if not ok:
             continue
         if src is None:
             continue
@@ -396,12 +402,11 @@ def slot_normals(ob_eval, warnings: list) -> dict:
     out = {}
     for slot, ms in enumerate(ob_eval.material_slots):
         mat = ms.material
-        try:
-            src, uv_map, other = normal_source(mat)
-        except (RuntimeError, ExportError, envmap.EnvironmentError_, ValueError) as exc:
-            warnings.append(f"Material '{mat.name}': its normal map cannot be read ({exc}); "
-                            "drawn with the surface normal")
+        ok, got = _read(mat, normal_source, warnings, "its normal map",
+                        "drawn with the surface normal")
+        if not ok:
             continue
+        src, uv_map, other = got
         if other is not None:
             warnings.append(f"Material '{mat.name}': '{other.bl_label}' ('{other.name}') "
                             "drives Normal and is not supported; drawn with the surface "

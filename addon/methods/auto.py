@@ -302,11 +302,6 @@ def drive(steps, tick=None):
             tick(fraction)
 
 
-def bpy_background() -> bool:
-    import bpy
-    return bool(bpy.app.background)
-
-
 def _depsgraph(scene):
     """The evaluated depsgraph of ``scene`` (the context's when it is the context scene)."""
     import bpy
@@ -434,9 +429,10 @@ class AutoMethod(Method):
         that yields its progress (0..1) after each measured candidate and returns the
         record (it writes nothing; :func:`write_choice` does).  Raises RuntimeError when
         the scene cannot be drawn."""
+        import bpy
         from ..engine import render_camera
         from ..drawing import ensure_gpu
-        if scene.camera is None and bpy_background():
+        if scene.camera is None and bpy.app.background:
             ensure_gpu(scene)       # in -b: candidates' GPU passes are timed as frames run them
             depsgraph = _depsgraph(scene)   # its temporary camera came and went: anew
         state = runtime.FrameState()
