@@ -8,6 +8,7 @@ only the matrices and the target differ.
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import bpy  # noqa: F401  (Blender's ``gpu`` module is importable once bpy is)
@@ -51,24 +52,32 @@ def ensure_gpu(scene):
     """In ``-b`` the gpu module needs one Workbench render before offscreen drawing."""
     if _GPU_READY or not bpy.app.background:
         return
-    cam_data = cam = None
-    if scene.camera is None:
-        # a render needs a camera: a temporary one in this scene, removed afterwards (a
-        # temporary scene will not do: removing it frees the render's GPU context)
-        cam_data = bpy.data.cameras.new("PRT GPU context")
-        cam = bpy.data.objects.new("PRT GPU context", cam_data)
-        scene.collection.objects.link(cam)
-        scene.camera = cam
-    r = scene.render
-    saved = (r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage)
+    with temporary_camera(scene):
+        r = scene.render
+        saved = (r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage)
+        try:
+            _workbench_render(scene)
+        finally:
+            r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
+
+
+@contextlib.contextmanager
+def temporary_camera(scene):
+    """A render needs a camera: without one, a temporary camera in ``scene`` while the
+    block runs, removed afterwards with its data (nothing else changes)."""
+    if scene.camera is not None:
+        yield
+        return
+    cam_data = bpy.data.cameras.new("PRT temporary camera")
+    cam = bpy.data.objects.new("PRT temporary camera", cam_data)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
     try:
-        _workbench_render(scene)
+        yield
     finally:
-        r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
-        if cam is not None:
-            scene.camera = None
-            bpy.data.objects.remove(cam)
-            bpy.data.cameras.remove(cam_data)
+        scene.camera = None
+        bpy.data.objects.remove(cam)
+        bpy.data.cameras.remove(cam_data)
 
 
 def _workbench_render(scene):

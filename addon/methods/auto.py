@@ -416,25 +416,28 @@ class AutoMethod(Method):
         Returns the stored record; raises RuntimeError when the scene cannot be drawn.
         In ``-b`` the candidates run inside a render of our engine (:func:`.engine.in_render`):
         only there does the gpu module have a context of its own for their GPU passes."""
+        import bpy
         from ..engine import in_render
         if scene.camera is not None:
             record = in_render(scene, lambda dg: drive(self.choice_steps(scene, dg)))
+        elif bpy.app.background:
+            # the GPU passes need a render's context, a render a camera: a temporary one,
+            # not used for the choice (it is made at the probe views)
+            with drawing.temporary_camera(scene):
+                record = in_render(scene, lambda dg: drive(
+                    self.choice_steps(scene, dg, probes_only=True)))
         else:
             record = drive(self.choice_steps(scene, depsgraph or _depsgraph(scene)))
         write_choice(scene, record)
         return record
 
-    def choice_steps(self, scene, depsgraph):
+    def choice_steps(self, scene, depsgraph, probes_only=False):
         """The choice for ``scene`` as :meth:`choose` stores it, in steps: a generator
         that yields its progress (0..1) after each measured candidate and returns the
-        record (it writes nothing; :func:`write_choice` does).  Raises RuntimeError when
-        the scene cannot be drawn."""
-        import bpy
+        record (it writes nothing; :func:`write_choice` does); ``probes_only``: at the
+        probe views, whatever the camera.  Raises RuntimeError when the scene cannot be
+        drawn."""
         from ..engine import render_camera
-        from ..drawing import ensure_gpu
-        if scene.camera is None and bpy.app.background:
-            ensure_gpu(scene)       # in -b: candidates' GPU passes are timed as frames run them
-            depsgraph = _depsgraph(scene)   # its temporary camera came and went: anew
         state = runtime.FrameState()
         state.sync(depsgraph)
         if state.error:
@@ -442,7 +445,7 @@ class AutoMethod(Method):
         if state.method != self.id:
             state.method = self.id
             self.sync(state)        # the candidates' stored data (sync loaded the scene method's)
-        state.camera = render_camera(scene, depsgraph)
+        state.camera = None if probes_only else render_camera(scene, depsgraph)
         camera_name = scene.camera.name if state.camera is not None else None
         yield 0.0
         choices = (yield from self._selection_steps(state))[0]
