@@ -42,17 +42,25 @@ def test_glsl_pass_equals_numpy(registered_addon, kind):
     eye = np.array([2.0, -3.0, 2.0])
     views = eye[None, :] - pos
     views /= np.linalg.norm(views, axis=1, keepdims=True)
-    vis_tex = method._texture(method._tiles(table), "R32F")
-    for mat in (brdf.Material(), brdf.principled_material(metallic=0.3, roughness=0.4),
-                brdf.Material(specular_color=(0.9, 0.5, 0.2), roughness=0.3,
-                              distribution="BECKMANN", fresnel="SCHLICK")):
+    from prt_relight.addon.engine import in_render
+    sel = np.arange(1, len(nrm), 2)                      # a subset: tiles by index
+    mats = (brdf.Material(), brdf.principled_material(metallic=0.3, roughness=0.4),
+            brdf.Material(specular_color=(0.9, 0.5, 0.2), roughness=0.3,
+                          distribution="BECKMANN", fresnel="SCHLICK"))
+
+    def passes(_depsgraph):
+        """The GLSL pass of every material, inside a render (the gpu module's context in
+        -b: drawing outside one may corrupt it for later passes)."""
+        vis_tex = method._texture(method._tiles(table), "R32F")
+        return [method.gpu_shade(ev.centres, ev.half[0], ev.energy, rsl.brdf_tables(mat),
+                                 nrm[sel], views[sel], rsl.point_weights(mat, nrm[sel],
+                                                                         views[sel]),
+                                 kind, vis_tex, 32, sel) for mat in mats]
+
+    for mat, got in zip(mats, in_render(bpy.context.scene, passes)):
         tables = rsl.brdf_tables(mat)
         V, C = ev.diffuse_factors(nrm, kind, table, tables)
         want = ev.shade(mat, tables, nrm, views, V, C)
-        sel = np.arange(1, len(nrm), 2)                  # a subset: tiles by index
-        got = method.gpu_shade(ev.centres, ev.half[0], ev.energy, tables, nrm[sel], views[sel],
-                               rsl.point_weights(mat, nrm[sel], views[sel]), kind, vis_tex,
-                               32, sel)
         assert np.isfinite(got).all()
         # float32 textures and arithmetic against float64: SAT differences keep ~1e-4
         np.testing.assert_allclose(got, want[sel], rtol=1e-3, atol=1e-4 * np.abs(want).max())
