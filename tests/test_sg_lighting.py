@@ -294,11 +294,14 @@ def test_export_lamps_reads_blender_lights():
     _add_light("POINT", (1.0, 2.0, 3.0), energy=50.0, shadow_soft_size=0.2, color=(1.0, 0.5, 0.25))
     _add_light("SUN", rotation=(0.3, 0.0, 0.0), energy=4.0, angle=0.02)
     _add_light("SPOT", (0.0, 0.0, 4.0), energy=30.0, spot_size=1.0, spot_blend=0.3)
-    _add_light("AREA", (0.0, 0.0, 4.0), energy=30.0)
+    _add_light("AREA", (0.0, 0.0, 4.0), energy=30.0, size=2.0)
     warnings = []
     lamps = scene_export.export_lamps(bpy.context.evaluated_depsgraph_get(), warnings)
     kinds = sorted(l.kind for l in lamps)
-    assert kinds == ["POINT", "SPOT", "SUN"] and len(warnings) == 1 and "AREA" in warnings[0]
+    assert kinds == ["AREA", "POINT", "SPOT", "SUN"] and warnings == []
+    area = [l for l in lamps if l.kind == "AREA"][0]       # a 2 m square facing down
+    assert np.isclose(area.area, 4.0) and np.allclose(area.direction, (0.0, 0.0, -1.0))
+    assert np.allclose(area.position, (0.0, 0.0, 4.0))
     point = [l for l in lamps if l.kind == "POINT"][0]
     assert np.allclose(point.position, (1, 2, 3)) and np.isclose(point.radius, 0.2)
     assert np.allclose(point.color, (50.0, 25.0, 12.5))
