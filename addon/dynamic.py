@@ -166,11 +166,7 @@ def apply(state):
         if not st.near and not moved:
             continue
 
-        # keyed on the poses it depends on: its own and those of the objects near it
-        own = (_pose_key(st.dynamic[1]),) if st.dynamic is not None else ()
-        poses = own + tuple((m.name, _pose_key(m.dynamic[1])) for m in st.near)
-
-        def product(st=st, stored=st.bits, poses=poses):
+        def product(st=st, stored=st.bits, poses=poses_of(st)):
             key = (st.name, id(stored), state.resolution, poses)
             return keys.held(_POSED, key, (stored,), lambda: _product(
                 st, stored, st.near, cube, state))
@@ -196,10 +192,11 @@ def _product(st, stored, others, cube, state):
     return bits
 
 
-def pose_key(state) -> tuple:
-    """The dynamic objects' current poses (what a product at them is keyed on)."""
-    return tuple((st.name, _pose_key(st.dynamic[1])) for st in state.objects
-                 if st.dynamic is not None)
+def poses_of(st) -> tuple:
+    """The poses an object's product depends on: its own (a dynamic object) and those of
+    the dynamic objects near it (what its cached products are keyed on)."""
+    own = (_pose_key(st.dynamic[1]),) if st.dynamic is not None else ()
+    return own + tuple((m.name, _pose_key(m.dynamic[1])) for m in st.near)
 
 
 def static_bits(st, state):

@@ -280,7 +280,7 @@ class RSLMethod(Method):
             # near (and, for a dynamic one, the static scene's) at each light
             fields = (st.status == "posed" and kind == "VDT" and st.data.get("rsl") is not None)
             if fields:
-                rkey += (dynamic.pose_key(state),)
+                rkey += (dynamic.poses_of(st),)
             radiance = None
             if use_gpu and not fields:
                 try:
