@@ -129,21 +129,33 @@ def face_coordinates(dirs):
 
 
 def texel_of_components(x, y, z, resolution: int) -> np.ndarray:
-    """Flat cubemap texel index of directions given as component arrays ``x, y, z`` (same
-    shape), computed in their float type (float32 stays float32: the hot sample loops of
-    SSDF and RSL).  The face coordinates of :data:`FACE_AXES` written out per major axis:
-    +X (s, t) = (-z, -y)/|x|, -X (z, -y), +Y (x, z), -Y (x, -z), +Z (x, -y), -Z (-x, -y)."""
+    """Flat cubemap texel index (int32) of directions given as component arrays ``x, y, z``
+    (same shape), computed in their float type (float32 stays float32: the hot sample
+    loops of SSDF and RSL).  The face coordinates of :data:`FACE_AXES` written out per
+    major axis: +X (s, t) = (-z, -y)/|x|, -X (z, -y), +Y (x, z), -Y (x, -z), +Z (x, -y),
+    -Z (-x, -y); ties go to x, then y."""
     ax, ay, az = np.abs(x), np.abs(y), np.abs(z)
-    is_x = (ax >= ay) & (ax >= az)
-    is_y = ~is_x & (ay >= az)
-    m = np.where(is_x, ax, np.where(is_y, ay, az))
+    m = np.maximum(np.maximum(ax, ay), az)
+    is_x = ax == m
+    is_y = (ay == m) & ~is_x
+    is_z = ~(is_x | is_y)
+    s = np.where(is_x, z, x)
+    np.negative(s, out=s, where=np.where(is_x, x >= 0, is_z & (z < 0)))
+    t = np.where(is_y, z, y)
+    np.negative(t, out=t, where=np.where(is_y, y < 0, True))
     m = np.where(m > 0, m, 1)
-    s = np.where(is_x, np.where(x < 0, z, -z), np.where(is_y, x, np.where(z < 0, -x, x))) / m
-    t = np.where(is_y, np.where(y < 0, -z, z), -y) / m
-    face = np.where(is_x, (x < 0).astype(np.int64), np.where(is_y, 2 + (y < 0), 4 + (z < 0)))
+    h = 0.5 * int(resolution)
+    s /= m
+    s += 1
+    s *= h
+    t /= m
+    t += 1
+    t *= h
     n = int(resolution)
-    col = np.clip(((s + 1) * (0.5 * n)).astype(np.int64), 0, n - 1)
-    row = np.clip(((t + 1) * (0.5 * n)).astype(np.int64), 0, n - 1)
+    col = np.clip(s.astype(np.int32), 0, n - 1)
+    row = np.clip(t.astype(np.int32), 0, n - 1)
+    face = np.where(is_x, x < 0, np.where(is_y, y < 0, z < 0)).astype(np.int32)
+    face += 2 * is_y + 4 * is_z
     return (face * n + row) * n + col
 
 

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import heapq
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -399,8 +401,51 @@ def _clipped_area(px, py, half):
 # §4.3  Visibility in the disk map: maps, VDT (eq. 9), SAT
 # --------------------------------------------------------------------------- #
 
+def _disk_samples(cube: Cubemap, resolution: int, sub: int) -> np.ndarray:
+    """(3, S) float32 local directions of the disk map's ``sub x sub`` samples per texel,
+    those below the height ``z0`` moved up to it (see :func:`visibility_maps`)."""
+    px, py, _, _ = disk_texel_samples(resolution, sub)
+    # below the height z0 (|p|^2 = 1 - z): read at z0 along the same azimuth
+    r_low = math.sqrt(1.0 - 2.0 / cube.resolution)
+    scale = np.minimum(1.0, r_low / np.maximum(np.hypot(px, py), 1e-12))
+    local = rsl_disk_to_hemisphere(px * scale, py * scale).reshape(-1, 3)
+    return np.ascontiguousarray(local.T, dtype=np.float32)
+
+
+def _frames(normals) -> np.ndarray:
+    """(P, 3 world, 3 local) float32 frames ``(t, b, n)`` of :func:`orthonormal_frame`."""
+    nrm = np.asarray(normals, dtype=np.float64)
+    t, b = orthonormal_frame(nrm)
+    return np.stack([t, b, nrm], axis=2).astype(np.float32)
+
+
+def _visible_counts(packed: np.ndarray, frames: np.ndarray, local: np.ndarray, cube_res: int,
+                    n: int, sub: int, chunk: int = 32) -> np.ndarray:
+    """Visible samples per disk texel, (p, n, n) uint8 in [0, sub²], from packed bits.
+    Small chunks: the sample arrays stay in the cache (2x faster than 512 points)."""
+    out = np.empty((len(frames), n, n), np.uint8)
+    for a in range(0, len(frames), chunk):
+        e = min(len(frames), a + chunk)
+        world = np.matmul(frames[a:e], local)                          # (p, 3, S)
+        tex = texel_of_components(world[:, 0], world[:, 1], world[:, 2], cube_res)
+        # read the packed bits directly (np.packbits order: most significant bit first)
+        if packed.shape[1]:
+            byte = np.take_along_axis(packed[a:e], tex >> 3, axis=1)
+        else:
+            byte = np.zeros(tex.shape, np.uint8)
+        got = ((byte >> (7 - (tex & 7)).astype(np.uint8)) & np.uint8(1))
+        got = got.reshape(e - a, n, sub, n, sub)
+        acc = out[a:e]
+        acc[...] = got[:, :, 0, :, 0]
+        for i in range(sub):
+            for j in range(sub):
+                if i or j:
+                    acc += got[:, :, i, :, j]
+    return out
+
+
 def visibility_maps(bits: np.ndarray, normals: np.ndarray, cube: Cubemap, resolution: int = 32,
-                    sub: int = 2, chunk: int = 512) -> np.ndarray:
+                    sub: int = 2, chunk: int = 32) -> np.ndarray:
     """Per-vertex visibility in its local disk map, (P, N, N) float32 in [0, 1].
 
     The stored cubemap visibility bits (world texel order) are read along ``sub x
@@ -418,70 +463,114 @@ def visibility_maps(bits: np.ndarray, normals: np.ndarray, cube: Cubemap, resolu
     and the square's corners outside the disk, read the visibility at height ``z0``
     along their azimuth: a boundary meeting the horizon continues straight below it.
     """
-    n = int(resolution)
-    P = len(normals)
-    px, py, _, _ = disk_texel_samples(n, sub)
-    # below the height z0 (|p|^2 = 1 - z): read at z0 along the same azimuth
-    r_low = math.sqrt(1.0 - 2.0 / cube.resolution)
-    scale = np.minimum(1.0, r_low / np.maximum(np.hypot(px, py), 1e-12))
-    local = rsl_disk_to_hemisphere(px * scale, py * scale).reshape(-1, 3)
-    t, b = orthonormal_frame(np.asarray(normals, dtype=np.float64))
-    nrm = np.asarray(normals, dtype=np.float64)
-    frames = np.stack([t, b, nrm], axis=2).astype(np.float32)       # (P, 3 world, 3 local)
-    local_t = np.ascontiguousarray(local.T, dtype=np.float32)        # (3, S)
-    out = np.zeros((P, n, n), dtype=np.float32)
-    packed = np.asarray(bits, dtype=np.uint8)
-    nbytes = packed.shape[1]
-    for a in range(0, P, chunk):
-        e = min(P, a + chunk)
-        world = np.matmul(frames[a:e], local_t)                       # (p, 3, S)
-        tex = texel_of_components(world[:, 0], world[:, 1], world[:, 2], cube.resolution)
-        # read the packed bits directly (np.packbits order: most significant bit first)
-        byte = np.take_along_axis(packed[a:e], tex >> 3, axis=1) if nbytes else tex * 0
-        got = ((byte >> (7 - (tex & 7)).astype(np.uint8)) & 1).astype(np.float32)
-        out[a:e] = got.reshape(e - a, n, sub, n, sub).mean(axis=(2, 4))
+    n, sub = int(resolution), int(sub)
+    counts = _visible_counts(np.asarray(bits, dtype=np.uint8), _frames(normals),
+                             _disk_samples(cube, n, sub), cube.resolution, n, sub, chunk)
+    return counts.astype(np.float32) * np.float32(1.0 / (sub * sub))
+
+
+def _signed_distances(vis: np.ndarray) -> np.ndarray:
+    """:func:`visibility_distance_table` of boolean maps (P, n, n), float32."""
+    P, n, _ = vis.shape
+    h = 2.0 / n
+    big = np.float32(4.0 * n * n)
+    out = np.empty((P, n, n), dtype=np.float32)
+    cols = np.ascontiguousarray(vis.transpose(2, 0, 1))                # (cols, P, rows)
+    for target in (False, True):
+        # distance from every texel to the nearest texel equal to `target`
+        feat = cols == target
+        # pass 1: along rows (1D distance to the nearest feature in the same row)
+        g = np.empty((n, P, n), np.float32)
+        last = np.full((P, n), -big, np.float32)
+        for j in range(n):
+            last[feat[j]] = j
+            g[j] = j - last
+        last.fill(big)
+        for j in range(n - 1, -1, -1):
+            last[feat[j]] = j
+            np.minimum(g[j], last - j, out=g[j])
+        np.minimum(g, big, out=g)
+        g *= g
+        g = np.ascontiguousarray(g.transpose(1, 2, 0))                # (P, rows, cols)
+        # pass 2: along columns, d²(i, j) = min_k g(k, j) + (i - k)², by offset |i - k|;
+        # no offset whose square passes every distance so far can lower one
+        d2 = g.copy()
+        top = float(d2.max(initial=0.0))
+        for o in range(1, n):
+            c = np.float32(o * o)
+            if c >= top:
+                break
+            np.minimum(d2[:, o:], g[:, :n - o] + c, out=d2[:, o:])
+            np.minimum(d2[:, :n - o], g[:, o:] + c, out=d2[:, :n - o])
+        d = np.sqrt(d2)
+        d *= np.float32(h)
+        d -= np.float32(0.5 * h)
+        sel = vis != target          # texels of the other value measure to `target`
+        out[sel] = (-d if target else d)[sel]
+    flat = vis.reshape(P, -1)
+    none = ~flat.any(1) | flat.all(1)
+    out[none] = np.where(vis[none], 2.0, -2.0)
     return out
 
 
-def visibility_distance_table(maps: np.ndarray, chunk: int = 1024) -> np.ndarray:
+def visibility_distance_table(maps: np.ndarray, chunk: int = 256) -> np.ndarray:
     """Signed distance (disk-plane units) from each texel centre to the visibility
     boundary, positive where visible (§4.3, Fig. 7): ``D = sign (d - h/2)`` with ``d``
     the exact Euclidean distance to the nearest centre of the other value (two-pass
     squared EDT) and ``h`` the texel size, so a boundary along texel edges is met
     exactly.  Maps are thresholded at 1/2.  A map with no boundary gets ``±2``."""
     maps = np.asarray(maps)
-    if len(maps) > chunk:
-        return np.concatenate([visibility_distance_table(maps[a:a + chunk], chunk)
-                               for a in range(0, len(maps), chunk)])
-    vis = maps >= 0.5
-    P, n, _ = vis.shape
-    h = 2.0 / n
-    big = 4.0 * n * n
-    out = np.empty((P, n, n), dtype=np.float32)
-    idx = np.arange(n)
-    for target in (False, True):
-        # distance from every texel to the nearest texel equal to `target`
-        feat = vis == target
-        # pass 1: along rows (1D distance to nearest feature in the same row)
-        g = np.full((P, n, n), big, dtype=np.float32)
-        last = np.full((P, n), -big, dtype=np.float32)
-        for j in range(n):
-            last = np.where(feat[:, :, j], j, last)
-            g[:, :, j] = j - last
-        last = np.full((P, n), big, dtype=np.float32)
-        for j in range(n - 1, -1, -1):
-            last = np.where(feat[:, :, j], j, last)
-            g[:, :, j] = np.minimum(g[:, :, j], last - j)
-        g = np.minimum(g, big) ** 2                                    # (P, rows, cols)
-        # pass 2: along columns: d²(i, j) = min_k g(k, j) + (i - k)²
-        d2 = np.empty((P, n, n), dtype=np.float32)
-        for i in range(n):
-            d2[:, i, :] = np.min(g + ((i - idx) ** 2).astype(np.float32)[None, :, None], axis=1)
-        d = np.sqrt(d2) * h - 0.5 * h
-        sel = vis != target          # texels of the other value measure to `target`
-        out[sel] = np.where(target, -d, d)[sel]
-    none = ~vis.reshape(P, -1).any(1) | vis.reshape(P, -1).all(1)
-    out[none] = np.where(vis[none], 2.0, -2.0)
+    out = np.empty(maps.shape, np.float32)
+    for a in range(0, len(maps), chunk):
+        out[a:a + chunk] = _signed_distances(maps[a:a + chunk] >= 0.5)
+    return out
+
+
+def visibility_tables(bits: np.ndarray, normals: np.ndarray, cube: Cubemap, kind: str = "VDT",
+                      resolution: int = 32, sub: int = 2, dtype=np.float32, threads=None,
+                      progress=None, block: int = 256) -> np.ndarray:
+    """The VDT (P, N, N) or visibility SAT (P, N+1, N+1) of every point straight from
+    its visibility bits, ``block`` points at a time on ``threads`` threads (numpy
+    releases the GIL in its loops): the float maps of all points are never held.
+    Equal to :func:`visibility_distance_table` / :func:`visibility_sat` of
+    :func:`visibility_maps`.  ``progress(fraction)`` runs on the calling thread after
+    each block (it may raise to stop)."""
+    n, sub = int(resolution), int(sub)
+    packed = np.asarray(bits, dtype=np.uint8)
+    frames = _frames(normals)
+    local = _disk_samples(cube, n, sub)
+    P = len(frames)
+    m = n if kind == "VDT" else n + 1
+    out = np.empty((P, m, m), dtype)
+
+    def one(a):
+        e = min(P, a + block)
+        counts = _visible_counts(packed[a:e], frames[a:e], local, cube.resolution, n, sub)
+        if kind == "VDT":
+            out[a:e] = _signed_distances(counts.astype(np.int32) * 2 >= sub * sub)
+        else:
+            out[a:e] = visibility_sat(counts.astype(np.float32) * np.float32(1.0 / (sub * sub)))
+        return e
+
+    starts = range(0, P, block)
+    workers = max(1, min(int(threads or os.cpu_count() or 1), len(starts)))
+    if workers == 1:
+        for a in starts:
+            e = one(a)
+            if progress is not None:
+                progress(e / P)
+        return out
+    with ThreadPoolExecutor(workers) as pool:
+        jobs = [pool.submit(one, a) for a in starts]
+        try:
+            for job in jobs:
+                e = job.result()
+                if progress is not None:
+                    progress(e / P)
+        except BaseException:
+            for job in jobs:
+                job.cancel()
+            raise
     return out
 
 
@@ -644,10 +733,20 @@ class ClusteredPCA:
     bases: np.ndarray         # (C, E, D) float32, orthonormal rows
     coeffs: np.ndarray        # (P, E) float32
 
-    def reconstruct(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+    def reconstruct(self, start: int = 0, stop: int | None = None, dtype=np.float64,
+                    chunk: int = 8192) -> np.ndarray:
+        """Vectors ``start:stop`` as ``dtype``: per cluster, the mean plus one matrix
+        product of the coefficients with the cluster's bases (no per-point copy of them)."""
         lab = self.labels[start:stop]
-        out = self.means[lab].copy()
-        out += np.einsum("pe,ped->pd", self.coeffs[start:stop], self.bases[lab])
+        coeffs = self.coeffs[start:stop]
+        out = np.empty((len(lab), self.means.shape[1]), dtype)
+        order = np.argsort(lab, kind="stable")
+        clusters, first = np.unique(lab[order], return_index=True)
+        ends = np.append(first[1:], len(lab))
+        for c, a, e in zip(clusters, first, ends):
+            for b in range(a, e, chunk):
+                rows = order[b:min(e, b + chunk)]
+                out[rows] = self.means[c] + coeffs[rows] @ self.bases[c]
         return out
 
     @property

@@ -9,15 +9,27 @@
  *
  * Textures (texelFetch only, so the sums equal the numpy evaluator's):
  *   pointData  RGBA32F  rows of `width`: [normal, 0] at (x, y), view dir at (x, y + rows),
- *                       the point's visibility tile index at (x, y + 2 rows)
+ *                       the point's visibility table index at (x, y + 2 rows)
  *   weights    RGBA32F  (width, rows * (terms + 1)): diffuse weight, then term weights
  *   lights     RGBA32F  (lightCount, 2): [centre, half side], [energy, 0]
- *   visTable   RGBA32F  per-vertex N x N (VDT) or (N+1) x (N+1) (SAT) tiles, R channel
+ *   visTable   R16F/R32F per-vertex N x N (VDT) or (N+1) x (N+1) (SAT) tables, each
+ *                       visTile² texels in row-major order from texel index * visTile²
  *   brdfTables RGBA32F  (N+2) x (N+1) blocks: cosine table, then terms x view nodes;
  *                       column N+1, row 0 holds the block's offset (mean per area)
  */
 
-float sat_at(sampler2D tex, ivec2 origin, int n, float x, float y)
+float table_texel(bool vis, ivec2 origin, int x, int y)
+{
+  /* brdfTables: a block at `origin`; visTable: the point's table from texel origin.x */
+  if (vis) {
+    int w = textureSize(visTable, 0).x;
+    int t = origin.x + y * visTile + x;
+    return texelFetch(visTable, ivec2(t % w, t / w), 0).r;
+  }
+  return texelFetch(brdfTables, origin + ivec2(x, y), 0).r;
+}
+
+float sat_at(bool vis, ivec2 origin, int n, float x, float y)
 {
   /* bilinear sample of an (n+1) x (n+1) corner table at grid coordinates (x, y) */
   x = clamp(x, 0.0, float(n));
@@ -28,22 +40,22 @@ float sat_at(sampler2D tex, ivec2 origin, int n, float x, float y)
   int y0 = clamp(int(y), 0, n - 1);
   float fx = x - float(x0);
   float fy = y - float(y0);
-  float a = texelFetch(tex, origin + ivec2(x0, y0), 0).r;
-  float b = texelFetch(tex, origin + ivec2(x0 + 1, y0), 0).r;
-  float c = texelFetch(tex, origin + ivec2(x0, y0 + 1), 0).r;
-  float d = texelFetch(tex, origin + ivec2(x0 + 1, y0 + 1), 0).r;
+  float a = table_texel(vis, origin, x0, y0);
+  float b = table_texel(vis, origin, x0 + 1, y0);
+  float c = table_texel(vis, origin, x0, y0 + 1);
+  float d = table_texel(vis, origin, x0 + 1, y0 + 1);
   float top = a * (1.0 - fx) + b * fx;
   float bot = c * (1.0 - fx) + d * fx;
   return top * (1.0 - fy) + bot * fy;
 }
 
-float box(sampler2D tex, ivec2 origin, int n, vec2 p, float half_side)
+float box(bool vis, ivec2 origin, int n, vec2 p, float half_side)
 {
   float k = 0.5 * float(n);
   float x0 = (p.x - half_side + 1.0) * k, x1 = (p.x + half_side + 1.0) * k;
   float y0 = (p.y - half_side + 1.0) * k, y1 = (p.y + half_side + 1.0) * k;
-  return sat_at(tex, origin, n, x1, y1) - sat_at(tex, origin, n, x0, y1) -
-         sat_at(tex, origin, n, x1, y0) + sat_at(tex, origin, n, x0, y0);
+  return sat_at(vis, origin, n, x1, y1) - sat_at(vis, origin, n, x0, y1) -
+         sat_at(vis, origin, n, x1, y0) + sat_at(vis, origin, n, x0, y0);
 }
 
 float clipped_area(vec2 p, float h)
@@ -58,7 +70,7 @@ float table_box(int block, vec2 p, float h)
   /* average of block's function over the square, offset added back */
   ivec2 origin = ivec2(0, block * (brdfRes + 1));
   float off = texelFetch(brdfTables, origin + ivec2(brdfRes + 1, 0), 0).r;
-  return (box(brdfTables, origin, brdfRes, p, h) + off * clipped_area(p, h)) / (4.0 * h * h);
+  return (box(false, origin, brdfRes, p, h) + off * clipped_area(p, h)) / (4.0 * h * h);
 }
 
 vec2 disk(vec3 l)
@@ -68,8 +80,9 @@ vec2 disk(vec3 l)
   return rho > 0.0 ? r * vec2(l.y, l.x) / rho : vec2(0.0, r);
 }
 
-float visibility(ivec2 tile, vec2 p, float h)
+float visibility(int base, vec2 p, float h)
 {
+  ivec2 origin = ivec2(base, 0);
   if (visMode == 0) { /* VDT, eq. 9 */
     int n = visRes;
     float k = 0.5 * float(n);
@@ -78,16 +91,16 @@ float visibility(ivec2 tile, vec2 p, float h)
     int x0 = clamp(int(x), 0, n - 2);
     int y0 = clamp(int(y), 0, n - 2);
     float fx = x - float(x0), fy = y - float(y0);
-    float a = texelFetch(visTable, tile + ivec2(x0, y0), 0).r;
-    float b = texelFetch(visTable, tile + ivec2(x0 + 1, y0), 0).r;
-    float c = texelFetch(visTable, tile + ivec2(x0, y0 + 1), 0).r;
-    float d = texelFetch(visTable, tile + ivec2(x0 + 1, y0 + 1), 0).r;
+    float a = table_texel(true, origin, x0, y0);
+    float b = table_texel(true, origin, x0 + 1, y0);
+    float c = table_texel(true, origin, x0, y0 + 1);
+    float d = table_texel(true, origin, x0 + 1, y0 + 1);
     float D = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
     return clamp((h + D) / (2.0 * h), 0.0, 1.0);
   }
   /* SAT: the average over the part of the square inside the table (as core.rsl) */
   float area = clipped_area(p, h);
-  return area > 1e-12 ? box(visTable, tile, visRes, p, h) / area : 1.0;
+  return area > 1e-12 ? box(true, origin, visRes, p, h) / area : 1.0;
 }
 
 void main()
@@ -118,10 +131,8 @@ void main()
   int j0 = min(int(node), viewNodes - 2);
   float fj = node - float(j0);
 
-  int tiles_per_row = textureSize(visTable, 0).x / visTile;
   int vis_index = int(texelFetch(pointData, pix + ivec2(0, 2 * rows), 0).x + 0.5);
-  ivec2 tile = ivec2((vis_index % tiles_per_row) * visTile,
-                     (vis_index / tiles_per_row) * visTile);
+  int base = vis_index * visTile * visTile;
 
   vec3 diffuse = vec3(0.0);
   vec3 glossy[MAX_TERMS];
@@ -133,7 +144,7 @@ void main()
     vec3 E = texelFetch(lights, ivec2(i, 1), 0).rgb;
     float h = cl.w;
     vec2 p = disk(vec3(dot(cl.xyz, t), dot(cl.xyz, b), dot(cl.xyz, n)));
-    float V = visibility(tile, p, h);
+    float V = visibility(base, p, h);
     if (V <= 0.0) {
       continue;
     }

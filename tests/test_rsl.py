@@ -210,6 +210,53 @@ def test_vdt_is_the_signed_distance():
     assert np.all((vdt > 0) == (maps[0] > 0.5))
 
 
+def test_vdt_equals_brute_force_distances():
+    """Random blobs (and empty/full maps) against the distance to every texel centre of
+    the other value, sign(d - h/2), by brute force."""
+    n = 16
+    h = 2.0 / n
+    rng = np.random.default_rng(8)
+    maps = (rng.random((6, n, n)) < np.linspace(0.05, 0.95, 6)[:, None, None])
+    maps = maps.astype(np.float32)
+    maps[4] = 1.0
+    maps[5] = 0.0
+    got = rsl.visibility_distance_table(maps, chunk=4)      # chunks of fewer maps too
+    yy, xx = np.mgrid[0:n, 0:n]
+    for m, table in zip(maps, got):
+        vis = m >= 0.5
+        if vis.all() or not vis.any():
+            assert np.all(table == (2.0 if vis.all() else -2.0))
+            continue
+        for i in range(n):
+            for j in range(n):
+                other = vis != vis[i, j]
+                d = np.sqrt(((yy[other] - i) ** 2 + (xx[other] - j) ** 2).min()) * h
+                want = (d - h / 2) * (1 if vis[i, j] else -1)
+                assert table[i, j] == pytest.approx(want, abs=1e-6)
+
+
+def test_visibility_tables_equal_the_maps_pipeline():
+    """The fused, threaded derivation (blocks of a few points on 2 threads) gives the
+    VDT / SAT of the maps, in the requested type; a progress callback that raises stops it."""
+    pos, nrm, bits = _scene(6)
+    maps = rsl.visibility_maps(bits, nrm, CUBE, 32)
+    vdt = rsl.visibility_tables(bits, nrm, CUBE, "VDT", threads=2, block=5)
+    np.testing.assert_array_equal(vdt, rsl.visibility_distance_table(maps))
+    sat = rsl.visibility_tables(bits, nrm, CUBE, "SAT", threads=2, block=5)
+    np.testing.assert_allclose(sat, rsl.visibility_sat(maps), atol=1e-6)
+    half = rsl.visibility_tables(bits, nrm, CUBE, "VDT", dtype=np.float16, threads=1, block=7)
+    assert half.dtype == np.float16
+    np.testing.assert_allclose(half, vdt, atol=2e-3)
+    seen = []
+
+    def stop(fraction):
+        seen.append(fraction)
+        raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt):
+        rsl.visibility_tables(bits, nrm, CUBE, "VDT", threads=2, block=5, progress=stop)
+    assert seen == [5 / len(nrm)]
+
+
 def _scene(cuts=10):
     g = mesh.grid(size=2.0, cuts=cuts)
     sp = mesh.shading_points(g)
@@ -383,6 +430,12 @@ def test_clustered_pca_is_exact_with_full_rank_and_meets_its_budget():
     assert err < 1e-5 and err == pytest.approx(rsl.relative_error(X, model), rel=1e-3, abs=1e-9)
     assert ratio > 1.0
     np.testing.assert_allclose(model.reconstruct(), X, atol=0.2 * np.abs(X).max())
+    # by rows and in half floats: the same vectors, each row from its own cluster
+    rows = model.reconstruct(37, 121, dtype=np.float16, chunk=16)
+    assert rows.dtype == np.float16
+    want = np.stack([model.means[c] + model.coeffs[p] @ model.bases[c]
+                     for p, c in zip(range(37, 121), model.labels[37:121])])
+    np.testing.assert_allclose(rows, want, atol=2e-3 * np.abs(want).max())
 
 
 def test_cpca_budget_ignores_a_constant_offset():

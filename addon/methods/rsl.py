@@ -55,14 +55,23 @@ def brdf_tables(material: brdf.Material) -> rsl.BrdfTables:
         material, DISK_RESOLUTION, VIEW_NODES, BRDF_SUBSAMPLES))
 
 
-def derive_visibility(bits, normals, resolution: int) -> dict:
-    """Per-vertex visibility maps in the disk map -> VDT (eq. 9) and visibility SAT."""
-    cube = directions.cubemap(resolution)
-    maps = rsl.visibility_maps(bits, normals, cube, DISK_RESOLUTION, VISIBILITY_SUBSAMPLES)
-    return {"VDT": rsl.visibility_distance_table(maps), "SAT": rsl.visibility_sat(maps)}
+def derive_visibility(bits, normals, resolution: int, kind: str = "VDT", dtype=np.float32,
+                      progress=None) -> np.ndarray:
+    """Per-vertex visibility maps in the disk map -> VDT (eq. 9) or visibility SAT."""
+    return rsl.visibility_tables(bits, normals, directions.cubemap(resolution), kind,
+                                 DISK_RESOLUTION, VISIBILITY_SUBSAMPLES, dtype=dtype,
+                                 progress=progress)
 
 
-def object_visibility(st, resolution: int, kind: str, normals=None, rows=None) -> np.ndarray:
+def _held_dtype(kind: str):
+    """Tables held for drawing: a VDT in half floats (2 KB a point; |D| <= 2, so the
+    distances near a boundary, the ones eq. 9 reads, keep 11 bits), a SAT in float32
+    (its box integral is a difference of four values)."""
+    return np.float16 if kind == "VDT" else np.float32
+
+
+def object_visibility(st, resolution: int, kind: str, normals=None, rows=None,
+                      progress=None) -> np.ndarray:
     """The object's VDT (stored CPCA reconstruction when synced, else derived from the
     visibility bits) or visibility SAT (always derived: the exact option), one table per
     current point.  ``normals``: the normals the bits were traced with (the precompute
@@ -75,10 +84,10 @@ def object_visibility(st, resolution: int, kind: str, normals=None, rows=None) -
         return keys.per_visibility(_VISIBILITY, (st.name, "rows", rows.tobytes()), stored,
                                    lambda: stored[rows])
     bits = st.bits if rows is None else st.bits[rows]
-    key = (st.name, id(st.bits), resolution, None if rows is None else rows.tobytes())
+    key = (st.name, kind, id(st.bits), resolution, None if rows is None else rows.tobytes())
     return keys.per_visibility(
         _VISIBILITY, key, st.bits,
-        lambda: derive_visibility(bits, normals, resolution))[kind]
+        lambda: derive_visibility(bits, normals, resolution, kind, _held_dtype(kind), progress))
 
 
 def field_visibility(st, evaluator, state, cos_tables) -> np.ndarray:
@@ -102,7 +111,7 @@ def field_visibility(st, evaluator, state, cos_tables) -> np.ndarray:
         V[p, k] *= frac
     static = dynamic.static_bits(st, state)
     if static is not None:
-        vdt = derive_visibility(static, pts.normals, state.resolution)["VDT"]
+        vdt = derive_visibility(static, pts.normals, state.resolution, "VDT", np.float16)
         V *= evaluator.diffuse_factors(pts.normals, "VDT", vdt, cos_tables)[0]
     return V
 
@@ -126,7 +135,7 @@ def cpca_blob(model: rsl.ClusteredPCA, resolution: int, rotation, probe) -> byte
 
 
 def _stored_tables(arrays, meta):
-    """(VDT (P, res, res) float32, rotation, probe) of a stored ``rsl`` blob."""
+    """(VDT (P, res, res) float16, rotation, probe) of a stored ``rsl`` blob."""
     try:
         res = int(meta["resolution"])
         labels, means, bases, coeffs = (arrays[k] for k in ("labels", "means", "bases",
@@ -139,9 +148,8 @@ def _stored_tables(arrays, meta):
             or (labels.size and not 0 <= labels.min() <= labels.max() < C)):
         raise storage.Unreadable("RSL data inconsistent")
     model = rsl.ClusteredPCA(labels.astype(np.int64), means, bases, coeffs)
-    vdt = np.concatenate([model.reconstruct(a, a + 4096)
-                          for a in range(0, max(len(labels), 1), 4096)])
-    return vdt.reshape(-1, res, res).astype(np.float32), rotation, probe
+    vdt = model.reconstruct(dtype=_held_dtype("VDT"))
+    return vdt.reshape(-1, res, res), rotation, probe
 
 
 class RSLMethod(Method):
@@ -211,7 +219,11 @@ class RSLMethod(Method):
         for o in job.objects:
             if job.cancel_requested:
                 raise Cancelled()
-            vdt = derive_visibility(o.bits, o.points.normals, job.resolution)["VDT"]
+            def progress(_fraction):
+                if job.cancel_requested:
+                    raise Cancelled()
+            vdt = derive_visibility(o.bits, o.points.normals, job.resolution, "VDT",
+                                    np.float32, progress)
             model, err, ratio = rsl.compress_by_budget(vdt.reshape(len(vdt), -1), budget)
             out[o.name] = (model, err, ratio)
             C, E, _ = model.bases.shape
@@ -274,7 +286,8 @@ class RSLMethod(Method):
                 ev.centres = evaluator.centres @ turn
                 normals = np.asarray(pts.normals, np.float64) @ turn
             rows = st.data.get("rsl_rows")
-            vis = object_visibility(st, state.resolution, kind, normals, rows)
+            vis = object_visibility(st, state.resolution, kind, normals, rows,
+                                    lambda f, i=i: state.tick((i + 0.9 * f) / len(state.objects)))
             rkey = (lkey, R.round(9).tobytes(), None if turn is None else turn.round(9).tobytes())
             # Fig. 8: a posed object's stored VDTs times the fields of the dynamic objects
             # near (and, for a dynamic one, the static scene's) at each light
@@ -308,17 +321,23 @@ class RSLMethod(Method):
 
     @staticmethod
     def _shade_gpu(st, evaluator, kind, vis, eye, view_dir, lighting_key, normals, turn):
-        vis_texture = keys.held(_GPU, ("vis", st.name, kind), (vis,),
-                                lambda: _texture(_tiles(vis), "R32F"))
+        batches = keys.held(_GPU, ("vis", st.name, kind), (vis,), lambda: _vis_textures(vis))
         pts = st.points
         radiance = np.zeros((pts.count, 3))
         for mat, sel, vd in _groups(st, eye, view_dir, turn):
             def shade(mat=mat, sel=sel, vd=vd):
-                group_normals = normals[sel]
-                return gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
-                                 brdf_tables(mat), group_normals, vd,
-                                 rsl.point_weights(mat, group_normals, vd), kind, vis_texture,
-                                 vis.shape[-1] - (kind == "SAT"), sel)
+                out = np.zeros((len(sel), 3))
+                for start, stop, texture in batches:
+                    part = np.nonzero((sel >= start) & (sel < stop))[0]
+                    if part.size == 0:
+                        continue
+                    nrm = normals[sel[part]]
+                    views = None if vd is None else vd[part]
+                    out[part] = gpu_shade(evaluator.centres, evaluator.half[0],
+                                          evaluator.energy, brdf_tables(mat), nrm, views,
+                                          rsl.point_weights(mat, nrm, views), kind, texture,
+                                          vis.shape[-1] - (kind == "SAT"), sel[part] - start)
+                return out
             if vd is None:                  # view independent: once per lighting/rotation
                 radiance[sel] = keys.held(_GPU_DIFFUSE, (st.name, kind, mat, lighting_key),
                                           (vis,), shade)
@@ -400,15 +419,31 @@ def _texture(values: np.ndarray, fmt: str):
                                 data=gpu.types.Buffer("FLOAT", flat.size, flat))
 
 
-def _tiles(tables: np.ndarray):
-    """(P, n, n) per-vertex tables packed as n x n tiles in rows of an R32F texture."""
-    P, n, _ = tables.shape
-    per_row = max(1, TEXTURE_WIDTH // n)
-    rows = -(-P // per_row)
-    img = np.zeros((rows * per_row, n, n), np.float32)
-    img[:P] = tables
-    img = img.reshape(rows, per_row, n, n).transpose(0, 2, 1, 3).reshape(rows * n, per_row * n)
-    return img[..., None]
+#: points per visibility texture: 16384 VDTs in R16F are 32 MiB, 2048 rows of 8192
+BATCH_POINTS = 16384
+
+
+def _vis_textures(tables: np.ndarray, batch: int = BATCH_POINTS):
+    """Per-point tables (P, m, m) as GPU textures of ``batch`` points each, ``[(start,
+    stop, texture)]``: each point's m² texels in a row of texels read in row-major order
+    (point ``i`` of a batch starts at texel ``i m²``), in half floats for a VDT (the
+    values held), float32 for a SAT.  Batches keep each texture within the GPU's
+    size limit and the float32 copy made for the upload small."""
+    import gpu
+    P, m, _ = tables.shape
+    fmt = "R16F" if tables.dtype == np.float16 else "R32F"
+    limit = gpu.capabilities.max_texture_size_get()
+    width = min(TEXTURE_WIDTH, limit)
+    batch = max(1, min(batch, limit * width // (m * m)))
+    out = []
+    for start in range(0, max(P, 1), batch):
+        stop = min(P, start + batch)
+        flat = tables[start:stop].reshape(-1)
+        rows = max(1, -(-flat.size // width))
+        img = np.zeros((rows, width, 1), np.float32)
+        img.reshape(-1)[:flat.size] = flat
+        out.append((start, stop, _texture(img, fmt)))
+    return out
 
 
 def brdf_texture_blocks(tables: rsl.BrdfTables) -> np.ndarray:
@@ -428,7 +463,7 @@ def brdf_texture_blocks(tables: rsl.BrdfTables) -> np.ndarray:
 def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, normals, views,
               weights, vis_kind: str, vis_texture, vis_res: int, indices):
     """Per-vertex radiance (P, 3) of points sharing one material by the GLSL pass
-    (``indices``: their tiles in the object's visibility texture ``vis_texture``).
+    (``indices``: their tables in the batch's visibility texture ``vis_texture``).
     ``weights``: list of (P, 3), the diffuse weight ``albedo/pi * W`` then each glossy
     term's weight (:func:`..core.rsl.point_weights`)."""
     import gpu
