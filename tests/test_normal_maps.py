@@ -298,7 +298,6 @@ def _evaluated(ob):
 
 @pytest.mark.usefixtures("registered_addon")
 def test_export_reads_both_nodes_tangents_and_warns_other_links():
-    import bpy
     from prt_relight.addon import texture_export
     from . import blender_scene as bs
     bs.reset()
