@@ -352,16 +352,21 @@ def valid_reflection_normal(ng, o, n):
     return np.where(np.sum(ng * r, axis=-1, keepdims=True) >= t, n, bent)
 
 
-def bump_shadowing(ng, n, i):
-    """Cycles' factor on a diffuse closure whose normal ``n`` is not the surface's ``ng``
-    (Chiang et al. 2019, "Taming the shadow terminator"): ``g = (ng.i) / ((n.i) (n.ng))``,
-    1 for g >= 1, 0 for g < 0, else ``-g^3 + g^2 + g``."""
-    cos_i = np.sum(n * i, axis=-1)
-    den = cos_i * np.sum(n * ng, axis=-1)
+def bump_shadowing(ns, n, i):
+    """Cycles' (5.0) factor on a diffuse closure whose normal ``n`` is not the smooth
+    surface normal ``ns`` (Conty Estevez et al. 2019, a microfacet shadowing function for
+    the bump terminator): GGX's Smith G1 at ``|ns.i|`` with ``alpha^2 = min(tan^2 d / 8, 1)``,
+    d the angle between ns and n; 0 when i and n are on different sides of ns."""
+    ns, n, i = (np.asarray(a, np.float64) for a in (ns, n, i))
+    cos_i = np.abs(np.sum(ns * i, axis=-1))
+    cos_d = np.minimum(np.abs(np.sum(ns * n, axis=-1)), 1.0)
+    side = np.sum(ns * i, axis=-1) * np.sum(ns * n, axis=-1) * np.sum(n * i, axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        g = np.where(den != 0.0, np.sum(ng * i, axis=-1) / np.where(den != 0.0, den, 1.0), 0.0)
-    out = -g ** 3 + g * g + g
-    return np.where(g >= 1.0, 1.0, np.where(g < 0.0, 0.0, out))
+        a2 = np.clip(0.125 * (1.0 / (cos_d * cos_d) - 1.0), 0.0, 1.0)
+        t2 = 1.0 / (cos_i * cos_i) - 1.0
+        g1 = 2.0 / (1.0 + np.sqrt(1.0 + a2 * t2))
+    out = np.where((cos_d >= 1.0) | (cos_i >= 1.0), 1.0, np.where(cos_i < 1e-6, 0.0, g1))
+    return np.where(np.all(ns == n, axis=-1), 1.0, np.where(side < 0.0, 0.0, out))
 
 
 def perturbed_normals(normal_source: NormalSource, uv, normal, tangent=None, sign=None,

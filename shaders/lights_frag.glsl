@@ -11,7 +11,9 @@
  * integrated.  V: the source's shadow map, filtered to the disc's angular size (PCSS,
  * Fernando 2005: blocker search, penumbra = (receiver - blocker depth) * 2 tan r).
  * Light below the triangle's own plane does not reach the point (Cycles' shadow ray would
- * enter the surface), whatever the interpolated normal says.
+ * enter the surface), whatever the interpolated normal says.  A normal or bump map: as in
+ * Cycles' Principled BSDF the glossy lobes take the mapped normal after the bump map
+ * correction, the diffuse term the mapped normal as is, times the terminator factor.
  *
  * paramTex (one material slot), row 0: 0 (albedo / pi, has diffuse), 1 (alpha,
  * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
@@ -87,6 +89,11 @@ vec3 table(int row, float mu)
   return mix(param(i0, row).rgb, param(i0 + 1, row).rgb, x - float(i0));
 }
 
+/* a mapped normal: the smooth one (Cycles' sd->N); light below its horizon reaches no
+ * closure (texture_lib.glsl bump_shadowing's side rule) */
+bool mappedN = false;
+vec3 smoothN = vec3(0.0, 0.0, 1.0);
+
 /* glossy lobes' f * cos (Fresnel, NDF, masking, multiscatter), at unit i */
 vec3 glossy_f_cos(vec3 n, vec3 o, vec3 i, float cos_o, float a, int dist, int lobes,
                   float lam_o, vec3 ms0, vec3 ms1)
@@ -94,7 +101,7 @@ vec3 glossy_f_cos(vec3 n, vec3 o, vec3 i, float cos_o, float a, int dist, int lo
   float cos_i = dot(n, i);
   vec3 hv = o + i;
   float len2 = dot(hv, hv);
-  if (cos_i <= 0.0 || len2 < 1e-20) {
+  if (cos_i <= 0.0 || len2 < 1e-20 || (mappedN && dot(smoothN, i) * dot(smoothN, n) < 0.0)) {
     return vec3(0.0);
   }
   vec3 h = hv * inversesqrt(len2);
@@ -330,7 +337,7 @@ float polygon_cosine(vec3 p, vec3 n, vec3 verts[POLY], int count)
  * axes): the Lambert term exactly (polygon_cosine; an ellipse as the 16-gon of its area),
  * the glossy lobes by NA stratified points on it and NB samples of the NDF that hit its
  * front, combined by the balance heuristic */
-vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 ng, vec3 o, float cos_o, vec4 kd, vec3 wd,
+vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_o, vec4 kd, vec3 wd,
                float a, int dist, int lobes, bool glossy, float lam_o, vec3 ms0, vec3 ms1,
                vec3 tx, vec3 ty, vec2 shift)
 {
@@ -352,7 +359,9 @@ vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 ng, vec3 o, float cos_o, vec4 k
                        : vec2(k == 1 || k == 2 ? 1.0 : -1.0, k >= 2 ? 1.0 : -1.0);
       verts[k] = centre + c.x * hx + c.y * hy;
     }
-    sum += kd.rgb * wd * polygon_cosine(vPos, n, verts, count) * L;
+    /* a mapped normal's terminator factor at the lamp's centre */
+    sum += kd.rgb * wd * polygon_cosine(vPos, nd, verts, count) * L *
+           (mappedN ? bump_shadowing(smoothN, nd, normalize(centre - vPos)) : 1.0);
   }
   if (!glossy) {
     return sum;
@@ -407,8 +416,8 @@ void main()
   vec3 n = normalize(vNrm);
   vec3 ng = normalize(cross(dFdx(vPos), dFdy(vPos)));
   ng = dot(ng, n) < 0.0 ? -ng : ng;
-  /* a normal or bump map: the Lambert and glossy terms use the mapped normal, visibility
-   * and the horizon tests the surface's */
+  /* a normal or bump map: the Lambert and glossy terms use the mapped normal (the glossy
+   * one corrected below), visibility and the horizon tests the surface's */
   vec4 nmap = texelFetch(paramTex, ivec2(16, 0), 0);
   bool mapped = nmap.x > 0.5;
   if (mapped) {
@@ -418,10 +427,13 @@ void main()
                       texelFetch(paramTex, ivec2(19, 0), 0).xyz,
                       texelFetch(paramTex, ivec2(20, 0), 0));
   }
+  vec3 nd = n;                             /* the diffuse term's normal: never corrected */
+  mappedN = mapped;
+  smoothN = normalize(vNrm);
   vec4 eye = param(8, 0);
   vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
   if (mapped && dot(ng, o) > 0.0) {
-    n = valid_reflection_normal(ng, o, n);   /* Cycles' bump map correction */
+    n = valid_reflection_normal(ng, o, n);   /* Cycles' bump map correction: glossy only */
   }
   float cos_o = dot(n, o);
   if (cos_o < COS_VIEW_MIN) {
@@ -457,7 +469,7 @@ void main()
       }
       float Va = local_visibility(s, vPos, ng, s0.xyz, s0.w, shift);
       if (Va > 0.0) {
-        color += Va * area_lamp(s, kind > 4.5, n, ng, o, cos_o, kd, wd, a, dist, lobes, glossy,
+        color += Va * area_lamp(s, kind > 4.5, n, nd, ng, o, cos_o, kd, wd, a, dist, lobes, glossy,
                                 lam_o, ms0, ms1, tx, ty, shift);
       }
       continue;
@@ -492,7 +504,7 @@ void main()
     vec3 sum = vec3(0.0);
     if (kind > 0.5) {                               /* point-like: its irradiance */
       if (dot(ng, c) > 0.0) {
-        sum = (kd.rgb * wd * max(dot(n, c), 0.0) * (mapped ? bump_shadowing(ng, n, c) : 1.0) +
+        sum = (kd.rgb * wd * max(dot(nd, c), 0.0) * (mapped ? bump_shadowing(smoothN, nd, c) : 1.0) +
                (glossy ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
                        : vec3(0.0))) * s1.rgb;
       }
@@ -502,12 +514,13 @@ void main()
       float omega = 2.0 * PI * (1.0 - cos_r);
       vec3 L = s1.rgb;
       /* Lambert: the cap's exact cosine integral while above both horizons */
-      float nc = dot(n, c);
+      float nc = dot(nd, c);
       float sr = sin(r);
       bool clear = nc >= sr && dot(ng, c) >= sr;
       if (kd.w > 0.5 && clear) {
         /* a mapped normal's terminator factor at the disc's centre */
-        sum += kd.rgb * wd * (PI * sr * sr * nc) * L * (mapped ? bump_shadowing(ng, n, c) : 1.0);
+        sum += kd.rgb * wd * (PI * sr * sr * nc) * L *
+               (mapped ? bump_shadowing(smoothN, nd, c) : 1.0);
       }
       for (int l = 0; l < (glossy || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
         vec2 u = fract(vec2((float(l) + 0.5) / float(NL), radical_inverse(l)) + shift);
@@ -517,8 +530,8 @@ void main()
         }
         vec3 f = vec3(0.0);
         if (kd.w > 0.5 && !clear) {
-          f += kd.rgb * wd * max(dot(n, i), 0.0) * (omega / float(NL)) *
-               (mapped ? bump_shadowing(ng, n, i) : 1.0);
+          f += kd.rgb * wd * max(dot(nd, i), 0.0) * (omega / float(NL)) *
+               (mapped ? bump_shadowing(smoothN, nd, i) : 1.0);
         }
         if (glossy) {
           float pl = 1.0 / omega;

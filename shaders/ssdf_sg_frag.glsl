@@ -83,10 +83,14 @@ void apply_inputs()
   fresBs.rgb = q[3];
 }
 
+/* the glossy lobe's frame: lobeN's, or a mapped normal's after the bump map correction */
+vec3 glossN, glossT, glossB;
+
 /* a normal or bump map (texel 27: kind, strength, distance; its image's texture_lib
  * parameters after the cosine lobes): the cosine lobes' and the glossy lobe's frame at this
- * pixel (Wang et al. 2009 shade per pixel in the normal map's frame), with Cycles' bump map
- * correction toward the surface normal n */
+ * pixel (Wang et al. 2009 shade per pixel in the normal map's frame); as Cycles' Principled
+ * BSDF, the diffuse lobes take the mapped normal as is (with the terminator factor), the
+ * glossy lobe its bump map correction toward the surface normal n */
 void mapped_frame(vec3 n, vec3 o)
 {
   vec4 nmap = texelFetch(paramTex, ivec2(27, 0), 0);
@@ -99,8 +103,12 @@ void mapped_frame(vec3 n, vec3 o)
                          texelFetch(paramTex, ivec2(base + 1, 0), 0).xyz,
                          texelFetch(paramTex, ivec2(base + 2, 0), 0).xyz,
                          texelFetch(paramTex, ivec2(base + 3, 0), 0));
-  lobeN = dot(n, o) > 0.0 ? valid_reflection_normal(n, o, m) : m;
+  lobeN = m;
   ssdf_frame(lobeN, lobeT, lobeB);
+  lobeMapped = true;
+  lobeSmooth = n;
+  glossN = dot(n, o) > 0.0 ? valid_reflection_normal(n, o, m) : m;
+  ssdf_frame(glossN, glossT, glossB);
 }
 
 void main()
@@ -113,6 +121,9 @@ void main()
   lobeN = n;
   lobeT = t;
   lobeB = b;
+  glossN = n;
+  glossT = t;
+  glossB = b;
   vec3 view = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
   mapped_frame(n, view);
   vec4 W[16];
@@ -162,7 +173,7 @@ void main()
   /* eq. 41 with the one-lobe isotropic NDF view slice (eq. 17-22) */
   if (glossy != 0) {
     vec3 o = view;
-    vec3 nl = lobeN;
+    vec3 nl = glossN;
     float c = dot(o, nl);
     vec3 pw = 2.0 * c * nl - o;
     pw = pw / max(length(pw), 1e-30);
@@ -179,7 +190,7 @@ void main()
     vec3 mu = ndfMu * m * fres;
     for (int k = 0; k < cosLobes; k++) {
       vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + k, 0), 0);
-      vec3 cw = cl.x * lobeT + cl.y * lobeB + cl.z * nl;
+      vec3 cw = cl.x * glossT + cl.y * glossB + cl.z * nl;
       vec3 p;
       float lam, amp;
       amp = sg_product(cw, cosLambda, pw, lam_w, p, lam);

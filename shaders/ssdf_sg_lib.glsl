@@ -216,8 +216,12 @@ float m_factor(float cos_i, float cos_o, float h_dot_i)
  * its f_h slope k and (withTheta) the SSDF's angle theta at the product lobe's axis, so the pair
  * adds w * fh_hat_slope(theta, k) to R_d.  Everything but theta depends on n alone. */
 /* the cosine lobes' frame: the surface's (n, t, b), or a normal map's at this pixel (the
- * SSDF stays in the surface's frame: visibility is the geometry's) */
+ * SSDF stays in the surface's frame: visibility is the geometry's); lobeMapped: the
+ * latter, each pair then takes Cycles' terminator factor (texture_lib.glsl
+ * bump_shadowing) at its product lobe's axis, lobeSmooth the surface's normal */
 vec3 lobeN, lobeT, lobeB;
+bool lobeMapped = false;
+vec3 lobeSmooth = vec3(0.0, 0.0, 1.0);
 
 bool diffuse_pair(int m, int j, vec3 n, vec3 t, vec3 b, vec4 W[16], bool withTheta,
                   out float theta, out vec3 w, out float k)
@@ -238,7 +242,8 @@ bool diffuse_pair(int m, int j, vec3 n, vec3 t, vec3 b, vec4 W[16], bool withThe
   float amp = sg_product(cw, cosLambda, axis, al.w, p, lam);
   vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
   theta = withTheta ? ssdf_value(local, W) : 0.0;
-  w = mu * (cl.w * amp * sg_hemisphere_integral(lam));
+  w = mu * (cl.w * amp * sg_hemisphere_integral(lam)) *
+      (lobeMapped ? bump_shadowing(lobeSmooth, lobeN, p) : 1.0);
   k = fh_slope(lam);
   return true;
 }

@@ -138,13 +138,27 @@ vec3 mapped_normal(sampler2D img, vec2 uv, vec3 P, vec3 N, vec3 T, float sgn, ve
   return dot(n, n) > 1e-30 ? normalize(n) : Nu;
 }
 
-/* core.textures.bump_shadowing: Cycles' smooth terminator on a diffuse closure with a
- * mapped normal n (Chiang et al. 2019) */
-float bump_shadowing(vec3 ng, vec3 n, vec3 i)
+/* core.textures.bump_shadowing: Cycles' terminator factor on a diffuse closure whose
+ * normal n is not the smooth normal ns (Conty Estevez et al. 2019): GGX's Smith G1 at
+ * |ns.i| with alpha^2 = min(tan^2 d / 8, 1), d the angle between ns and n */
+float bump_shadowing(vec3 ns, vec3 n, vec3 i)
 {
-  float den = dot(n, i) * dot(n, ng);
-  float g = den != 0.0 ? dot(ng, i) / den : 0.0;
-  return g >= 1.0 ? 1.0 : (g < 0.0 ? 0.0 : g * (1.0 + g - g * g));
+  if (n == ns) {
+    return 1.0;
+  }
+  float cos_si = dot(ns, i), cos_sn = dot(ns, n);
+  if (cos_si * cos_sn * dot(n, i) < 0.0) {
+    return 0.0;                                /* i and n on different sides of ns */
+  }
+  float cos_i = abs(cos_si), cos_d = abs(cos_sn);
+  if (cos_d >= 1.0 || cos_i >= 1.0) {
+    return 1.0;
+  }
+  if (cos_i < 1e-6) {
+    return 0.0;
+  }
+  float a2 = clamp(0.125 * (1.0 / (cos_d * cos_d) - 1.0), 0.0, 1.0);
+  return 2.0 / (1.0 + sqrt(1.0 + a2 * (1.0 / (cos_i * cos_i) - 1.0)));
 }
 
 /* core.textures.valid_reflection_normal: Cycles' bump map correction of a mapped normal n

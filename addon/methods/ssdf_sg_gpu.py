@@ -37,10 +37,9 @@ _INPUT_SAMPLERS = (("FLOAT_2D", "albedoTex"), ("FLOAT_2D", "roughTex"), ("FLOAT_
 
 def _fragment_source(main: str) -> str:
     """sg_common.glsl (the SG algebra, BRDF factors and cube-face lookup shared with the
-    material helpers' GLSL twin, tested against numpy there), ssdf_sg_lib.glsl, ``main``
-    (the main pass also texture_lib.glsl: the slot's textured inputs)."""
-    extra = ("texture_lib.glsl",) if main == "ssdf_sg_frag.glsl" else ()
-    return drawing.glsl_source("sg_common.glsl", "ssdf_sg_lib.glsl", *extra, main)
+    material helpers' GLSL twin, tested against numpy there), texture_lib.glsl (the slot's
+    textured inputs, a mapped normal's terminator factor), ssdf_sg_lib.glsl, ``main``."""
+    return drawing.glsl_source("sg_common.glsl", "texture_lib.glsl", "ssdf_sg_lib.glsl", main)
 
 
 def _gpu_shader(flat: bool = False):
