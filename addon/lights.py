@@ -151,9 +151,16 @@ def lamp_sources(lamps) -> list:
 
 # --------------------------------------------------------------------------- shaders
 
-def _shader():
+#: every optional feature of lights_frag.glsl (a #define each)
+FEATURES = ("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "LOCAL_LAMPS", "AREA_LAMPS")
+
+
+def _shader(features=FEATURES):
+    """The pass compiled with ``features`` (lights_frag.glsl: what a draw lacks is left
+    out of its shader, not branched around)."""
     import gpu
-    sh = _GPU.get("shader")
+    features = tuple(sorted(features))
+    sh = _GPU.get(("shader", features))
     if sh is None:
         info = gpu.types.GPUShaderCreateInfo()
         # 128 bytes of push constants at most (the closed side rides in paramTex, the
@@ -174,10 +181,50 @@ def _shader():
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
         info.vertex_source(drawing.glsl_source("lights_vert.glsl"))
-        info.fragment_source("#define COS_VIEW_MIN 1e-4\n" + drawing.glsl_source(
+        defines = "".join(f"#define {f}\n" for f in features)
+        info.fragment_source("#define COS_VIEW_MIN 1e-4\n" + defines + drawing.glsl_source(
             "brdf_lib.glsl", "texture_lib.glsl", "lights_frag.glsl"))
-        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
+        sh = _GPU[("shader", features)] = gpu.shader.create_from_info(info)
     return sh
+
+
+def slot_features(params: np.ndarray, albedo_source) -> tuple:
+    """The per-slot features of a slot's paramTex rows (:func:`slot_texels`) and textured
+    colour source."""
+    out = []
+    if params[0, 1, 2] > 0 and params[0, 1, 3] > 0.5:
+        out.append("GLOSSY")
+    if params[0, 11, 0] >= 2:
+        out.append("ROUGH_TEX")
+    if params[0, 16, 0] > 0.5:
+        out.append("NORMAL_MAP")
+    if albedo_source is not None:
+        out.append("ALBEDO_TEX")
+    return tuple(out)
+
+
+def frame_features(sources) -> tuple:
+    """The per-frame features: local lamps (point, spot) and area lamps."""
+    out = []
+    if any(s.local and s.area is None for s in sources):
+        out.append("LOCAL_LAMPS")
+    if any(s.area is not None for s in sources):
+        out.append("AREA_LAMPS")
+    return tuple(out)
+
+
+def _surface_batch(pos, nrm, uv, attr, tng):
+    """A batch of the pass's vertex layout (any feature set's shader draws it)."""
+    import gpu
+    fmt = _GPU.get("format")
+    if fmt is None:
+        fmt = _GPU["format"] = gpu.types.GPUVertFormat()
+        for ident, n in (("pos", 3), ("nrm", 3), ("uv", 2), ("attr", 4), ("tng", 4)):
+            fmt.attr_add(id=ident, comp_type="F32", len=n, fetch_mode="FLOAT")
+    vbo = gpu.types.GPUVertBuf(fmt, len(pos))
+    for ident, data in (("pos", pos), ("nrm", nrm), ("uv", uv), ("attr", attr), ("tng", tng)):
+        vbo.attr_fill(ident, np.ascontiguousarray(data, dtype=np.float32))
+    return gpu.types.GPUBatch(type="TRIS", buf=vbo)
 
 
 def _distance_shader():
@@ -251,9 +298,7 @@ def _object_batches(st):
         mapped = texture_export.shader_normal(st, int(slot))
         if mapped is not None:
             tng[:] = mapped[1][corner[sel]]
-        surfaces.append((int(slot), batch_for_shader(_shader(), "TRIS", {
-            "pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
-            "uv": uv, "attr": attr, "tng": tng})))
+        surfaces.append((int(slot), _surface_batch(pos[sel], nrm[sel], uv, attr, tng)))
     if len(_BATCHES) >= 64:
         _BATCHES.pop(next(iter(_BATCHES)))
     got = _BATCHES[key] = (depth, surfaces)
@@ -512,31 +557,35 @@ def draws(state, eye, view_dir) -> list:
             src[k, 8 + 4 * face:12 + 4 * face] = M.T
     src_tex = _texture(src)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
+    per_frame = frame_features(sources)
     out = []
     for st in state.objects:
-        surfaces = _object_batches(st)[1]
-        params = {slot: _texture(slot_texels(st, slot, eye4)) for slot, _ in surfaces}
-        rough = {slot: _input_texture(st, slot) for slot, _ in surfaces}
-        bumps = {slot: _normal_texture(st, slot) for slot, _ in surfaces}
+        slots = []
+        for slot, batch in _object_batches(st)[1]:
+            texels = slot_texels(st, slot, eye4)
+            source = st.textures.get(slot, (None, None))[0]
+            slots.append((batch, _texture(texels), source, _input_texture(st, slot),
+                          _normal_texture(st, slot),
+                          slot_features(texels, source) + per_frame))
 
-        def draw(view_projection, surfaces=surfaces, params=params, textures=st.textures,
-                 rough=rough, bumps=bumps):
-            sh = _shader()
-            sh.bind()
-            sh.uniform_float("viewProjection", view_projection)
-            sh.uniform_sampler("srcTex", src_tex)
-            sh.uniform_sampler("shadowTex", shadow_tex)
-            sh.uniform_sampler("cubeTex", cube_tex)
-            for slot, batch in surfaces:
-                sh.uniform_sampler("paramTex", params[slot])
-                source = textures.get(slot, (None, None))[0]
-                for name, value in drawing.source_uniforms(source).items():
-                    sh.uniform_float(name, value)
-                sh.uniform_sampler("albedoTex", drawing.albedo_texture(source.texture.pixels)
-                                   if source is not None and source.texture is not None
-                                   else drawing.white_texture())
-                sh.uniform_sampler("roughTex", rough[slot])
-                sh.uniform_sampler("normalTex", bumps[slot])
+        def draw(view_projection, slots=slots):
+            for batch, params, source, rough, bump, features in slots:
+                sh = _shader(features)
+                sh.bind()
+                sh.uniform_float("viewProjection", view_projection)
+                sh.uniform_sampler("srcTex", src_tex)
+                sh.uniform_sampler("shadowTex", shadow_tex)
+                sh.uniform_sampler("cubeTex", cube_tex)
+                sh.uniform_sampler("paramTex", params)
+                if source is not None:         # the push constants only ALBEDO_TEX reads
+                    for name, value in drawing.source_uniforms(source).items():
+                        sh.uniform_float(name, value)
+                    sh.uniform_sampler("albedoTex",
+                                       drawing.albedo_texture(source.texture.pixels)
+                                       if source.texture is not None
+                                       else drawing.white_texture())
+                sh.uniform_sampler("roughTex", rough)
+                sh.uniform_sampler("normalTex", bump)
                 batch.draw(sh)
 
         out.append(draw)

@@ -34,7 +34,12 @@
  * axis, cos of its half angle), 3 (spot smoothstep width), 6 (cubeTex tile origin x, y
  * and face size), 8..31 the six faces' world-to-clip columns.  An area lamp (kind 4 a
  * rectangle, 5 an ellipse): 0 (centre, radius of a disc of its area), 1 (radiance), 2 (the
- * way it faces), 4, 5 (its half axes), and its cube shadow map as a local lamp's. */
+ * way it faces), 4, 5 (its half axes), and its cube shadow map as a local lamp's.
+ *
+ * Features are compiled in only where a draw has them (addon/lights.py _shader: GLOSSY,
+ * ROUGH_TEX, NORMAL_MAP, ALBEDO_TEX per slot, LOCAL_LAMPS, AREA_LAMPS per frame): a branch
+ * no fragment takes still costs registers on a GPU and its whole body on llvmpipe, which
+ * runs both sides of a branch under a mask. */
 
 #define NL 8
 #define NB 8
@@ -48,16 +53,21 @@ float nodeFrac = 0.0;
 
 vec4 param(int i, int row)
 {
-  if (nodeCount < 2) {
-    return texelFetch(paramTex, ivec2(i, row), 0);
+#ifdef ROUGH_TEX
+  if (nodeCount >= 2) {
+    return mix(texelFetch(paramTex, ivec2(i, row + nodeRow0), 0),
+               texelFetch(paramTex, ivec2(i, row + nodeRow1), 0), nodeFrac);
   }
-  return mix(texelFetch(paramTex, ivec2(i, row + nodeRow0), 0),
-             texelFetch(paramTex, ivec2(i, row + nodeRow1), 0), nodeFrac);
+#endif
+  return texelFetch(paramTex, ivec2(i, row), 0);
 }
 
 /* a textured Roughness: select the nodes and return alpha (else -1) */
 float textured_alpha()
 {
+#ifndef ROUGH_TEX
+  return -1.0;
+#else
   vec4 t = texelFetch(paramTex, ivec2(11, 0), 0);
   int n = int(t.x + 0.5);
   if (n < 2) {
@@ -75,6 +85,7 @@ float textured_alpha()
   nodeRow1 = 8 + 4 * k;
   nodeFrac = x - float(k);
   return max(r * r, t.y);
+#endif
 }
 
 vec4 source(int s, int i)
@@ -418,6 +429,7 @@ void main()
   ng = dot(ng, n) < 0.0 ? -ng : ng;
   /* a normal or bump map: the Lambert and glossy terms use the mapped normal (the glossy
    * one corrected below), visibility and the horizon tests the surface's */
+#ifdef NORMAL_MAP
   vec4 nmap = texelFetch(paramTex, ivec2(16, 0), 0);
   bool mapped = nmap.x > 0.5;
   if (mapped) {
@@ -427,6 +439,9 @@ void main()
                       texelFetch(paramTex, ivec2(19, 0), 0).xyz,
                       texelFetch(paramTex, ivec2(20, 0), 0));
   }
+#else
+  const bool mapped = false;
+#endif
   vec3 nd = n;                             /* the diffuse term's normal: never corrected */
   mappedN = mapped;
   smoothN = normalize(vNrm);
@@ -441,14 +456,20 @@ void main()
   }
   cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
   vec4 kd = param(0, 0);
+#ifdef ALBEDO_TEX
   if (texInfo.z > -0.5 && kd.w > 0.5) {          /* the slot's colour, per pixel / pi */
     kd.rgb = input_colour(albedoTex, vUv, vAttr, texInfo, texMap0, texMap1, mixColor) / PI;
   }
+#endif
   vec4 lobe = param(1, 0);
   float a = texAlpha > 0.0 ? texAlpha : max(lobe.x, 1e-4);
   int dist = int(lobe.y);
   int lobes = int(lobe.z);
+#ifdef GLOSSY
   bool glossy = lobe.w > 0.5 && lobes > 0;
+#else
+  const bool glossy = false;
+#endif
   vec3 wd = table(1, cos_o);
   vec3 ms0 = table(2, cos_o), ms1 = table(3, cos_o);
   float lam_o = smith_lambda(dist, a, cos_o);
@@ -463,6 +484,7 @@ void main()
     vec3 c = s0.xyz;
     float r = s0.w;
     float kind = s1.w;      /* 0 disc, 1 point-like direction, 2 point, 3 spot, 4/5 area */
+#ifdef AREA_LAMPS
     if (kind > 3.5) {                 /* an area lamp: a rectangle (4) or an ellipse (5) */
       if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
         continue;                                   /* behind its emitting side */
@@ -474,6 +496,8 @@ void main()
       }
       continue;
     }
+#endif
+#ifdef LOCAL_LAMPS
     if (kind > 1.5) {                 /* a local lamp: the sphere seen from here */
       vec3 to_lamp = s0.xyz - vPos;
       float d2 = max(dot(to_lamp, to_lamp), 1e-12);
@@ -493,11 +517,16 @@ void main()
       kind = r < 1e-4 ? 1.0 : 0.0;
       s1.rgb *= kind > 0.5 ? e : e / (PI * sin(r) * sin(r));
     }
+#endif
     if (dot(ng, c) < -sin(r)) {
       continue;                                     /* the whole disc is below the plane */
     }
+#ifdef LOCAL_LAMPS
     float V = s1.w > 1.5 ? local_visibility(s, vPos, ng, s0.xyz, s0.w, shift)
                          : visibility(s, vPos, ng, r, shift);
+#else
+    float V = visibility(s, vPos, ng, r, shift);
+#endif
     if (V <= 0.0) {
       continue;
     }
