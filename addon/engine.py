@@ -130,7 +130,7 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
     s = max(1, int(supersampling))
     background = _background(state)
     added = (sharp.draws(state, eye, view_dir, background)
-             + lights.draws(state, eye, view_dir)) if eye is not None or view_dir is not None \
+             + lights.draws(state, eye, view_dir, s)) if eye is not None or view_dir is not None \
         else []
     big = drawing.render_offscreen(batches, background, projection @ view,
                                    width * s, height * s, transparent,

@@ -203,9 +203,18 @@ def slot_features(params: np.ndarray, albedo_source) -> tuple:
     return tuple(out)
 
 
-def frame_features(sources) -> tuple:
-    """The per-frame features: local lamps (point, spot) and area lamps."""
-    out = []
+#: shadow-map taps per source and sample with one sample per pixel (blocker search, filter)
+TAPS = (16, 24)
+
+
+def frame_features(sources, supersampling: int = 1) -> tuple:
+    """The per-frame features: local lamps (point, spot) and area lamps, and with
+    ``supersampling`` s > 1 fewer shadow taps per sample: a pixel's s² samples turn their
+    taps differently, so n / s taps per sample still give each pixel s times the taps of
+    one sample per pixel."""
+    s = max(1, int(supersampling))
+    out = [] if s == 1 else [f"BLOCKER_TAPS {max(4, -(-TAPS[0] // s))}",
+                             f"PCF_TAPS {max(4, -(-TAPS[1] // s))}"]
     if any(s.local and s.area is None for s in sources):
         out.append("LOCAL_LAMPS")
     if any(s.area is not None for s in sources):
@@ -520,9 +529,10 @@ def _texture(rgba):
     return drawing.float_texture(np.ascontiguousarray(rgba, dtype=np.float32))
 
 
-def draws(state, eye, view_dir) -> list:
+def draws(state, eye, view_dir, supersampling: int = 1) -> list:
     """``draw(view_projection)`` callables adding every source to the objects (empty when
-    there is none).  Renders the sources' shadow maps first (cached)."""
+    there is none), for a frame of ``supersampling``² samples per pixel.  Renders the
+    sources' shadow maps first (cached)."""
     sources = (list(state.sources) + lamp_sources(state.drawn_lamps))[:MAX_DRAWN]
     casters = [st for st in state.objects if st.status != "unshadowed"]
     if not sources or not state.objects:
@@ -557,7 +567,7 @@ def draws(state, eye, view_dir) -> list:
             src[k, 8 + 4 * face:12 + 4 * face] = M.T
     src_tex = _texture(src)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
-    per_frame = frame_features(sources)
+    per_frame = frame_features(sources, supersampling)
     out = []
     for st in state.objects:
         slots = []

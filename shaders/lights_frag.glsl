@@ -44,8 +44,14 @@
 #define NL 8
 #define NB 8
 #define TABLE 32
+/* most shadow-map taps per source and sample (addon/lights.py defines fewer when each
+ * pixel has several samples) */
+#ifndef BLOCKER_TAPS
 #define BLOCKER_TAPS 16
+#endif
+#ifndef PCF_TAPS
 #define PCF_TAPS 24
+#endif
 
 /* the roughness nodes the pixel lies between (nodeCount 1: the slot's own rows) */
 int nodeCount = 1, nodeRow0 = 0, nodeRow1 = 0;
@@ -161,15 +167,25 @@ bool ndf_direction(int b, vec3 n, vec3 o, float a, int dist, vec3 tx, vec3 ty, v
 
 /* ---------------------------------------------------------------- shadow maps */
 
-const vec2 POISSON[24] = vec2[24](
-  vec2(-0.613392, 0.617481), vec2(0.170019, -0.040254), vec2(-0.299417, 0.791925),
-  vec2(0.645680, 0.493210), vec2(-0.651784, 0.717887), vec2(0.421003, 0.027070),
-  vec2(-0.817194, -0.271096), vec2(-0.705374, -0.668203), vec2(0.977050, -0.108615),
-  vec2(0.063326, 0.142369), vec2(0.203528, 0.214331), vec2(-0.667531, 0.326090),
-  vec2(-0.098422, -0.295755), vec2(-0.885922, 0.215369), vec2(0.566637, 0.605213),
-  vec2(0.039766, -0.396100), vec2(0.751946, 0.453352), vec2(0.078707, -0.715323),
-  vec2(-0.075838, -0.529344), vec2(0.724479, -0.580798), vec2(0.222999, -0.215125),
-  vec2(-0.467574, -0.405438), vec2(-0.248268, -0.814753), vec2(0.354411, -0.887570));
+/* taps on a disc: k of n on a Vogel (golden-angle) spiral, even in area for any n; `dir`
+ * starts at the pixel's rotation and turns by the golden angle per tap (step_tap) */
+const vec2 GOLDEN = vec2(-0.7373688, 0.6754903);
+
+vec2 disc_tap(int k, int n, vec2 dir)
+{
+  return dir * sqrt((float(k) + 0.5) / float(n));
+}
+
+vec2 step_tap(vec2 dir)
+{
+  return vec2(dir.x * GOLDEN.x - dir.y * GOLDEN.y, dir.x * GOLDEN.y + dir.y * GOLDEN.x);
+}
+
+/* taps for a disc of `radius` texels: about one per texel it covers, 4 to `most` */
+int tap_count(float radius, int most)
+{
+  return clamp(int(ceil(3.14159265 * radius * radius)), 4, most);
+}
 
 /* depth at uv in [0, 1]^2 of a tile (origin x, y and size in texels of the atlas) */
 float shadow_depth(vec4 tile, vec2 uv)
@@ -208,12 +224,14 @@ float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
   float spread = 2.0 * tan(radius);                    /* penumbra per unit of distance */
   /* blocker search over the largest penumbra a blocker up to the light could cast */
   float search = clamp(z * depth_range * spread / texel, 1.0, 48.0);
-  mat2 turn = mat2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x),
-                   -sin(6.2831853 * shift.x), cos(6.2831853 * shift.x));
+  vec2 turn = vec2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x));
   float blockers = 0.0, sum = 0.0;
   float uv_texel = 1.0 / tile.z;
-  for (int k = 0; k < BLOCKER_TAPS; k++) {
-    vec2 off = turn * POISSON[k] * search * uv_texel;
+  int nb = tap_count(search, BLOCKER_TAPS);
+  vec2 dir = turn;
+  for (int k = 0; k < nb; k++) {
+    vec2 off = disc_tap(k, nb, dir) * search * uv_texel;
+    dir = step_tap(dir);
     float d = shadow_depth(tile, uv + off);
     if (d < z + dot(off, slope) - bias) {
       blockers += 1.0;
@@ -225,12 +243,15 @@ float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
   }
   float penumbra = max(z - sum / blockers, 0.0) * depth_range * spread / texel;  /* texels */
   float filter_radius = max(0.5 * penumbra, 0.75);
+  int nf = tap_count(filter_radius, PCF_TAPS);
   float lit = 0.0;
-  for (int k = 0; k < PCF_TAPS; k++) {
-    vec2 off = turn * POISSON[k] * filter_radius * uv_texel;
+  dir = turn;
+  for (int k = 0; k < nf; k++) {
+    vec2 off = disc_tap(k, nf, dir) * filter_radius * uv_texel;
+    dir = step_tap(dir);
     lit += shadow_depth(tile, uv + off) < z + dot(off, slope) - bias ? 0.0 : 1.0;
   }
-  return lit / float(PCF_TAPS);
+  return lit / float(nf);
 }
 
 /* a local lamp's shadow: six 90-degree faces around it (+X, -X, +Y, -Y, +Z, -Z, matrices
@@ -259,16 +280,18 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
    * k texel tan(incidence) nearer the lamp (grazing receivers must not shadow themselves) */
   float cos_l = max(dot(ng, -v / max(length(v), 1e-12)), 0.1);
   float slope = texel * sqrt(1.0 - cos_l * cos_l) / cos_l;
-  mat2 turn = mat2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x),
-                   -sin(6.2831853 * shift.x), cos(6.2831853 * shift.x));
+  vec2 turn = vec2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x));
   float uv_texel = 1.0 / tile.z;
   float search = clamp(lamp_radius / texel, 1.0, 24.0);
   float blockers = 0.0, sum = 0.0;
-  for (int k = 0; k < BLOCKER_TAPS; k++) {
-    float b = texelFetch(cubeTex, ivec2(ftile.xy + clamp(uv + turn * POISSON[k] * search
-                                                         * uv_texel, 0.0, 1.0) * (tile.z - 1.0)),
-                         0).r;
-    if (b < d - bias - length(POISSON[k]) * search * slope) {
+  int nb = tap_count(search, BLOCKER_TAPS);
+  vec2 dir = turn;
+  for (int k = 0; k < nb; k++) {
+    vec2 tap = disc_tap(k, nb, dir);
+    dir = step_tap(dir);
+    float b = texelFetch(cubeTex, ivec2(ftile.xy + clamp(uv + tap * search * uv_texel, 0.0, 1.0)
+                                        * (tile.z - 1.0)), 0).r;
+    if (b < d - bias - length(tap) * search * slope) {
       blockers += 1.0;
       sum += b;
     }
@@ -279,14 +302,17 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
   float avg = max(sum / blockers, 1e-6);
   float penumbra = (d - avg) / avg * 2.0 * lamp_radius / texel;       /* in texels */
   float filter_radius = clamp(0.5 * penumbra, 0.75, 32.0);
+  int nf = tap_count(filter_radius, PCF_TAPS);
   float lit = 0.0;
-  for (int k = 0; k < PCF_TAPS; k++) {
-    float b = texelFetch(cubeTex, ivec2(ftile.xy + clamp(uv + turn * POISSON[k] * filter_radius
-                                                         * uv_texel, 0.0, 1.0) * (tile.z - 1.0)),
-                         0).r;
-    lit += b < d - bias - length(POISSON[k]) * filter_radius * slope ? 0.0 : 1.0;
+  dir = turn;
+  for (int k = 0; k < nf; k++) {
+    vec2 tap = disc_tap(k, nf, dir);
+    dir = step_tap(dir);
+    float b = texelFetch(cubeTex, ivec2(ftile.xy + clamp(uv + tap * filter_radius * uv_texel,
+                                                         0.0, 1.0) * (tile.z - 1.0)), 0).r;
+    lit += b < d - bias - length(tap) * filter_radius * slope ? 0.0 : 1.0;
   }
-  return lit / float(PCF_TAPS);
+  return lit / float(nf);
 }
 
 /* ---------------------------------------------------------------- area lamps */
