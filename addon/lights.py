@@ -31,6 +31,8 @@ TABLE = 32
 _GPU = drawing.gpu_cache({})
 _BATCHES = drawing.gpu_cache({})
 _SHADOWS = drawing.gpu_cache({})
+# the atlas's depth texture and framebuffer, drawn into again after a turn (same size)
+_SHADOW_TARGET = drawing.gpu_cache({}, limit=1)
 # extraction per (image content, settings): (core sources, residual image)
 _SPLITS = keys.cache(2, name="lights._SPLITS")
 #: one line per source of the last synced frame, for the panel
@@ -95,8 +97,15 @@ def split_world(world, settings: dict):
         return world, []
     # keyed on the pixels' content: a packed image is exported as a new array every sync
     key = (keys.image_key(img), tuple(sorted(settings.items())))
-    sources, residual = keys.held(_SPLITS, key, (),
-                                  lambda: core_lights.extract_sources(img, **settings))
+
+    def split():
+        # the image's luminance power (the panel's shares) rides with its split: a turn
+        # of the world changes neither
+        unit = copy.copy(world)
+        unit.strength = 1.0
+        return (*core_lights.extract_sources(img, **settings),
+                float(unit.total_power() @ core_lights.LUMINANCE))
+    sources, residual, image_power = keys.held(_SPLITS, key, (), split)
     if not sources:
         return world, []
     out = copy.copy(world)
@@ -104,7 +113,7 @@ def split_world(world, settings: dict):
     R = np.asarray(world.rotation, np.float64)        # texture = R @ world
     drawn = [DrawnSource(R.T @ s.direction, s.radius, s.radiance * world.strength,
                          f"Source {k + 1}") for k, s in enumerate(sources)]
-    total = float(world.total_power() @ core_lights.LUMINANCE)
+    total = image_power * world.strength
     LAST_SOURCES[:] = [describe(s, total) for s in drawn]
     return out, drawn
 
@@ -347,8 +356,12 @@ def _shadow_atlas(state, sources, casters):
     cols = min(len(sources), 4)
     rows = -(-len(sources) // 4)
     width, height = SHADOW_TILE * cols, SHADOW_TILE * rows
-    tex = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
-    fb = gpu.types.GPUFrameBuffer(depth_slot=tex)
+    target = _SHADOW_TARGET.get((width, height))
+    if target is None:
+        _SHADOW_TARGET.clear()
+        tex = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
+        target = _SHADOW_TARGET[(width, height)] = (tex, gpu.types.GPUFrameBuffer(depth_slot=tex))
+    tex, fb = target
     tiles = []
     saved = gpu.state.viewport_get()
     sh = _depth_shader()
