@@ -212,18 +212,19 @@ def slot_features(params: np.ndarray, albedo_source) -> tuple:
     return tuple(out)
 
 
-#: shadow-map taps per source and sample with one sample per pixel (blocker search, filter)
+#: shadow-map taps per source and sample with one sample per pixel (blocker search, filter;
+#: lights_frag.glsl's defaults)
 TAPS = (16, 24)
 
 
 def frame_features(sources, supersampling: int = 1) -> tuple:
     """The per-frame features: local lamps (point, spot) and area lamps, and with
-    ``supersampling`` s > 1 fewer shadow taps per sample: a pixel's s² samples turn their
+    ``supersampling`` s > 1 fewer filter taps per sample: a pixel's s² samples turn their
     taps differently, so n / s taps per sample still give each pixel s times the taps of
-    one sample per pixel."""
+    one sample per pixel.  The blocker search keeps its taps: fewer miss blockers, a bias
+    the pixel's average does not remove."""
     s = max(1, int(supersampling))
-    out = [] if s == 1 else [f"BLOCKER_TAPS {max(4, -(-TAPS[0] // s))}",
-                             f"PCF_TAPS {max(4, -(-TAPS[1] // s))}"]
+    out = [] if s == 1 else [f"PCF_TAPS {max(4, -(-TAPS[1] // s))}"]
     if any(s.local and s.area is None for s in sources):
         out.append("LOCAL_LAMPS")
     if any(s.area is not None for s in sources):

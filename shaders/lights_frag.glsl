@@ -44,8 +44,8 @@
 #define NL 8
 #define NB 8
 #define TABLE 32
-/* most shadow-map taps per source and sample (addon/lights.py defines fewer when each
- * pixel has several samples) */
+/* most shadow-map taps per source and sample (addon/lights.py defines fewer filter taps
+ * when each pixel has several samples) */
 #ifndef BLOCKER_TAPS
 #define BLOCKER_TAPS 16
 #endif
