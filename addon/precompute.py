@@ -130,8 +130,9 @@ class PrecomputeJob:
             bvh += time.perf_counter() - tb
             self.stage = "tracing"
             got = {}
+            origins = self._origins(scene, pts, nrm, starts, lo, hi)
             visibility.trace_visibility(
-                scene, pts[lo:hi], nrm[lo:hi], cube, self.offset, threads=threads,
+                scene, pts[lo:hi], nrm[lo:hi], cube, self.offset, threads=threads, origins=origins,
                 progress=lambda done, count, lo=lo: progress(lo + done, total),
                 cancel=lambda: self.cancel_requested, stats=got,
                 consume=lambda a, b, bits, lo=lo: consume(lo + a, lo + b, bits))
@@ -157,6 +158,20 @@ class PrecomputeJob:
         self.derived = method.derive(self)
         self.timings["derive"] = time.perf_counter() - t3
         self.stage = "writing"
+
+    def _origins(self, scene, pts, nrm, starts, lo, hi):
+        """Ray origins of points lo..hi (rows of one trace group), stepped out of contact
+        (core.visibility.contact_origins); counts the moved points in timings."""
+        tris, corners = [], []
+        for i, o in enumerate(self.objects):
+            if lo <= starts[i] and starts[i + 1] <= hi:
+                tris.append(o.arrays.triangle_positions)
+                corners.append(o.points.point_of_corner[o.arrays.triangles] + (starts[i] - lo))
+        origins, moved = visibility.contact_origins(
+            scene, pts[lo:hi], nrm[lo:hi], np.concatenate(tris), np.concatenate(corners),
+            self.offset)
+        self.timings["contact_points"] = self.timings.get("contact_points", 0) + int(moved.sum())
+        return origins
 
     def _shadow_fields(self, cube, threads):
         """Each dynamic object's occluder field (its own frame: the world at this pose)
