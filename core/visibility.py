@@ -92,6 +92,8 @@ def ray_origins(points: np.ndarray, normals: np.ndarray, offset: float) -> np.nd
 #: how far into an adjacent face a moved origin sits: this share of the way from the point
 #: to the face's centroid (then stepped off the face along its own normal)
 CONTACT_SHARE = 0.02
+#: faces within ~0.26 degrees of the point's normal are not probed
+CONTACT_ALIGNED = 0.99999
 #: triangles probed at a time by :func:`contact_origins` (bounds its temporaries)
 CONTACT_CHUNK = 200_000
 
@@ -118,51 +120,89 @@ def contact_origins(scene, points: np.ndarray, normals: np.ndarray, tri_position
     origins = ray_origins(p, n, offset)
     tp_all = np.asarray(tri_positions, dtype=np.float64).reshape(-1, 3, 3)
     tri_pts = np.asarray(tri_points, dtype=np.int64).reshape(-1, 3)
-    cut = np.zeros(len(p))                  # corner angles of the cut-off faces, per point
-    reached = np.zeros(len(p))              # ... and of the faces the origin reaches
-    best = np.full(len(p), -np.inf)         # the best-aligned cut-off face's sample
-    best_sample = np.zeros((len(p), 3))
-    step_all = ray_step(p, offset)
-    for lo in range(0, len(tp_all), CONTACT_CHUNK):
-        tp = tp_all[lo:lo + CONTACT_CHUNK]
+    step = ray_step(p, offset)
+
+    def pairs(tris, probed_only=False):
+        """(point, |n . face normal|, kept, sample) of the corners of triangles ``tris``
+        (with ``probed_only`` only those of faces not aligned with the point's normal)."""
+        tp = tp_all[tris]
         ng = np.cross(tp[:, 1] - tp[:, 0], tp[:, 2] - tp[:, 0])
         length = np.linalg.norm(ng, axis=1)
         ng = ng / np.maximum(length, 1e-300)[:, None]
-        pt = tri_pts[lo:lo + CONTACT_CHUNK].reshape(-1)
+        pt = tri_pts[tris].reshape(-1)
         tri = np.repeat(np.arange(len(tp)), 3)
         align = np.einsum("ij,ij->i", ng[tri], n[pt])
-        a, b, c = tp, np.roll(tp, -1, axis=1), np.roll(tp, 1, axis=1)
-        e1, e2 = b - a, c - a                       # the corner angle of each pair
-        angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=-1),
-                           np.einsum("tkj,tkj->tk", e1, e2)).reshape(-1)
         keep = (length[tri] > 0.0) & (align != 0.0)
-        pt, tri, align, angle = pt[keep], tri[keep], align[keep], angle[keep]
+        if probed_only:
+            keep &= np.abs(align) < CONTACT_ALIGNED
+        pt, tri, align = pt[keep], tri[keep], align[keep]
         sample = (p[pt] + CONTACT_SHARE * (tp.mean(axis=1)[tri] - p[pt])
-                  + (step_all[pt] * np.sign(align))[:, None] * ng[tri])
-        align = np.abs(align)
+                  + (step[pt] * np.sign(align))[:, None] * ng[tri])
+        return pt, np.abs(align), keep, sample
+
+    # pass 1: which points' steps are cut off from some face's sample
+    cut_points = []
+    for lo in range(0, len(tp_all), CONTACT_CHUNK):
+        # a face the normal already stands on (flat shading, flat regions) is reached:
+        # the step along the normal is its own step, as Cycles takes it
+        pt, align, _, sample = pairs(np.arange(lo, min(lo + CONTACT_CHUNK, len(tp_all))),
+                                     probed_only=True)
         seg = sample - origins[pt]
         dist = np.linalg.norm(seg, axis=1)
-        ok = dist > 0.0
-        blocked = np.zeros(len(pt), dtype=bool)
-        if ok.any():
-            hit = scene.run(np.ascontiguousarray(origins[pt][ok], dtype=np.float32),
-                            np.ascontiguousarray(seg[ok] / dist[ok, None], dtype=np.float32),
-                            dists=np.ascontiguousarray(dist[ok], dtype=np.float32),
-                            query="OCCLUDED")
-            blocked[ok] = hit != -1
-        cut += np.bincount(pt[blocked], angle[blocked], minlength=len(p))
-        reached += np.bincount(pt[~blocked], angle[~blocked], minlength=len(p))
-        # this chunk's best-aligned cut-off pair per point, where it beats the earlier ones
-        order = np.lexsort((-align[blocked], pt[blocked]))
-        rows = np.flatnonzero(blocked)[order]
-        rows = rows[np.unique(pt[rows], return_index=True)[1]]
-        better = align[rows] > best[pt[rows]]
-        rows = rows[better]
-        best[pt[rows]] = align[rows]
-        best_sample[pt[rows]] = sample[rows]
+        probe = dist > 0.0
+        if probe.any():
+            hit = _occluded(scene, origins[pt][probe], seg[probe] / dist[probe, None],
+                            dist[probe])
+            cut_points.append(pt[probe][hit])
+    cut_points = np.unique(np.concatenate(cut_points)) if cut_points else np.zeros(0, int)
+    moved = np.zeros(len(p), dtype=bool)
+    if len(cut_points) == 0:
+        return origins, moved
+    # pass 2, those points' faces only: the vote by corner angle, the origin moved
+    mine = np.zeros(len(p), dtype=bool)
+    mine[cut_points] = True
+    tris = np.flatnonzero(mine[tri_pts].any(axis=1))
+    pt, align, keep, sample = pairs(tris)
+    tp = tp_all[tris]
+    a, b, c = tp, np.roll(tp, -1, axis=1), np.roll(tp, 1, axis=1)
+    e1, e2 = b - a, c - a                           # the corner angle of each pair
+    angle = np.arctan2(np.linalg.norm(np.cross(e1, e2), axis=-1),
+                       np.einsum("tkj,tkj->tk", e1, e2)).reshape(-1)[keep]
+    sel = mine[pt]
+    pt, align, angle, sample = pt[sel], align[sel], angle[sel], sample[sel]
+    seg = sample - origins[pt]
+    dist = np.linalg.norm(seg, axis=1)
+    probe = (dist > 0.0) & (align < CONTACT_ALIGNED)
+    blocked = np.zeros(len(pt), dtype=bool)
+    blocked[probe] = _occluded(scene, origins[pt][probe], seg[probe] / dist[probe, None],
+                               dist[probe])
+    cut = np.bincount(pt[blocked], angle[blocked], minlength=len(p))
+    reached = np.bincount(pt[~blocked], angle[~blocked], minlength=len(p))
     moved = cut > reached
-    origins[moved] = best_sample[moved].astype(np.float32)
+    # the best-aligned cut-off face of each moved point
+    rows = np.flatnonzero(blocked & moved[pt])
+    rows = rows[np.lexsort((-align[rows], pt[rows]))]
+    rows = rows[np.unique(pt[rows], return_index=True)[1]]
+    origins[pt[rows]] = sample[rows].astype(np.float32)
     return origins, moved
+
+
+def _occluded(scene, origins, dirs, dists, parts: int | None = None) -> np.ndarray:
+    """(R,) bool: is each segment blocked; the rays split over threads (Embree releases
+    the GIL)."""
+    parts = max(1, min(parts or default_threads(), len(origins) // 10_000))
+    cuts = np.linspace(0, len(origins), parts + 1).astype(int)
+
+    def run(k):
+        a, b = cuts[k], cuts[k + 1]
+        return scene.run(np.ascontiguousarray(origins[a:b], dtype=np.float32),
+                         np.ascontiguousarray(dirs[a:b], dtype=np.float32),
+                         dists=np.ascontiguousarray(dists[a:b], dtype=np.float32),
+                         query="OCCLUDED") != -1
+    if parts == 1:
+        return run(0)
+    with ThreadPoolExecutor(max_workers=parts) as pool:
+        return np.concatenate(list(pool.map(run, range(parts))))
 
 
 def _repeat_rows(rows: np.ndarray, repeats) -> np.ndarray:
