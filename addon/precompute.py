@@ -130,7 +130,11 @@ class PrecomputeJob:
             bvh += time.perf_counter() - tb
             self.stage = "tracing"
             got = {}
-            origins = self._origins(scene, pts, nrm, starts, lo, hi)
+            origins, moved = trace_origins(
+                [o for i, o in enumerate(self.objects)
+                 if lo <= starts[i] and starts[i + 1] <= hi], scene, self.offset)
+            self.timings["contact_points"] = (self.timings.get("contact_points", 0)
+                                              + int(moved.sum()))
             visibility.trace_visibility(
                 scene, pts[lo:hi], nrm[lo:hi], cube, self.offset, threads=threads, origins=origins,
                 progress=lambda done, count, lo=lo: progress(lo + done, total),
@@ -159,20 +163,6 @@ class PrecomputeJob:
         self.timings["derive"] = time.perf_counter() - t3
         self.stage = "writing"
 
-    def _origins(self, scene, pts, nrm, starts, lo, hi):
-        """Ray origins of points lo..hi (rows of one trace group), stepped out of contact
-        (core.visibility.contact_origins); counts the moved points in timings."""
-        tris, corners = [], []
-        for i, o in enumerate(self.objects):
-            if lo <= starts[i] and starts[i + 1] <= hi:
-                tris.append(o.arrays.triangle_positions)
-                corners.append(o.points.point_of_corner[o.arrays.triangles] + (starts[i] - lo))
-        origins, moved = visibility.contact_origins(
-            scene, pts[lo:hi], nrm[lo:hi], np.concatenate(tris), np.concatenate(corners),
-            self.offset)
-        self.timings["contact_points"] = self.timings.get("contact_points", 0) + int(moved.sum())
-        return origins
-
     def _shadow_fields(self, cube, threads):
         """Each dynamic object's occluder field (its own frame: the world at this pose)
         and the static scene's field over where it goes (Zhou et al. 2005)."""
@@ -199,6 +189,19 @@ class PrecomputeJob:
                             f"{field.error:.1%})" + (f", static field {static.nbytes / 2**20:.1f}"
                                                      " MiB" if static is not None else ""))
         self.timings["shadow_fields"] = time.perf_counter() - t0
+
+
+def trace_origins(objects, scene, offset):
+    """``(origins, moved)`` of the shading points of ``objects`` (one trace group, in row
+    order) against ``scene``: stepped off along the normal, or out of a surface they touch
+    (core.visibility.contact_origins)."""
+    starts = np.cumsum([0] + [o.points.count for o in objects])
+    return visibility.contact_origins(
+        scene, np.concatenate([o.points.positions for o in objects]),
+        np.concatenate([o.points.normals for o in objects]),
+        np.concatenate([o.arrays.triangle_positions for o in objects]),
+        np.concatenate([o.points.point_of_corner[o.arrays.triangles] + s
+                        for o, s in zip(objects, starts[:-1])]), offset)
 
 
 class _InOrder:
