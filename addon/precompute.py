@@ -130,8 +130,13 @@ class PrecomputeJob:
             bvh += time.perf_counter() - tb
             self.stage = "tracing"
             got = {}
+            origins, moved = trace_origins(
+                [o for i, o in enumerate(self.objects)
+                 if lo <= starts[i] and starts[i + 1] <= hi], scene, self.offset)
+            self.timings["contact_points"] = (self.timings.get("contact_points", 0)
+                                              + int(moved.sum()))
             visibility.trace_visibility(
-                scene, pts[lo:hi], nrm[lo:hi], cube, self.offset, threads=threads,
+                scene, pts[lo:hi], nrm[lo:hi], cube, self.offset, threads=threads, origins=origins,
                 progress=lambda done, count, lo=lo: progress(lo + done, total),
                 cancel=lambda: self.cancel_requested, stats=got,
                 consume=lambda a, b, bits, lo=lo: consume(lo + a, lo + b, bits))
@@ -184,6 +189,19 @@ class PrecomputeJob:
                             f"{field.error:.1%})" + (f", static field {static.nbytes / 2**20:.1f}"
                                                      " MiB" if static is not None else ""))
         self.timings["shadow_fields"] = time.perf_counter() - t0
+
+
+def trace_origins(objects, scene, offset):
+    """``(origins, moved)`` of the shading points of ``objects`` (one trace group, in row
+    order) against ``scene``: stepped off along the normal, or out of a surface they touch
+    (core.visibility.contact_origins)."""
+    starts = np.cumsum([0] + [o.points.count for o in objects])
+    return visibility.contact_origins(
+        scene, np.concatenate([o.points.positions for o in objects]),
+        np.concatenate([o.points.normals for o in objects]),
+        np.concatenate([o.arrays.triangle_positions for o in objects]),
+        np.concatenate([o.points.point_of_corner[o.arrays.triangles] + s
+                        for o, s in zip(objects, starts[:-1])]), offset)
 
 
 class _InOrder:

@@ -7,7 +7,8 @@ FrameState marks such materials (:attr:`core.brdf.Material.per_pixel_lobe`), so 
 method shades their Lambert base only, and this pass adds the lobes per pixel
 (``shaders/sharp_lobe_frag.glsl``): NDF samples, the environment filtered to each
 sample's share of the lobe from a mip pyramid of the equirect (level 0 is the
-background's texture), the shading points' stored visibility at each sample direction.
+background's texture), the shading points' stored visibility at each sample direction
+(mixed over the triangle's corners whose normal's hemisphere holds it: only those traced it).
 The viewport and F12 draw it alike, after the method's own pass, adding with depth
 test equal.
 """
@@ -44,13 +45,17 @@ def _shader():
         for slot, (kind, ident) in enumerate(_SAMPLERS):
             info.sampler(slot, kind, ident)
         for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"),
-                                              ("VEC3", "triPoints"), ("VEC3", "bary"))):
+                                              ("VEC3", "triPoints"), ("VEC3", "bary"),
+                                              ("VEC3", "triN0"), ("VEC3", "triN1"),
+                                              ("VEC3", "triN2"))):
             info.vertex_in(slot, kind, ident)
         iface = gpu.types.GPUStageInterfaceInfo("prt_sharp_lobe_iface")
         iface.smooth("VEC3", "vPos")
         iface.smooth("VEC3", "vNrm")
         iface.smooth("VEC3", "vBary")
         iface.flat("VEC3", "vTri")
+        for k in range(3):
+            iface.flat("VEC3", "vTriN%d" % k)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
         info.vertex_source((drawing.SHADER_DIR / "sharp_lobe_vert.glsl").read_text())
@@ -66,7 +71,8 @@ def sharp_slots(st) -> list:
 
 def _batches(st, slots):
     """Per sharp slot a batch of its triangles' corners: position, normal, the three
-    shading points and barycentric weights."""
+    shading points, barycentric weights and the three points' normals (the hemispheres
+    their visibility was traced over)."""
     from gpu_extras.batch import batch_for_shader
     key = (st.name, st.fingerprint, tuple(slots))
     got = _BATCHES.get(key)
@@ -75,6 +81,9 @@ def _batches(st, slots):
     arrays = st.arrays
     tri = arrays.triangles
     pos, nrm, tri_points, bary = drawing.triangle_corners(st)
+    pts = st.points
+    tri_normals = np.repeat(pts.normals[pts.point_of_corner[tri]].astype(np.float32), 3,
+                            axis=0)                                  # (3T, 3 points, 3)
     tri_slot = arrays.corner_materials[tri[:, 0]]
     out = []
     for slot in slots:
@@ -83,7 +92,8 @@ def _batches(st, slots):
             out.append((slot, batch_for_shader(_shader(), "TRIS", {
                 "pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
                 "triPoints": np.ascontiguousarray(tri_points[sel]),
-                "bary": np.ascontiguousarray(bary[sel])})))
+                "bary": np.ascontiguousarray(bary[sel]),
+                **{"triN%d" % k: np.ascontiguousarray(tri_normals[sel, k]) for k in range(3)}})))
     if len(_BATCHES) >= 32:
         _BATCHES.pop(next(iter(_BATCHES)))
     _BATCHES[key] = out

@@ -6,8 +6,9 @@
  * (cos_o n.h) (Walter et al. 2007), L(i) is the environment averaged over the sample's
  * share of the lobe (filtered importance sampling, Krivanek & Colbert 2008: the mip level
  * whose texel spans 1 / (K pdf)), and V(i) is the shading points' stored visibility at
- * i, mixed barycentrically.  At alpha = 0 (Cycles' singular reflection) one sample at the
- * mirror direction gives F(cos_o) L(r) V(r) exactly.
+ * i, mixed barycentrically over the corners that traced it.  At alpha = 0 (Cycles'
+ * singular reflection) one sample at the mirror direction gives F(cos_o) L(r) V(r)
+ * exactly.
  *
  * paramTex texels: 0 eye (xyz, w = 1 perspective / 0 direction toward the viewer),
  * 1 (alpha, distribution 0 Beckmann / 1 GGX, lobe count, samples K), 2 (W0, H0, levels
@@ -103,41 +104,68 @@ float visible_bit(float p, int k)
   return float((octet >> (7 - (k & 7))) & 1);
 }
 
-/* core.directions.texel_of_components */
-int cube_texel(vec3 d, int n)
+/* core.directions.texel_of_components; `centre`: the texel's centre direction
+ * (core.directions.cubemap: a + s U + t V at the texel's centre s, t) */
+int cube_texel(vec3 d, int n, out vec3 centre)
 {
   vec3 a = abs(d);
   float s, t, m;
+  vec3 major, U, V;
   int face;
   if (a.x >= a.y && a.x >= a.z) {
     m = a.x;
     face = d.x < 0.0 ? 1 : 0;
     s = d.x < 0.0 ? d.z : -d.z;
     t = -d.y;
+    major = vec3(sign(d.x), 0.0, 0.0);
+    U = vec3(0.0, 0.0, d.x < 0.0 ? 1.0 : -1.0);
+    V = vec3(0.0, -1.0, 0.0);
   }
   else if (a.y >= a.z) {
     m = a.y;
     face = d.y < 0.0 ? 3 : 2;
     s = d.x;
     t = d.y < 0.0 ? -d.z : d.z;
+    major = vec3(0.0, sign(d.y), 0.0);
+    U = vec3(1.0, 0.0, 0.0);
+    V = vec3(0.0, 0.0, d.y < 0.0 ? -1.0 : 1.0);
   }
   else {
     m = a.z;
     face = d.z < 0.0 ? 5 : 4;
     s = d.z < 0.0 ? -d.x : d.x;
     t = -d.y;
+    major = vec3(0.0, 0.0, sign(d.z));
+    U = vec3(d.z < 0.0 ? -1.0 : 1.0, 0.0, 0.0);
+    V = vec3(0.0, -1.0, 0.0);
   }
   m = m > 0.0 ? m : 1.0;
   int col = clamp(int((s / m + 1.0) * 0.5 * float(n)), 0, n - 1);
   int row = clamp(int((t / m + 1.0) * 0.5 * float(n)), 0, n - 1);
+  centre = major + ((float(col) + 0.5) * 2.0 / float(n) - 1.0) * U +
+           ((float(row) + 0.5) * 2.0 / float(n) - 1.0) * V;
   return (face * n + row) * n + col;
 }
 
+/* The shading points' visibility at d, mixed barycentrically over the corners that
+ * traced d's texel: a point stores only its normal's hemisphere (core.visibility, 0
+ * elsewhere), and on a smooth-shaded rim a corner's normal can face away from light the
+ * pixel does see (a cylinder's bottom ring, tilted down, "shadowed" the softboxes on its
+ * side's upper part: highlights 24 % dark) -- untraced is unknown, not blocked. */
 float visibility(vec3 d)
 {
-  int k = cube_texel(d, int(param(3).x));
-  return vBary.x * visible_bit(vTri.x, k) + vBary.y * visible_bit(vTri.y, k) +
-         vBary.z * visible_bit(vTri.z, k);
+  vec3 centre;
+  int k = cube_texel(d, int(param(3).x), centre);
+  /* core.visibility.hemisphere_mask: n . w > 0 at the texel's centre */
+  vec3 w = vBary * vec3(dot(vTriN0, centre) > 0.0 ? 1.0 : 0.0,
+                        dot(vTriN1, centre) > 0.0 ? 1.0 : 0.0,
+                        dot(vTriN2, centre) > 0.0 ? 1.0 : 0.0);
+  float total = w.x + w.y + w.z;
+  if (total <= 0.0) {
+    return 0.0;
+  }
+  return (w.x * visible_bit(vTri.x, k) + w.y * visible_bit(vTri.y, k) +
+          w.z * visible_bit(vTri.z, k)) / total;
 }
 
 /* ---------------------------------------------------------------- main */

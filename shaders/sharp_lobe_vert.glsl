@@ -1,11 +1,15 @@
 /* Per-pixel glossy lobes too narrow for the cubemap (addon/sharp.py): per-corner
- * position and normal, the triangle's three shading points and barycentric weights, so
- * the fragment can read each point's stored visibility at its own directions. */
+ * position and normal, the triangle's three shading points with their normals and
+ * barycentric weights, so the fragment can read each point's stored visibility at its
+ * own directions (and know which directions a point traced). */
 void main()
 {
   vPos = pos;
   vNrm = nrm;
   vBary = bary;
   vTri = triPoints;
+  vTriN0 = triN0;
+  vTriN1 = triN1;
+  vTriN2 = triN2;
   gl_Position = viewProjection * vec4(pos, 1.0);
 }

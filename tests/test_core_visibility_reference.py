@@ -187,6 +187,54 @@ def test_small_scene_moderately_far_from_origin():
     np.testing.assert_array_equal(vis, (sp.normals @ cube.directions.T) > 0)
 
 
+def _box_on_ground(lift=0.0):
+    """A smooth-shaded unit box (corner normals (±1, ±1, ±1)/sqrt 3) standing ``lift``
+    above a ground plane at z = 0: its triangles, corner point indices, points, normals."""
+    v = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (0.0, 1.0)])
+    v[:, 2] += lift
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    corners = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    normals = unit(np.sign(v - [0.0, 0.0, 0.5 + lift]))
+    ground = np.array([[[-50, -50, 0], [50, -50, 0], [50, 50, 0]],
+                       [[-50, -50, 0], [50, 50, 0], [-50, 50, 0]]], float)
+    return np.concatenate([v[corners], ground]), corners, v, normals
+
+
+def test_contact_origins_lift_a_smooth_rim_off_the_ground_it_rests_on():
+    """A bottom corner's normal points 35 degrees into the ground: stepped along it the
+    rays start under the ground, blind upward and seeing the world below the floor.
+    Its two side faces (180 degrees of corner angle) outvote the bottom face lying on
+    the ground (90): traced from just inside a side face it sees every upward direction
+    of its hemisphere but those grazing the other side face (the sample sits 2 % into
+    its face) and none below the ground."""
+    tris, corners, pts, nrm = _box_on_ground()
+    cube = directions.cubemap(N)
+    scene = visibility.build_occluder_scene(tris)
+    offset = 1e-4 * mesh.bounding_diagonal(tris.reshape(-1, 3))
+    origins, moved = visibility.contact_origins(scene, pts, nrm, tris[:12], corners, offset)
+    bottom = pts[:, 2] == 0.0
+    np.testing.assert_array_equal(moved, bottom)
+    # the points off the ground keep the plain step along the normal
+    np.testing.assert_array_equal(origins[~bottom],
+                                  visibility.ray_origins(pts, nrm, offset)[~bottom])
+    hemi = visibility.hemisphere_mask(nrm, cube)
+    up, down = cube.directions[:, 2] > 0.0, cube.directions[:, 2] < 0.0
+    for given, seen_up, seen_down in ((None, (0.0, 0.0), 1.0), (origins, (0.95, 1.0), 0.0)):
+        bits = visibility.trace_visibility(scene, pts, nrm, cube, offset, origins=given)
+        vis = visibility.unpack_visibility(bits, cube.size)
+        for k in np.flatnonzero(bottom):
+            assert seen_up[0] <= vis[k][hemi[k] & up].mean() <= seen_up[1]
+            assert vis[k][hemi[k] & down].mean() == seen_down
+
+
+def test_contact_origins_leave_points_off_the_ground_alone():
+    tris, corners, pts, nrm = _box_on_ground(lift=0.05)
+    scene = visibility.build_occluder_scene(tris)
+    origins, moved = visibility.contact_origins(scene, pts, nrm, tris[:12], corners, 1e-3)
+    assert not moved.any()
+    np.testing.assert_array_equal(origins, visibility.ray_origins(pts, nrm, 1e-3))
+
+
 # --------------------------------------------------------------------------- #
 # visibility: packing, threads, callbacks
 # --------------------------------------------------------------------------- #

@@ -211,3 +211,34 @@ def test_mirror_ball_matches_cycles(tmp_path, kind, limit):
     ours = bs.render_exr(tmp_path / "ours.exr")
     truth = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=256)
     assert bs.rel_l2(ours, truth) < limit
+
+
+@pytest.mark.slow
+def test_smooth_shaded_sharp_edged_part_under_studio_matches_cycles(tmp_path):
+    """Issue 15: a Glossy (Beckmann 0.15) 24-segment cylinder shaded smooth, caps and
+    all (sharp edges with interpolated normals), standing on a ground under 'studio'.
+    Its bottom ring's normals point 43 degrees into the ground; its visibility was traced
+    from under it and mixed up the side, so the softboxes' rim highlights came out 24 %
+    dark (22.8 % rel-L2 for every method; core.visibility.contact_origins)."""
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("studio"), rotation_z=2.2)
+    bpy.ops.mesh.primitive_cylinder_add(vertices=24, radius=0.8, depth=1.2,
+                                        location=(0.0, 0.0, 0.6))
+    part = bpy.context.object
+    bpy.ops.object.shade_smooth()
+    part.data.materials.append(bs.bsdf_material("G", "ShaderNodeBsdfGlossy", Roughness=0.15,
+                                                distribution="BECKMANN"))
+    bs.add_ground(size=5.0, cuts=16)
+    bs.add_camera(location=(0.0, -4.5, 3.0), rotation=(1.0, 0.0, 0.0))
+    bs.set_resolution(80, 60)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 3
+    bpy.ops.prt.precompute()
+    truth = bs.render_exr(tmp_path / "cycles.exr", engine="CYCLES", samples=2048)
+    for method in ("REFERENCE", "SSDF_SG"):
+        scene.prt.method = method
+        ours = bs.render_exr(tmp_path / f"{method}.exr")
+        # 3.9 % now; the brightest highlight within 5 % (75 / 87 / 98 against 77 / 89 / 100)
+        assert bs.rel_l2(ours, truth) < 0.05, method
+        top = np.unravel_index(truth[..., 1].argmax(), truth.shape[:2])
+        np.testing.assert_allclose(ours[top][:3], truth[top][:3], rtol=0.05, err_msg=method)

@@ -332,8 +332,10 @@ def test_precompute_streams_the_visibility_and_keeps_it_only_for_a_derive():
     assert all(o.kept is None and o.blob for o in job.objects)
     pts = np.concatenate([o.points.positions for o in job.objects])
     nrm = np.concatenate([o.points.normals for o in job.objects])
-    whole = visibility.trace_visibility(visibility.build_occluder_scene(job.occluders), pts,
-                                        nrm, directions.cubemap(job.resolution), job.offset)
+    occluders = visibility.build_occluder_scene(job.occluders)
+    origins, _ = precompute.trace_origins(job.objects, occluders, job.offset)
+    whole = visibility.trace_visibility(occluders, pts, nrm, directions.cubemap(job.resolution),
+                                        job.offset, origins=origins)
     start = 0
     for o in job.objects:
         rows = whole[start:start + o.points.count]
