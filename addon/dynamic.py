@@ -208,6 +208,13 @@ def static_bits(st, state):
     data = st.dynamic[0]
     pts = st.points
     key = (st.name, "static", id(data), state.resolution, _pose_key(st.dynamic[1]))
-    return keys.held(_POSED, key, (data,), lambda: shadow_fields.static_bits(
-        data.static, _static_scene(state),
-        visibility.ray_origins(pts.positions, pts.normals, data.offset), pts.positions))
+
+    def make():
+        scene = _static_scene(state)
+        # where the precompute's rays start: out of a static surface the object touches
+        origins = (visibility.ray_origins(pts.positions, pts.normals, data.offset)
+                   if scene is None else visibility.contact_origins(
+                       scene, pts.positions, pts.normals, st.arrays.triangle_positions,
+                       pts.point_of_corner[st.arrays.triangles], data.offset)[0])
+        return shadow_fields.static_bits(data.static, scene, origins, pts.positions)
+    return keys.held(_POSED, key, (data,), make)
