@@ -26,19 +26,6 @@ import bench_lights  # noqa: E402
 import scenes  # noqa: E402
 
 
-def cycles_seed(path, seed, spp):
-    """Direct-light Cycles frame with one seed (scenes.render_cycles fixes seed 0)."""
-    import bpy
-    sc = bpy.context.scene
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = spp
-    sc.cycles.use_adaptive_sampling = False
-    sc.cycles.use_denoising = False
-    sc.cycles.max_bounces = 0
-    sc.cycles.seed = seed
-    scenes._render("CYCLES", [path])
-
-
 def converged_error(ours, frames):
     """(rel-L2 against the mean, the mean's noise, estimated rel-L2 against converged)."""
     C = np.stack(frames)[..., :3].astype(np.float64)
@@ -72,7 +59,7 @@ def main():
     for s in range(args.seeds):
         p = out / f"cycles_{w}x{h}_{args.spp}_{s}.exr"
         if not p.exists():
-            cycles_seed(p, s, args.spp)
+            scenes.render_cycles(p, samples=args.spp, seed=s)
         frames.append(scenes.read_exr(p))
     print(f"sun scene {w}×{h}, Cycles {args.seeds} seeds × {args.spp} spp")
     print("| method | vs the mean | the mean's noise | est. vs converged |")

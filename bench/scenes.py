@@ -234,7 +234,7 @@ def _render(engine, paths):
     return seconds
 
 
-def render_cycles(path, samples: int = 256, png=None) -> float:
+def render_cycles(path, samples: int = 256, png=None, seed: int = 0) -> float:
     """Direct-light-only Cycles render (ground truth), saved as EXR; returns seconds."""
     import bpy
     scene = bpy.context.scene
@@ -243,7 +243,7 @@ def render_cycles(path, samples: int = 256, png=None) -> float:
     scene.cycles.use_adaptive_sampling = False
     scene.cycles.use_denoising = False
     scene.cycles.max_bounces = 0
-    scene.cycles.seed = 0
+    scene.cycles.seed = seed
     return _render("CYCLES", [path] + ([png] if png else []))
 
 
