@@ -98,6 +98,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import brdf as core_brdf
+from . import sg
 from .cache import memo
 from .directions import orthonormal_frame
 from .fitting import levenberg_marquardt
@@ -779,24 +780,69 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     cos_o = np.sum(n * o, axis=1)[:, None]
     rough = material.roughness
     rough = rough[:, None] if np.ndim(rough) and np.size(rough) == P and P > 1 else rough
-    m = _m_factor(material.model, rough, cos_i, cos_o, c)
+    if material.model == "GGX":
+        m = _ggx_normalisation(material, n, pw, lam, mu_d, cos_o[:, 0], P)
+        keep_energy = 1.0
+    else:
+        m = _m_factor(material.model, rough, cos_i, cos_o, c)
     mat = material
+    cf = _fresnel_cosine(n, o, pw, lam) if material.model == "GGX" else c
     if any(np.ndim(v) >= 1 and np.shape(v)[0] == P and P > 1
            for v in (mat.ior, mat.metallic)) or mat.diffuse.ndim == 2 or mat.specular.ndim == 2:
-        fres = _fresnel_pointwise(mat, c, P)
+        fres = _fresnel_pointwise(mat, cf, P)
     else:
-        fres = _fresnel(mat, c)
+        fres = _fresnel(mat, cf)
     if mat.multiscatter:
         k_main, k_metal = multiscatter_factors(mat, cos_o[:, 0], P)
         fres = fres * k_main[:, None, :]
         if mat.fresnel == "PRINCIPLED":
-            fres = fres + _metal_fresnel(mat, c, P) * (k_metal - k_main)[:, None, :]
+            fres = fres + _metal_fresnel(mat, cf, P) * (k_metal - k_main)[:, None, :]
     mu = np.broadcast_to(mu_d, (P, K))[..., None] * (m * (c > 0.0) * keep_energy)[..., None] * fres
     return pw, lam, mu
 
 
 def _per_point(v, P, shape=()):
     return np.broadcast_to(np.asarray(v, dtype=np.float64), (P,) + shape)
+
+
+def _fresnel_cosine(n, o, pw, lam):
+    """``o . h`` (P, K) at the half vector of the view and the axis of each warped lobe's
+    product with the clamped cosine (eq. 5 with eq. 40's ``C*``): where the lit part of a
+    broad lobe is, rather than its centre (a rough dielectric's grazing Fresnel at the
+    centre was 2-4 points of error at r >= 0.7; the same at sharp lobes)."""
+    lam_c, _ = sg.clamped_cosine_sg()
+    d = lam[..., None] * pw + lam_c * n[:, None, :]
+    d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
+    h = d + o[:, None, :]
+    h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    return np.sum(h * o[:, None, :], axis=-1)
+
+
+def ggx_albedo(material, cos_o, P):
+    """Cycles' GGX single-scattering albedo ``E(r, n.o)`` and ``E_avg(r)`` per point (P,),
+    ``r = sqrt(a)`` the Blender roughness."""
+    cos_o = np.broadcast_to(np.asarray(cos_o, dtype=np.float64), (P,))
+    r = np.sqrt(np.clip(_per_point(material.roughness, P), 0.0, 1.0))
+    e, e_avg = np.zeros(P), np.zeros(P)
+    for rv in np.unique(r):
+        sel = r == rv
+        e[sel] = ggx_E(float(rv), np.clip(cos_o[sel], 0.0, 1.0))
+        e_avg[sel] = ggx_E_avg(float(rv))
+    return e, e_avg
+
+
+def _ggx_normalisation(material, n, pw, lam, mu_d, cos_o, P):
+    """``M_o`` of the GGX lobes (P, 1): the factor that gives the warped slice (Fresnel 1)
+    Cycles' single-scattering albedo, ``E(r, n.o) / sum_k mu_k <G_k, C*>`` with ``C*`` the
+    clamped cosine of eq. 40 (inner product eq. 4).  It stands in for eq. 22's ``M`` at the
+    lobe centre (shared by the coaxial lobes): the warp and ``M`` at the centre lose 9-23 %
+    of a rough GGX slice's energy at a normal view, and the broad tail lobe of ``a > 0.8``
+    gains more than that at grazing ones."""
+    lam_c, mu_c = sg.clamped_cosine_sg()
+    cos_lobe = sg.inner_product(pw, lam, 1.0, n[:, None, :], lam_c, mu_c)          # (P, K)
+    a_sg = np.sum(np.broadcast_to(mu_d, cos_lobe.shape) * cos_lobe, axis=1)
+    e, _ = ggx_albedo(material, cos_o, P)
+    return (e / np.maximum(a_sg, 1e-300))[:, None]
 
 
 def _metal_fresnel(material, c, P):
@@ -815,14 +861,14 @@ def multiscatter_factors(material: SGMaterial, cos_o, P):
     ``r = sqrt(a)``; ``F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg))`` with the lobe's mean
     Fresnel ``F_ss``: the main lobe's (the colour, Schlick, or the Principled dielectric
     layer) and the Principled metal lobe's (F0 = base colour, no F82 tint)."""
-    cos_o = np.broadcast_to(np.asarray(cos_o, dtype=np.float64), (P,))
-    r = np.sqrt(np.clip(_per_point(material.roughness, P), 0.0, 1.0))
-    missing, e_avg = np.zeros(P), np.zeros(P)
-    for rv in np.unique(r):
-        sel = r == rv
-        e = np.maximum(ggx_E(float(rv), cos_o[sel]), 1e-6)
-        missing[sel] = (1.0 - e) / e
-        e_avg[sel] = ggx_E_avg(float(rv))
+    e, e_avg = ggx_albedo(material, cos_o, P)
+    missing = (1.0 - np.maximum(e, 1e-6)) / np.maximum(e, 1e-6)
+    fms_main, fms_metal = multiscatter_fms(material, e_avg, P)
+    return 1.0 + missing[:, None] * fms_main, 1.0 + missing[:, None] * fms_metal
+
+
+def multiscatter_fms(material: SGMaterial, e_avg, P):
+    """``(F_ms main, F_ms metal)`` (P, 3) of :func:`multiscatter_factors` for ``E_avg`` (P,)."""
     ks = np.clip(_per_point(material.specular, P, (3,)), 0.0, None)
     mode = material.fresnel
     if mode == "NONE":
@@ -843,12 +889,11 @@ def multiscatter_factors(material: SGMaterial, cos_o, P):
         fss = f0 + (1.0 - f0) * s[:, None]
     f0m = np.clip(_per_point(material.diffuse, P, (3,)), 0.0, 1.0)
     fss_m = f0m + (1.0 - f0m) / 21.0
+    ea = np.broadcast_to(np.asarray(e_avg, dtype=np.float64), (P,))[:, None]
 
-    def factor(f):
-        ea = e_avg[:, None]
-        fms = f * ea / np.maximum(1.0 - f * (1.0 - ea), 1e-12)
-        return 1.0 + missing[:, None] * fms
-    return factor(fss), factor(fss_m)
+    def fms(f):
+        return f * ea / np.maximum(1.0 - f * (1.0 - ea), 1e-12)
+    return fms(fss), fms(fss_m)
 
 
 def _bend_view(n, o):
@@ -957,12 +1002,12 @@ def diffuse_view_weight(material: SGMaterial, normals, views):
 
 # --------------------------------------------------------------------------- from core.brdf
 
-def sg_material_from_brdf(material: core_brdf.Material, ggx: bool = False) -> SGMaterial:
+def sg_material_from_brdf(material: core_brdf.Material, ggx: bool = True) -> SGMaterial:
     """Closest SG model of a Cycles-like :class:`.brdf.Material`, ``alpha = max(r^2, ...)``:
     Beckmann lobes are ``COOK_TORRANCE``; GGX and Multiscatter GGX lobes are ``GGX`` (two
-    coaxial SGs, GGX's Smith term; Multiscatter GGX with ``multiscatter=True``) when
-    ``ggx``, else ``COOK_TORRANCE`` too (what the SSDF_SG shaders draw until they read the
-    second lobe and the multiscatter factor; docs/measurements.md "SG lobes of a rough metal").
+    coaxial SGs; Multiscatter GGX with ``multiscatter=True``), or with ``ggx=False``
+    ``COOK_TORRANCE`` too (the Beckmann lobe of the same alpha drawn before 2026-12-02:
+    docs/measurements.md "SG lobes of a rough metal").
 
     * Glossy BSDF (``fresnel="NONE"``): ``F = 1``, ``ks`` = node colour, diffuse
       albedo kept (0 for a pure Glossy BSDF).

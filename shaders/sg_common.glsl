@@ -29,6 +29,9 @@
 #define SG_COS_VIEW_MIN 1e-4
 #define SG_COS_MIN_SINGULAR 0.05
 #define SG_LAMBDA_MAX 1e5
+/* eq. 40's clamped-cosine SG (core.sg.clamped_cosine_sg) */
+#define SG_COSINE_LAMBDA 2.133
+#define SG_COSINE_MU 1.17
 
 /* NDF correction tables c_lam, c_mu on a = 0, 0.05, ..., 1 (core.sg_brdf.ISO_NDF_TABLE). */
 const float SG_CT_CLAM[21] = float[21](0.9999875, 0.998759, 0.9951434, 0.9894735, 0.9822715, 0.9742365, 0.9661932, 0.9590131, 0.9535198, 0.9504024, 0.9501555, 0.9530325, 0.9589624, 0.9674702, 0.9777121, 0.9886328, 0.9991382, 1.008208, 1.014945, 1.018575, 1.018442);
