@@ -219,7 +219,7 @@ void sg_frame(vec3 n, vec3 t_in, out vec3 t, out vec3 b)
 }
 
 /* The view slice ks rho_s(o, i) as SG lobes (core.sg_brdf.specular_lobes), without the
- * cosine.  n, o unit; t a tangent (any vector; vec3(0) for the default frame).
+ * cosine; models 0-4 (GGX, 5, is drawn by ssdf_sg_frag.glsl's ggx_specular).  n, o unit; t a tangent (any vector; vec3(0) for the default frame).
  * Returns the lobe count K (<= SG_MAX_LOBES); lobes k < K are in axes/lams/mus. */
 int specular_lobes(vec4 sgm0, vec4 sgm1, vec4 sgm2, vec3 n, vec3 o, vec3 t_in,
                    int n_ndf, vec4 ndf_lobes[SG_MAX_LOBES], float ndf_mu[SG_MAX_LOBES],

@@ -205,8 +205,8 @@ def test_cycles_glossy_beckmann_03_within_6_percent():
 
 
 def test_principled_default_surface_error():
-    """Cycles' default surface (Principled, Multiscatter GGX, r = 0.5) mapped to
-    Cook-Torrance/Beckmann: total (diffuse + specular) error by quadrature."""
+    """Cycles' default surface (Principled, Multiscatter GGX, r = 0.5) mapped to the GGX
+    lobes: total (diffuse + specular) error by quadrature."""
     cm = brdf.principled_material()
     sm = sg_brdf.sg_material_from_brdf(cm)
     views = _views([0, 30, 60, 75])
@@ -219,8 +219,8 @@ def test_principled_default_surface_error():
     diff = sg_brdf.diffuse_albedo(sm)[None, :] / math.pi * np.sum(cos * L) * _FIB_W
     err = _rel_l2(spec + diff, ref)
     print(f"Principled default: rel L2 {err:.4f}")
-    # measured 0.093: GGX drawn with a Beckmann NDF, multiscatter energy dropped
-    assert err <= 0.10
+    # measured 0.062 (0.093 with the Beckmann lobe of the same alpha, no multiscatter)
+    assert err <= 0.07
 
 
 def test_textured_parameters_match_per_point_materials():
@@ -440,7 +440,9 @@ def test_glsl_specular_lobes_match_numpy():
         sg_brdf.SGMaterial(model="WARD", roughness=0.15),
         sg_brdf.SGMaterial(model="WARD_ANISO", alpha_x=0.3, alpha_y=0.1),
         sg_brdf.SGMaterial(model="ASHIKHMIN_SHIRLEY", nu=75, nv=1200, fresnel="SCHLICK", specular=(0.05, 0.05, 0.05)),
-        sg_brdf.sg_material_from_brdf(brdf.principled_material(base_color=(0.8, 0.4, 0.2), metallic=0.3, roughness=0.4)),
+        # the twin's models are 0-4: the Principled layering on a Beckmann lobe (GGX is drawn
+        # by ssdf_sg_frag.glsl: tests/test_textures.py's sphere against Cycles)
+        sg_brdf.sg_material_from_brdf(brdf.principled_material(base_color=(0.8, 0.4, 0.2), metallic=0.3, roughness=0.4), ggx=False),
     ]
     for mat in cases:
         ax, lam, mu = sg_brdf.specular_lobes(mat, n, v, t)
@@ -502,7 +504,7 @@ def test_blender_material_export_and_the_reflectance_panel():
     mat = bs.bsdf_material("SGMat", "ShaderNodeBsdfPrincipled", **{"Metallic": 0.2, "IOR": 1.45})
     assert mat.prt_sg.use_blender_material
     sgm = sg_material.export_sg_material(mat, [])
-    assert sgm.model == "COOK_TORRANCE" and sgm.fresnel == "PRINCIPLED"
+    assert sgm.model == "GGX" and sgm.multiscatter and sgm.fresnel == "PRINCIPLED"
     assert np.isclose(float(sgm.metallic), 0.2) and np.isclose(float(sgm.ior), 1.45)
 
     # the sliders: own model when "Use Blender Material" is off
@@ -612,14 +614,14 @@ def _forest_metal_sphere_errors(r, ggx):
     return err, ours.mean(axis=0) / truth.mean(axis=0)
 
 
-@pytest.mark.parametrize("r, beckmann_min, ggx_max", [(0.3, 0.18, 0.11), (0.7, 0.30, 0.235)])
+@pytest.mark.parametrize("r, beckmann_min, ggx_max", [(0.3, 0.18, 0.13), (0.7, 0.30, 0.22)])
 def test_rough_metal_ggx_lobes_with_multiscatter_against_quadrature(r, beckmann_min, ggx_max):
     """A Principled metal (base 0.9 / 0.7 / 0.5) under 'forest': two coaxial GGX lobes
-    with GGX's Smith term and Cycles' multiscatter factor against the Beckmann lobe of the
-    same alpha, on a grid over the sphere's disc (measured 20.0 -> 10.2 % at r 0.3, 32.1 ->
-    22.1 % at r 0.7; docs/measurements.md "SG lobes of a rough metal").  What is left: the
-    slice is 13 % dark (the warped lobes' energy, M at each lobe's centre)."""
+    normalised to Cycles' E(r, mu) with Cycles' multiscatter factor against the Beckmann
+    lobe of the same alpha, on a grid over the sphere's disc (measured 20.0 -> 12.0 % at
+    r 0.3, 32.1 -> 20.7 % at r 0.7, means within 3 / 9 %; docs/measurements.md "SG lobes
+    of a rough metal")."""
     beck, beck_ratio = _forest_metal_sphere_errors(r, False)
     ggx, ggx_ratio = _forest_metal_sphere_errors(r, True)
     assert beck > beckmann_min and ggx < ggx_max, (beck, ggx)
-    assert np.all(np.abs(ggx_ratio - 1.0) < 0.15), ggx_ratio
+    assert np.all(np.abs(ggx_ratio - 1.0) < 0.1), ggx_ratio
