@@ -36,10 +36,14 @@ With ``c = n . h`` (``theta`` its angle), ``cos_i = n . i``, ``cos_o = n . o``,
   ``G2 = 1/(1 + Lambda(cos_i) + Lambda(cos_o))`` and Cycles' rational Beckmann
   ``Lambda`` (:func:`.brdf.smith_lambda`).  With ``F = 1`` and ``ks`` = colour this
   is Cycles' Glossy BSDF (Beckmann) exactly, up to the SG approximation.
-``GGX`` (Cycles' GGX / Multiscatter GGX, Principled): ``D = a^2 / (pi c^4 (a^2 + tan^2 theta)^2)``,
-  ``M`` as Cook-Torrance with GGX's ``Lambda = (sqrt(1 + a^2 tan^2) - 1)/2``; its NDF is
-  :data:`GGX_LOBES` coaxial SGs (:data:`GGX_NDF_TABLE`, :func:`fit_coaxial_ndf`), each warped
-  like the one lobe of the other models.
+``GGX`` (Cycles' GGX / Multiscatter GGX, Principled): ``D = a^2 / (pi c^4 (a^2 + tan^2 theta)^2)``
+  as :data:`GGX_LOBES` coaxial SGs (:data:`GGX_NDF_TABLE`, :func:`fit_coaxial_ndf`), each
+  warped like the one lobe of the other models.  ``M`` at the lobes' centre is replaced by
+  the factor that gives the slice (Fresnel 1) Cycles' GGX albedo ``E(r, n.o)``
+  (:func:`_ggx_normalisation`), the Fresnel is taken at each lobe's product with the
+  cosine (:func:`_fresnel_cosine`), and Multiscatter GGX adds Cycles' energy factor per
+  layer (:func:`multiscatter_factors`).  (:func:`_m_factor` has GGX's Smith ``Lambda`` for
+  :func:`specular_brdf`.)
 ``BLINN_PHONG``: ``D = (e + 2)/(2 pi) c^e`` with exponent ``e = 2/a^2 - 2``
   (``a = roughness``, the Beckmann-equivalent slope), ``M`` as Cook-Torrance.
 ``WARD``: ``D = exp(-tan^2 theta / a^2) / (pi a^2)``, ``M = F / (4 sqrt(cos_i cos_o))``
@@ -82,10 +86,11 @@ K <= 7, the 7 lobes of Fig. 2 for ``nu = 75, nv = 1200``).  Each lobe is warped
 separately (§4.3) into an isotropic lobe of the view slice.
 
 What is approximated, and where it hurts: the isotropic warp at oblique views
-(§4.3 says so), ``M`` constant over each lobe (eq. 22) and the F82 tint of Cycles' metal
-lobe (Schlick here).  Cycles' multiple-scattering energy compensation of Multiscatter
-GGX is a factor of ``M_o`` (:func:`multiscatter_factors`): it is up to +25 % on a rough
-bright metal (r = 0.7), which a Beckmann lobe without it missed.  Measured errors:
+(§4.3 says so), ``M`` constant over each lobe (eq. 22), a rough GGX slice's shape (its
+energy is Cycles' by construction) and the F82 tint of Cycles' metal lobe (Schlick here).
+GGX lobes drawn as the Beckmann lobe of the same alpha without the multiscatter factor
+(before 2026-12-02, ``sg_material_from_brdf(ggx=False)``) were 14-20 % off on a rough
+metal: docs/measurements.md "SG lobes of a rough metal".  Measured errors:
 ``tests/test_sg_brdf.py``, docs/measurements.md.
 """
 
@@ -751,7 +756,9 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     * ``mu = mu_W ks F(o.p) M_o(p_W)`` (eq. 22) with ``M_o`` of the model
       (cosines floored at :data:`COS_MIN`, or :data:`COS_MIN_SINGULAR` for the
       ``1/sqrt(cos)`` models) and the Fresnel of :func:`fresnel_coefficients`;
-      lobes whose facet faces away from the view (``o.p <= 0``) get ``mu = 0``.
+      lobes whose facet faces away from the view (``o.p <= 0``) get ``mu = 0``;
+    * ``GGX``: ``M_o`` is the normalisation to Cycles' ``E(r, n.o)``, ``F`` at each lobe's
+      product with the cosine, times the multiscatter factor (module docstring).
 
     ``normals``, ``views`` (toward the viewer), ``tangents``: (P, 3).  Per-point
     material arrays broadcast over P.  Returns ``axes (P, K, 3)``, ``lam (P, K)``,
@@ -867,8 +874,9 @@ def multiscatter_factors(material: SGMaterial, cos_o, P):
     return 1.0 + missing[:, None] * fms_main, 1.0 + missing[:, None] * fms_metal
 
 
-def multiscatter_fms(material: SGMaterial, e_avg, P):
-    """``(F_ms main, F_ms metal)`` (P, 3) of :func:`multiscatter_factors` for ``E_avg`` (P,)."""
+def multiscatter_fss(material: SGMaterial, P):
+    """``(F_ss main, F_ss metal)`` (P, 3): the lobes' mean Fresnel (Cycles' ``Fss``; linear
+    in the base colour)."""
     ks = np.clip(_per_point(material.specular, P, (3,)), 0.0, None)
     mode = material.fresnel
     if mode == "NONE":
@@ -888,12 +896,15 @@ def multiscatter_fms(material: SGMaterial, e_avg, P):
         f0 = np.clip(ks, 0.0, 1.0)
         fss = f0 + (1.0 - f0) * s[:, None]
     f0m = np.clip(_per_point(material.diffuse, P, (3,)), 0.0, 1.0)
-    fss_m = f0m + (1.0 - f0m) / 21.0
-    ea = np.broadcast_to(np.asarray(e_avg, dtype=np.float64), (P,))[:, None]
+    return fss, f0m + (1.0 - f0m) / 21.0
 
-    def fms(f):
-        return f * ea / np.maximum(1.0 - f * (1.0 - ea), 1e-12)
-    return fms(fss), fms(fss_m)
+
+def multiscatter_fms(material: SGMaterial, e_avg, P):
+    """``(F_ms main, F_ms metal)`` (P, 3) of :func:`multiscatter_factors` for ``E_avg`` (P,):
+    ``F_ss E_avg / (1 - F_ss (1 - E_avg))``."""
+    ea = np.broadcast_to(np.asarray(e_avg, dtype=np.float64), (P,))[:, None]
+    return tuple(f * ea / np.maximum(1.0 - f * (1.0 - ea), 1e-12)
+                 for f in multiscatter_fss(material, P))
 
 
 def _bend_view(n, o):

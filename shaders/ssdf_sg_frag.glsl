@@ -62,8 +62,10 @@ void ggx_inputs(float x, float y, int nr, int nl, float mw, vec3 cf)
     q[j] = lo + (hi - lo) * cf;
   }
   fresAm = q[0];
-  fmsMain = q[1];
-  fmsMetal = q[2];
+  /* Cycles' F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg)) of the pixel's F_ss (0: no multiscatter) */
+  float ea = e.z;
+  fmsMain = e.w > 0.5 ? q[1] * ea / max(1.0 - q[1] * (1.0 - ea), vec3(1e-12)) : vec3(0.0);
+  fmsMetal = e.w > 0.5 ? q[2] * ea / max(1.0 - q[2] * (1.0 - ea), vec3(1e-12)) : vec3(0.0);
 }
 
 /* Cycles' GGX single-scattering albedo E(r, mu) at the pixel's table entry (linear in mu

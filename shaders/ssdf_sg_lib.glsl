@@ -29,8 +29,9 @@
 
 const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
 const int ENTRY = 38;       /* ENTRY_TEXELS */
-const int GGX_TEXEL = 17;   /* GGX: (lambda_2 a^2, mu_2 a^2), E(r, mu) at 32 mu nodes (8 texels),
-                             * then (metal part of A, F_ms main, F_ms metal) per corner */
+const int GGX_TEXEL = 17;   /* GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E(r, mu) at 32
+                             * mu nodes (8 texels), then (metal part of A, F_ss main, F_ss metal)
+                             * per corner */
 
 int cosLobes;
 float cosLambda;

@@ -163,13 +163,14 @@ def material_uniforms(material):
     A, Bd, Bs = (np.asarray(x, np.float64).reshape(3) for x in sg_brdf.fresnel_coefficients(m))
     glossy = is_glossy(m)
     model = {"COOK_TORRANCE": 0, "BLINN_PHONG": 0, "WARD": 1, "GGX": 3}.get(m.model, 2)
-    # GGX: E(r, mu) on Cycles' 32 mu nodes (the lobes' normalisation and the multiscatter
-    # factor), the metal part of A and the two F_ms (core.sg_brdf.multiscatter_factors)
-    E, am, fms = np.ones(GGX_E_NODES), np.zeros(3), np.zeros((2, 3))
+    # GGX: E(r, mu) on Cycles' 32 mu nodes and E_avg (the lobes' normalisation and the
+    # multiscatter factor), the metal part of A and the two F_ss (linear in the base colour;
+    # the shader makes F_ms of them, core.sg_brdf.multiscatter_factors)
+    E, e_avg, am, fss = np.ones(GGX_E_NODES), np.ones(1), np.zeros(3), np.zeros((2, 3))
     if m.model == "GGX":
         E, e_avg = sg_brdf.ggx_albedo(m, np.linspace(0.0, 1.0, GGX_E_NODES), GGX_E_NODES)
         if m.multiscatter:
-            fms = np.array([f[0] for f in sg_brdf.multiscatter_fms(m, e_avg[:1], 1)])
+            fss = np.array([f[0] for f in sg_brdf.multiscatter_fss(m, 1)])
         if m.fresnel == "PRINCIPLED":
             am = float(np.asarray(m.metallic).reshape(-1)[0]) * np.clip(
                 np.asarray(m.diffuse, np.float64).reshape(3), 0.0, 1.0)
@@ -179,7 +180,8 @@ def material_uniforms(material):
                 ior=float(np.asarray(m.ior).reshape(-1)[0]), ndfLambda=float(lam[0]),
                 ndfMu=float(mu[0]), ndfLambda2=float(lam[1]), ndfMu2=float(mu[1]),
                 fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0), ggxE=E,
-                fresAm=(*am, 0.0), fmsMain=(*fms[0], 0.0), fmsMetal=(*fms[1], 0.0))
+                ggxEavg=float(e_avg[0]), multiscatter=int(m.multiscatter),
+                fresAm=(*am, 0.0), fssMain=(*fss[0], 0.0), fssMetal=(*fss[1], 0.0))
 
 
 #: texel of the first clamped-cosine lobe in the parameter texture
@@ -189,8 +191,8 @@ ROUGHNESS_NODES, LEVEL_NODES = 33, 9
 #: Cycles' mu nodes of E(r, mu) (core.brdf_tables)
 GGX_E_NODES = 32
 #: texels per table entry: (lambda a^2, mu a^2, eta, -), then kd, A, B_d, B_s at the four
-#: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, -, -), E at the 32 mu
-#: nodes (8 texels), then the metal part of A, F_ms main, F_ms metal at the four corners
+#: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E at
+#: the 32 mu nodes (8 texels), then the metal part of A, F_ss main, F_ss metal at the corners
 ENTRY_TEXELS = 17 + 1 + GGX_E_NODES // 4 + 12
 #: the textured inputs a slot's shader reads, in sampler and texel order
 INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
@@ -243,11 +245,12 @@ def _entry(uniforms, alpha):
     e[0] = (u["ndfLambda"] * alpha * alpha, u["ndfMu"] * alpha * alpha, u["ior"], 0.0)
     for c, v in enumerate(uniforms):
         e[1 + 4 * c:5 + 4 * c] = (v["kd"], v["fresA"], v["fresBd"], v["fresBs"])
-    e[17] = (u["ndfLambda2"] * alpha * alpha, u["ndfMu2"] * alpha * alpha, 0.0, 0.0)
+    e[17] = (u["ndfLambda2"] * alpha * alpha, u["ndfMu2"] * alpha * alpha, u["ggxEavg"],
+             u["multiscatter"])
     e[18:18 + GGX_E_NODES // 4] = np.asarray(u["ggxE"]).reshape(-1, 4)
     k = 18 + GGX_E_NODES // 4
     for c, v in enumerate(uniforms):
-        e[k + 3 * c:k + 3 * c + 3] = (v["fresAm"], v["fmsMain"], v["fmsMetal"])
+        e[k + 3 * c:k + 3 * c + 3] = (v["fresAm"], v["fssMain"], v["fssMetal"])
     return e
 
 
