@@ -83,7 +83,7 @@ class PRT_PT_sg_material(bpy.types.Panel):
         col = self.layout.column()
         col.prop(s, "use_blender_material")
         if s.use_blender_material:
-            col.label(text="Drawn as Cook-Torrance (Beckmann) from the node tree", icon="INFO")
+            col.label(text="Drawn from the node tree (Beckmann or GGX lobes)", icon="INFO")
             return
         col.prop(s, "model")
         if s.model == "WARD_ANISO":
