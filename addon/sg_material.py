@@ -43,7 +43,7 @@ class PRTSGMaterialSettings(bpy.types.PropertyGroup):
     use_blender_material: BoolProperty(
         name="Use Blender Material", default=True, update=redraw_viewports,
         description="Map the material's node tree (Diffuse/Glossy/Principled BSDF) to "
-                    "Cook-Torrance; off: use the settings below")
+                    "SG lobes (Beckmann or GGX); off: use the settings below")
     model: EnumProperty(name="Model", items=MODEL_ITEMS, default="COOK_TORRANCE",
                         update=redraw_viewports)
     roughness: FloatProperty(name="Roughness", default=0.3, min=0.0, max=1.0,
@@ -83,7 +83,7 @@ class PRT_PT_sg_material(bpy.types.Panel):
         col = self.layout.column()
         col.prop(s, "use_blender_material")
         if s.use_blender_material:
-            col.label(text="Drawn as Cook-Torrance (Beckmann) from the node tree", icon="INFO")
+            col.label(text="Drawn from the node tree (Beckmann or GGX lobes)", icon="INFO")
             return
         col.prop(s, "model")
         if s.model == "WARD_ANISO":

@@ -36,6 +36,14 @@ With ``c = n . h`` (``theta`` its angle), ``cos_i = n . i``, ``cos_o = n . o``,
   ``G2 = 1/(1 + Lambda(cos_i) + Lambda(cos_o))`` and Cycles' rational Beckmann
   ``Lambda`` (:func:`.brdf.smith_lambda`).  With ``F = 1`` and ``ks`` = colour this
   is Cycles' Glossy BSDF (Beckmann) exactly, up to the SG approximation.
+``GGX`` (Cycles' GGX / Multiscatter GGX, Principled): ``D = a^2 / (pi c^4 (a^2 + tan^2 theta)^2)``
+  as :data:`GGX_LOBES` coaxial SGs (:data:`GGX_NDF_TABLE`, :func:`fit_coaxial_ndf`), each
+  warped like the one lobe of the other models.  ``M`` at the lobes' centre is replaced by
+  the factor that gives the slice (Fresnel 1) Cycles' GGX albedo ``E(r, n.o)``
+  (:func:`_ggx_normalisation`), the Fresnel is taken at each lobe's product with the
+  cosine (:func:`_fresnel_cosine`), and Multiscatter GGX adds Cycles' energy factor per
+  layer (:func:`multiscatter_factors`).  (:func:`_m_factor` has GGX's Smith ``Lambda`` for
+  :func:`specular_brdf`.)
 ``BLINN_PHONG``: ``D = (e + 2)/(2 pi) c^e`` with exponent ``e = 2/a^2 - 2``
   (``a = roughness``, the Beckmann-equivalent slope), ``M`` as Cook-Torrance.
 ``WARD``: ``D = exp(-tan^2 theta / a^2) / (pi a^2)``, ``M = F / (4 sqrt(cos_i cos_o))``
@@ -78,10 +86,12 @@ K <= 7, the 7 lobes of Fig. 2 for ``nu = 75, nv = 1200``).  Each lobe is warped
 separately (§4.3) into an isotropic lobe of the view slice.
 
 What is approximated, and where it hurts: the isotropic warp at oblique views
-(§4.3 says so), ``M`` constant over each lobe (eq. 22), GGX lobes drawn with a
-Beckmann NDF of the same ``alpha`` (:func:`sg_material_from_brdf`), and
-Cycles' multiple-scattering energy compensation (dropped: its factor is at most
-1.0 + ~0.1 at roughness 0.5).  Measured errors: ``tests/test_sg_brdf.py``.
+(§4.3 says so), ``M`` constant over each lobe (eq. 22), a rough GGX slice's shape (its
+energy is Cycles' by construction) and the F82 tint of Cycles' metal lobe (Schlick here).
+GGX lobes drawn as the Beckmann lobe of the same alpha without the multiscatter factor
+(before 2026-12-02, ``sg_material_from_brdf(ggx=False)``) were 14-20 % off on a rough
+metal: docs/measurements.md "SG lobes of a rough metal".  Measured errors:
+``tests/test_sg_brdf.py``, docs/measurements.md.
 """
 
 from __future__ import annotations
@@ -93,10 +103,12 @@ from typing import NamedTuple
 import numpy as np
 
 from . import brdf as core_brdf
+from . import sg
 from .cache import memo
 from .directions import orthonormal_frame
 from .fitting import levenberg_marquardt
-from .microfacet import _lambda_raw
+from .brdf_tables import ggx_E, ggx_E_avg
+from .microfacet import _lambda_raw, F0_from_ior, fresnel_dielectric_Fss
 
 __all__ = [
     "MODELS", "ISOTROPIC_MODELS", "FRESNEL_MODES", "MAX_LOBES", "ALPHA_MIN",
@@ -107,8 +119,10 @@ __all__ = [
     "MODEL_INDEX", "FRESNEL_INDEX",
 ]
 
-MODELS = ("COOK_TORRANCE", "BLINN_PHONG", "WARD", "WARD_ANISO", "ASHIKHMIN_SHIRLEY")
-ISOTROPIC_MODELS = MODELS[:3]
+MODELS = ("COOK_TORRANCE", "BLINN_PHONG", "WARD", "WARD_ANISO", "ASHIKHMIN_SHIRLEY", "GGX")
+ISOTROPIC_MODELS = MODELS[:3] + ("GGX",)
+#: coaxial SG lobes of the GGX NDF fit (one lobe loses its long tails: 14-20 % L2 error)
+GGX_LOBES = 2
 FRESNEL_MODES = ("NONE", "SCHLICK", "DIELECTRIC", "PRINCIPLED")
 #: integer codes used by the GLSL twin (``shaders/sg_common.glsl``).
 MODEL_INDEX = {m: i for i, m in enumerate(MODELS)}
@@ -162,6 +176,8 @@ class SGMaterial:
     fresnel:    one of :data:`FRESNEL_MODES`.
     ior:        relative index of refraction ``eta`` of eq. 14.
     metallic:   ``"PRINCIPLED"`` metal weight.
+    multiscatter: scale the lobes by Cycles' multiple-scattering energy compensation
+                (Multiscatter GGX): :func:`multiscatter_factors`.
     """
 
     model: str = "COOK_TORRANCE"
@@ -175,6 +191,7 @@ class SGMaterial:
     fresnel: str = "NONE"
     ior: object = 1.5
     metallic: object = 0.0
+    multiscatter: bool = False
 
     def __post_init__(self):
         self.model = str(self.model).upper()
@@ -192,6 +209,7 @@ class SGMaterial:
         self.nv = float(_positive_array(self.nv, "nv", 0.0))
         self.ior = _positive_array(self.ior, "ior", 1e-3)
         self.metallic = np.clip(_positive_array(self.metallic, "metallic", 0.0), 0.0, 1.0)
+        self.multiscatter = bool(self.multiscatter)
 
     @property
     def is_anisotropic(self) -> bool:
@@ -224,6 +242,8 @@ def ndf_value(model, h_local, roughness=0.3, aniso=(0.3, 0.1)):
                 d = np.exp(-tan2 / a2) / (math.pi * a2 * c2 * c2)
             elif model == "WARD":
                 d = np.exp(-tan2 / a2) / (math.pi * a2)
+            elif model == "GGX":
+                d = a2 / (math.pi * (s2 + a2 * c2) ** 2)
             else:
                 e = np.maximum(2.0 / a2 - 2.0, 0.0)
                 d = (e + 2.0) / (2.0 * math.pi) * np.exp(e * np.log(np.maximum(c, 1e-300)))
@@ -329,6 +349,60 @@ def iso_table_fit(model):
     return np.array(cl), np.array(cm)
 
 
+
+def _graded_theta_quadrature(a, per_panel=24):
+    """Gauss-Legendre in theta on [0, pi/2], panels growing geometrically from ``a / 4``
+    (a heavy-tailed NDF: its peak and its tails both resolved); weights ``2 pi sin dtheta``."""
+    edges = np.concatenate([[0.0], np.geomspace(max(a, ALPHA_MIN) / 4.0, 0.5 * math.pi, 28)])
+    x, w = np.polynomial.legendre.leggauss(per_panel)
+    lo, hi = edges[:-1, None], edges[1:, None]
+    th = ((lo + hi) / 2 + (hi - lo) / 2 * x).ravel()
+    wt = ((hi - lo) / 2 * w + 0 * x).ravel() * 2.0 * math.pi * np.sin(th)
+    return th, wt
+
+
+def fit_coaxial_ndf(model, roughness, lobes):
+    """Least-squares fit of ``lobes`` SGs on the normal, ``sum_k G(h; n, lam_k, mu_k) ~ D(h)``
+    (eq. 12 with several lobes, as §4.2 fits anisotropic NDFs): minimises
+    ``int_{h.n>0} (sum G - D)^2 dh`` by Levenberg-Marquardt on ``log lam_k`` with the
+    amplitudes solved by linear least squares.  For GGX, whose tails one lobe cannot
+    follow (from ``a ~ 0.8`` the second lobe is the constant ``lam -> 0``).
+    Returns ``(lam (K,), mu (K,), rel_error)``, sharpest lobe first."""
+    a = max(float(roughness), ALPHA_MIN)
+    th, wt = _graded_theta_quadrature(a)
+    h = np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1)
+    d = ndf_value(model, h, a)
+    omc = 2.0 * np.sin(0.5 * th) ** 2
+    sw = np.sqrt(wt)
+
+    def solve(x):
+        B = np.exp(-np.exp(x)[None, :] * omc[:, None]) * sw[:, None]
+        coef, *_ = np.linalg.lstsq(B, d * sw, rcond=None)
+        return coef, B @ coef - d * sw
+
+    x0 = math.log(2.0 / (a * a)) + np.linspace(0.5, -2.5, lobes) if lobes > 1 else \
+        np.array([math.log(2.0 / (a * a))])
+    x, _ = levenberg_marquardt(lambda v: solve(v)[1], x0, 100,
+                               fd_step=lambda v: 1e-6 * max(1.0, abs(v)), tries=12,
+                               min_gain=1e-12)
+    coef, r = solve(x)
+    order = np.argsort(-x)
+    lam = np.exp(x)
+    return lam[order], np.maximum(coef[order], 0.0), math.sqrt(float(r @ r) / float(np.sum(wt * d * d)))
+
+
+def ggx_table_fit(lobes=GGX_LOBES):
+    """``(c_lam (21, K), c_mu (21, K))`` of the GGX lobes on :data:`ISO_TABLE_ALPHA`
+    (``lam_k = c_lam_k 2/a^2``, ``mu_k = c_mu_k/(pi a^2)``), each node's fit started from
+    the previous one's so the lobes vary smoothly.  How :data:`GGX_NDF_TABLE` was made."""
+    cl, cm = [], []
+    for a in ISO_TABLE_ALPHA:
+        a = max(float(a), ALPHA_MIN)
+        lam, mu, _ = fit_coaxial_ndf("GGX", a, lobes)
+        cl.append(lam * a * a / 2.0)
+        cm.append(mu * math.pi * a * a)
+    return np.array(cl), np.array(cm)
+
 # Generated by iso_table_fit(model) (rounded to 7 digits); tests refit and compare.
 # Also written, with the same digits, in shaders/sg_common.glsl.
 ISO_NDF_TABLE = {
@@ -343,6 +417,11 @@ ISO_NDF_TABLE = {
         np.array([1.000009, 1.000934, 1.003699, 1.008185, 1.014223, 1.0216, 1.03008, 1.039424, 1.049401, 1.059803, 1.070449, 1.081186, 1.091891, 1.102468, 1.112836, 1.122934, 1.132709, 1.142121, 1.151137, 1.159735, 1.167898])),
 }
 
+# Generated by ggx_table_fit() (7 digits, below 1e-6 written 0); tests refit and compare.
+# Also in shaders/sg_common.glsl.
+GGX_NDF_TABLE = (
+    np.array([[1.992838, 0.3828076], [1.98416, 0.3794611], [1.957449, 0.3691366], [1.911287, 0.3512051], [1.84205, 0.3240784], [1.740421, 0.2836717], [1.611464, 0.2315964], [1.535449, 0.2018369], [1.501452, 0.1891955], [1.478714, 0.1796236], [1.456021, 0.1679977], [1.427885, 0.1521422], [1.390106, 0.130881], [1.338649, 0.1035195], [1.269413, 0.06974741], [1.178129, 0.02971582], [1.099019, 0], [1.08185, 0], [1.055609, 0], [1.019339, 0], [1.541843, 0]]),
+    np.array([[0.7645672, 0.2045907], [0.7653469, 0.2035765], [0.7678104, 0.2003622], [0.7723066, 0.1944554], [0.7796551, 0.1846765], [0.7918028, 0.1680978], [0.8071456, 0.1459605], [0.8093663, 0.1417465], [0.8011657, 0.1528181], [0.7880022, 0.1708359], [0.7715373, 0.1929814], [0.7523974, 0.2180762], [0.7309676, 0.2453626], [0.7076121, 0.2741905], [0.6827244, 0.3039604], [0.6567133, 0.3341347], [0.6114557, 0.3842979], [0.5127084, 0.4888012], [0.3841785, 0.6200544], [0.217368, 0.7863972], [0, 1]]))
 
 def _table_lookup(table, a):
     x = np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0) * (len(table) - 1)
@@ -351,9 +430,29 @@ def _table_lookup(table, a):
     return (1.0 - t) * table[i] + t * table[i + 1]
 
 
+def iso_ndf_lobes(model, roughness):
+    """Coaxial SG lobes of an isotropic NDF from its table: ``(lam, mu)`` of shape
+    ``roughness.shape + (K,)`` (K = 1, or :data:`GGX_LOBES` for GGX)."""
+    if model != "GGX":
+        lam, mu = iso_ndf_sg(model, roughness)
+        return lam[..., None], mu[..., None]
+    a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)[..., None]
+    c_lam, c_mu = GGX_NDF_TABLE
+    x = np.clip(a, 0.0, 1.0) * (len(c_lam) - 1)
+    i = np.minimum(x.astype(np.int64), len(c_lam) - 2)
+    t = x - i
+    k = np.arange(c_lam.shape[1])
+    lam = ((1.0 - t) * c_lam[i, k] + t * c_lam[i + 1, k]) * 2.0 / (a * a)
+    mu = ((1.0 - t) * c_mu[i, k] + t * c_mu[i + 1, k]) / (math.pi * a * a)
+    return np.maximum(lam, 1e-4), mu
+
+
 def iso_ndf_sg(model, roughness):
     """Single-lobe SG of an isotropic NDF from the correction table:
-    ``(lam, mu)`` arrays of the shape of ``roughness`` (floored at ALPHA_MIN)."""
+    ``(lam, mu)`` arrays of the shape of ``roughness`` (floored at ALPHA_MIN).
+    GGX has several lobes: :func:`iso_ndf_lobes`."""
+    if model == "GGX":
+        raise ValueError("GGX is fitted by several lobes: use iso_ndf_lobes")
     a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)
     c_lam, c_mu = ISO_NDF_TABLE[model]
     lam = _table_lookup(c_lam, a) * 2.0 / (a * a)
@@ -513,14 +612,16 @@ def ndf_lobes(material: SGMaterial) -> NDFLobes:
 
 @memo(256)
 def _iso_cached(model, a):
-    lam, mu = iso_ndf_sg(model, a)
-    lam, mu = float(lam), float(mu)
-    th, wt = _hemi_theta_quadrature(_iso_support_cos(model, a) if a < 0.3 else 0.0)
+    lam, mu = iso_ndf_lobes(model, a)
+    if model == "GGX":
+        th, wt = _graded_theta_quadrature(a)
+    else:
+        th, wt = _hemi_theta_quadrature(_iso_support_cos(model, a) if a < 0.3 else 0.0)
     h = np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1)
     d = ndf_value(model, h, a)
-    g = mu * np.exp(-lam * 2.0 * np.sin(0.5 * th) ** 2)
+    g = np.sum(mu[None, :] * np.exp(-lam[None, :] * 2.0 * np.sin(0.5 * th)[:, None] ** 2), axis=1)
     err = math.sqrt(float(np.sum(wt * (g - d) ** 2)) / float(np.sum(wt * d * d)))
-    return NDFLobes(np.array([[0.0, 0.0, 1.0]]), np.array([lam]), np.array([mu]), err)
+    return NDFLobes(np.tile([0.0, 0.0, 1.0], (len(lam), 1)), lam, mu, err)
 
 
 # --------------------------------------------------------------------------- Fresnel
@@ -581,12 +682,13 @@ def _fresnel(material, c):
 
 def _m_factor(model, roughness, cos_i, cos_o, h_dot_i):
     """Scalar part of ``M_o(i)`` (without Fresnel) per model (module docstring)."""
-    if model in ("COOK_TORRANCE", "BLINN_PHONG"):
+    if model in ("COOK_TORRANCE", "BLINN_PHONG", "GGX"):
         ci = np.maximum(cos_i, COS_MIN)
         co = np.maximum(cos_o, COS_MIN)
         a2 = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN) ** 2
-        li = _lambda_raw("BECKMANN", a2, ci)
-        lo = _lambda_raw("BECKMANN", a2, co)
+        dist = "GGX" if model == "GGX" else "BECKMANN"
+        li = _lambda_raw(dist, a2, ci)
+        lo = _lambda_raw(dist, a2, co)
         return 1.0 / ((1.0 + li + lo) * 4.0 * ci * co)
     if model in ("WARD", "WARD_ANISO"):
         ci = np.maximum(cos_i, COS_MIN_SINGULAR)
@@ -630,12 +732,12 @@ def _local_ndf_lobes(material, P):
     if material.is_anisotropic:
         f = ndf_lobes(material)
         return f.axes[None], f.lam[None], f.mu[None]
-    lam, mu = iso_ndf_sg(material.model, material.roughness)
-    lam = np.broadcast_to(lam, np.shape(lam) if np.ndim(lam) else (1,)).reshape(-1, 1)
-    mu = np.broadcast_to(mu, np.shape(mu) if np.ndim(mu) else (1,)).reshape(-1, 1)
+    lam, mu = iso_ndf_lobes(material.model, material.roughness)
+    K = lam.shape[-1]
+    lam, mu = lam.reshape(-1, K), mu.reshape(-1, K)
     if lam.shape[0] not in (1, P):
         raise ValueError(f"roughness has {lam.shape[0]} values for {P} points")
-    return np.array([[[0.0, 0.0, 1.0]]]), lam, mu
+    return np.tile([0.0, 0.0, 1.0], (1, K, 1)), lam, mu
 
 
 def specular_lobes(material: SGMaterial, normals, views, tangents=None):
@@ -654,7 +756,9 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     * ``mu = mu_W ks F(o.p) M_o(p_W)`` (eq. 22) with ``M_o`` of the model
       (cosines floored at :data:`COS_MIN`, or :data:`COS_MIN_SINGULAR` for the
       ``1/sqrt(cos)`` models) and the Fresnel of :func:`fresnel_coefficients`;
-      lobes whose facet faces away from the view (``o.p <= 0``) get ``mu = 0``.
+      lobes whose facet faces away from the view (``o.p <= 0``) get ``mu = 0``;
+    * ``GGX``: ``M_o`` is the normalisation to Cycles' ``E(r, n.o)``, ``F`` at each lobe's
+      product with the cosine, times the multiscatter factor (module docstring).
 
     ``normals``, ``views`` (toward the viewer), ``tangents``: (P, 3).  Per-point
     material arrays broadcast over P.  Returns ``axes (P, K, 3)``, ``lam (P, K)``,
@@ -683,15 +787,124 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     cos_o = np.sum(n * o, axis=1)[:, None]
     rough = material.roughness
     rough = rough[:, None] if np.ndim(rough) and np.size(rough) == P and P > 1 else rough
-    m = _m_factor(material.model, rough, cos_i, cos_o, c)
+    if material.model == "GGX":
+        m = _ggx_normalisation(material, n, pw, lam, mu_d, cos_o[:, 0], P)
+        keep_energy = 1.0
+    else:
+        m = _m_factor(material.model, rough, cos_i, cos_o, c)
     mat = material
+    cf = _fresnel_cosine(n, o, pw, lam) if material.model == "GGX" else c
     if any(np.ndim(v) >= 1 and np.shape(v)[0] == P and P > 1
            for v in (mat.ior, mat.metallic)) or mat.diffuse.ndim == 2 or mat.specular.ndim == 2:
-        fres = _fresnel_pointwise(mat, c, P)
+        fres = _fresnel_pointwise(mat, cf, P)
     else:
-        fres = _fresnel(mat, c)
+        fres = _fresnel(mat, cf)
+    if mat.multiscatter:
+        k_main, k_metal = multiscatter_factors(mat, cos_o[:, 0], P)
+        fres = fres * k_main[:, None, :]
+        if mat.fresnel == "PRINCIPLED":
+            fres = fres + _metal_fresnel(mat, cf, P) * (k_metal - k_main)[:, None, :]
     mu = np.broadcast_to(mu_d, (P, K))[..., None] * (m * (c > 0.0) * keep_energy)[..., None] * fres
     return pw, lam, mu
+
+
+def _per_point(v, P, shape=()):
+    return np.broadcast_to(np.asarray(v, dtype=np.float64), (P,) + shape)
+
+
+def _fresnel_cosine(n, o, pw, lam):
+    """``o . h`` (P, K) at the half vector of the view and the axis of each warped lobe's
+    product with the clamped cosine (eq. 5 with eq. 40's ``C*``): where the lit part of a
+    broad lobe is, rather than its centre (a rough dielectric's grazing Fresnel at the
+    centre was 2-4 points of error at r >= 0.7; the same at sharp lobes)."""
+    lam_c, _ = sg.clamped_cosine_sg()
+    d = lam[..., None] * pw + lam_c * n[:, None, :]
+    d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
+    h = d + o[:, None, :]
+    h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    return np.sum(h * o[:, None, :], axis=-1)
+
+
+def ggx_albedo(material, cos_o, P):
+    """Cycles' GGX single-scattering albedo ``E(r, n.o)`` and ``E_avg(r)`` per point (P,),
+    ``r = sqrt(a)`` the Blender roughness."""
+    cos_o = np.broadcast_to(np.asarray(cos_o, dtype=np.float64), (P,))
+    r = np.sqrt(np.clip(_per_point(material.roughness, P), 0.0, 1.0))
+    e, e_avg = np.zeros(P), np.zeros(P)
+    for rv in np.unique(r):
+        sel = r == rv
+        e[sel] = ggx_E(float(rv), np.clip(cos_o[sel], 0.0, 1.0))
+        e_avg[sel] = ggx_E_avg(float(rv))
+    return e, e_avg
+
+
+def _ggx_normalisation(material, n, pw, lam, mu_d, cos_o, P):
+    """``M_o`` of the GGX lobes (P, 1): the factor that gives the warped slice (Fresnel 1)
+    Cycles' single-scattering albedo, ``E(r, n.o) / sum_k mu_k <G_k, C*>`` with ``C*`` the
+    clamped cosine of eq. 40 (inner product eq. 4).  It stands in for eq. 22's ``M`` at the
+    lobe centre (shared by the coaxial lobes): the warp and ``M`` at the centre lose 9-23 %
+    of a rough GGX slice's energy at a normal view, and the broad tail lobe of ``a > 0.8``
+    gains more than that at grazing ones."""
+    lam_c, mu_c = sg.clamped_cosine_sg()
+    cos_lobe = sg.inner_product(pw, lam, 1.0, n[:, None, :], lam_c, mu_c)          # (P, K)
+    a_sg = np.sum(np.broadcast_to(mu_d, cos_lobe.shape) * cos_lobe, axis=1)
+    e, _ = ggx_albedo(material, cos_o, P)
+    return (e / np.maximum(a_sg, 1e-300))[:, None]
+
+
+def _metal_fresnel(material, c, P):
+    """The Principled metal lobe's part of ``ks F`` (P, K, 3): ``m (base + (1 - base)(1 - c)^5)``."""
+    m = _per_point(material.metallic, P)[:, None, None]
+    base = np.clip(_per_point(material.diffuse, P, (3,)), 0.0, 1.0)[:, None, :]
+    s5 = ((1.0 - np.clip(c, 0.0, 1.0)) ** 5)[..., None]
+    return m * (base + (1.0 - base) * s5)
+
+
+def multiscatter_factors(material: SGMaterial, cos_o, P):
+    """``(k_main, k_metal)`` (P, 3): Cycles' Multiscatter GGX energy compensation
+    ``1 + F_ms (1 - E) / E`` (Kulla & Conty 2017, as in :func:`.brdf.multiscatter_factor`),
+    a factor of ``M_o`` (it depends on the view alone, eq. 22).  ``E = E(r, n.o)`` and
+    ``E_avg(r)`` are Cycles' single-scattering albedo tables at the Blender roughness
+    ``r = sqrt(a)``; ``F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg))`` with the lobe's mean
+    Fresnel ``F_ss``: the main lobe's (the colour, Schlick, or the Principled dielectric
+    layer) and the Principled metal lobe's (F0 = base colour, no F82 tint)."""
+    e, e_avg = ggx_albedo(material, cos_o, P)
+    missing = (1.0 - np.maximum(e, 1e-6)) / np.maximum(e, 1e-6)
+    fms_main, fms_metal = multiscatter_fms(material, e_avg, P)
+    return 1.0 + missing[:, None] * fms_main, 1.0 + missing[:, None] * fms_metal
+
+
+def multiscatter_fss(material: SGMaterial, P):
+    """``(F_ss main, F_ss metal)`` (P, 3): the lobes' mean Fresnel (Cycles' ``Fss``; linear
+    in the base colour)."""
+    ks = np.clip(_per_point(material.specular, P, (3,)), 0.0, None)
+    mode = material.fresnel
+    if mode == "NONE":
+        fss = ks
+    elif mode == "SCHLICK":
+        fss = ks + (1.0 - ks) / 21.0
+    elif mode == "DIELECTRIC":
+        fss = ks * np.array([fresnel_dielectric_Fss(float(x)) for x in
+                             _per_point(material.ior, P)])[:, None]
+    else:
+        eta = _per_point(material.ior, P)
+        s = np.zeros(P)
+        for ev in np.unique(eta):
+            f0r = F0_from_ior(float(ev))
+            s[eta == ev] = min(max((fresnel_dielectric_Fss(float(ev)) - f0r) / (1.0 - f0r), 0.0),
+                               1.0) if f0r < 1.0 else 1.0
+        f0 = np.clip(ks, 0.0, 1.0)
+        fss = f0 + (1.0 - f0) * s[:, None]
+    f0m = np.clip(_per_point(material.diffuse, P, (3,)), 0.0, 1.0)
+    return fss, f0m + (1.0 - f0m) / 21.0
+
+
+def multiscatter_fms(material: SGMaterial, e_avg, P):
+    """``(F_ms main, F_ms metal)`` (P, 3) of :func:`multiscatter_factors` for ``E_avg`` (P,):
+    ``F_ss E_avg / (1 - F_ss (1 - E_avg))``."""
+    ea = np.broadcast_to(np.asarray(e_avg, dtype=np.float64), (P,))[:, None]
+    return tuple(f * ea / np.maximum(1.0 - f * (1.0 - ea), 1e-12)
+                 for f in multiscatter_fss(material, P))
 
 
 def _bend_view(n, o):
@@ -800,20 +1013,23 @@ def diffuse_view_weight(material: SGMaterial, normals, views):
 
 # --------------------------------------------------------------------------- from core.brdf
 
-def sg_material_from_brdf(material: core_brdf.Material) -> SGMaterial:
-    """Closest SG model of a Cycles-like :class:`.brdf.Material`: Cook-Torrance
-    with the Beckmann NDF of the same ``alpha = max(r^2, ...)``.
+def sg_material_from_brdf(material: core_brdf.Material, ggx: bool = True) -> SGMaterial:
+    """Closest SG model of a Cycles-like :class:`.brdf.Material`, ``alpha = max(r^2, ...)``:
+    Beckmann lobes are ``COOK_TORRANCE``; GGX and Multiscatter GGX lobes are ``GGX`` (two
+    coaxial SGs; Multiscatter GGX with ``multiscatter=True``), or with ``ggx=False``
+    ``COOK_TORRANCE`` too (the Beckmann lobe of the same alpha drawn before 2026-12-02:
+    docs/measurements.md "SG lobes of a rough metal").
 
     * Glossy BSDF (``fresnel="NONE"``): ``F = 1``, ``ks`` = node colour, diffuse
-      albedo kept (0 for a pure Glossy BSDF); Beckmann is exact, GGX /
-      Multiscatter GGX become Beckmann with the same alpha (GGX's long tails and
-      the multiscatter energy are lost).
+      albedo kept (0 for a pure Glossy BSDF).
     * ``"SCHLICK"`` / ``"F82"``: Schlick with ``F0 = specular_color`` (F82 tint dropped).
     * Principled (``"DIELECTRIC"``): ``fresnel="PRINCIPLED"`` with the base colour,
       metallic, the dielectric ``f0`` colour and ``eta`` (module docstring).
     """
     alpha = max(material.alpha, ALPHA_MIN)
-    common = dict(model="COOK_TORRANCE", roughness=alpha)
+    ggx = ggx and material.lobe_distribution == "GGX"
+    common = dict(model="GGX" if ggx else "COOK_TORRANCE", roughness=alpha,
+                  multiscatter=ggx and material.distribution == "MULTI_GGX")
     if material.fresnel == "NONE":
         return SGMaterial(diffuse=material.diffuse_albedo, specular=material.specular_color,
                           fresnel="NONE", **common)

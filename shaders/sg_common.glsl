@@ -29,6 +29,9 @@
 #define SG_COS_VIEW_MIN 1e-4
 #define SG_COS_MIN_SINGULAR 0.05
 #define SG_LAMBDA_MAX 1e5
+/* eq. 40's clamped-cosine SG (core.sg.clamped_cosine_sg) */
+#define SG_COSINE_LAMBDA 2.133
+#define SG_COSINE_MU 1.17
 
 /* NDF correction tables c_lam, c_mu on a = 0, 0.05, ..., 1 (core.sg_brdf.ISO_NDF_TABLE). */
 const float SG_CT_CLAM[21] = float[21](0.9999875, 0.998759, 0.9951434, 0.9894735, 0.9822715, 0.9742365, 0.9661932, 0.9590131, 0.9535198, 0.9504024, 0.9501555, 0.9530325, 0.9589624, 0.9674702, 0.9777121, 0.9886328, 0.9991382, 1.008208, 1.014945, 1.018575, 1.018442);
@@ -216,7 +219,7 @@ void sg_frame(vec3 n, vec3 t_in, out vec3 t, out vec3 b)
 }
 
 /* The view slice ks rho_s(o, i) as SG lobes (core.sg_brdf.specular_lobes), without the
- * cosine.  n, o unit; t a tangent (any vector; vec3(0) for the default frame).
+ * cosine; models 0-4 (GGX, 5, is drawn by ssdf_sg_frag.glsl's ggx_specular).  n, o unit; t a tangent (any vector; vec3(0) for the default frame).
  * Returns the lobe count K (<= SG_MAX_LOBES); lobes k < K are in axes/lams/mus. */
 int specular_lobes(vec4 sgm0, vec4 sgm1, vec4 sgm2, vec3 n, vec3 o, vec3 t_in,
                    int n_ndf, vec4 ndf_lobes[SG_MAX_LOBES], float ndf_mu[SG_MAX_LOBES],

@@ -39,6 +39,100 @@ vec4 table_entry(float x, float y, int nr, int nl, int k)
              mix(table_texel(i0, j1, k), table_texel(i1, j1, k), fx), fy);
 }
 
+/* the GGX lobes' inputs at table position (x, y), metallic weight mw, base colour cf (the
+ * second lobe as the first: lambda a^2, mu a^2; the corner terms bilinear as in apply_inputs) */
+void ggx_inputs(float x, float y, int nr, int nl, float mw, vec3 cf)
+{
+  entryX = x;
+  entryY = y;
+  tableNr = nr;
+  tableNl = nl;
+  if (brdfModel != 3) {
+    return;
+  }
+  float a2 = roughness * roughness;       /* the pixel's alpha (set above when textured) */
+  vec4 e = table_entry(x, y, nr, nl, GGX_TEXEL);
+  ndfLambda2 = max(e.x / a2, 1e-4);
+  ndfMu2 = e.y / a2;
+  vec3 q[3];
+  int k0 = GGX_TEXEL + 1 + 8;
+  for (int j = 0; j < 3; j++) {
+    vec3 lo = mix(table_entry(x, y, nr, nl, k0 + j).rgb, table_entry(x, y, nr, nl, k0 + 6 + j).rgb, mw);
+    vec3 hi = mix(table_entry(x, y, nr, nl, k0 + 3 + j).rgb, table_entry(x, y, nr, nl, k0 + 9 + j).rgb, mw);
+    q[j] = lo + (hi - lo) * cf;
+  }
+  fresAm = q[0];
+  /* Cycles' F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg)) of the pixel's F_ss (0: no multiscatter) */
+  float ea = e.z;
+  fmsMain = e.w > 0.5 ? q[1] * ea / max(1.0 - q[1] * (1.0 - ea), vec3(1e-12)) : vec3(0.0);
+  fmsMetal = e.w > 0.5 ? q[2] * ea / max(1.0 - q[2] * (1.0 - ea), vec3(1e-12)) : vec3(0.0);
+}
+
+/* Cycles' GGX single-scattering albedo E(r, mu) at the pixel's table entry (linear in mu
+ * between the 32 nodes, as core.brdf_tables.ggx_E) */
+float ggx_albedo(float mu)
+{
+  float x = clamp(mu, 0.0, 1.0) * 31.0;
+  int i = min(int(x), 31);
+  int j = min(i + 1, 31);
+  vec4 ti = table_entry(entryX, entryY, tableNr, tableNl, GGX_TEXEL + 1 + i / 4);
+  vec4 tj = table_entry(entryX, entryY, tableNr, tableNl, GGX_TEXEL + 1 + j / 4);
+  return mix(ti[i % 4], tj[j % 4], x - float(i));
+}
+
+/* Eq. 41 for the GGX model (core.sg_brdf.specular_lobes): two coaxial lobes warped alike,
+ * scaled together so the slice has Cycles' albedo E(r, n.o) (against eq. 40's cosine),
+ * each with the Fresnel at the half vector of its product with the cosine, times Cycles'
+ * multiscatter factor per layer */
+vec3 ggx_specular(vec3 o, vec3 nl, vec3 t, vec3 b, vec3 n, vec4 W[16])
+{
+  float c = dot(o, nl);
+  if (c <= 0.0) {
+    return vec3(0.0);
+  }
+  vec3 pw = normalize(2.0 * c * nl - o);
+  float tau = max(4.0 * c, 4.0 * COS_MIN);
+  float lams[2] = float[2](min(ndfLambda / tau, LAMBDA_MAX), min(ndfLambda2 / tau, LAMBDA_MAX));
+  float mus[2] = float[2](ndfMu, ndfMu2);
+  float E = ggx_albedo(max(c, SG_COS_VIEW_MIN));
+  float asg = 0.0;
+  for (int k = 0; k < 2; k++) {
+    asg += mus[k] * SG_COSINE_MU * sg_inner_product(pw, lams[k], nl, SG_COSINE_LAMBDA);
+  }
+  float norm = E / max(asg, 1e-30);
+  float missing = (1.0 - max(E, 1e-6)) / max(E, 1e-6);
+  vec3 kmain = 1.0 + missing * fmsMain;
+  vec3 kmetal = 1.0 + missing * fmsMetal;
+  vec3 color = vec3(0.0);
+  for (int k = 0; k < 2; k++) {
+    if (mus[k] <= 0.0) {
+      continue;
+    }
+    vec3 h = normalize(normalize(lams[k] * pw + SG_COSINE_LAMBDA * nl) + o);
+    float cf = clamp(dot(h, o), 0.0, 1.0);
+    float s5 = pow(1.0 - cf, 5.0);
+    vec3 fres = fresA.rgb + fresBd.rgb * sg_fresnel_eq14(cf, ior) + fresBs.rgb * s5;
+    vec3 metal = vec3(0.0);
+    if (principled != 0) {
+      fres = max(fres, vec3(0.0));
+      metal = fresAm + fresBs.rgb * s5;
+    }
+    vec3 mu = mus[k] * norm * (fres * kmain + metal * (kmetal - kmain));
+    for (int m = 0; m < cosLobes; m++) {
+      vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
+      vec3 cw = cl.x * lobeT + cl.y * lobeB + cl.z * nl;
+      vec3 p;
+      float lam;
+      float amp = sg_product(cw, cosLambda, pw, lams[k], p, lam);
+      vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
+      float theta = ssdf_value(local, W);
+      vec3 gamma = env_lookup(p, lam) * envStrength * sg_integral(lam);
+      color += cl.w * amp * fh_hat(theta, lam) * mu * gamma;
+    }
+  }
+  return color;
+}
+
 /* the slot's textured inputs at this pixel: the NDF lobe and eta from the table at the
  * pixel's roughness and level, kd and the Fresnel terms bilinear in (metallic, base
  * colour) between the table's corners (exact: they are bilinear in the two) */
@@ -60,6 +154,7 @@ void apply_inputs()
   if (slot_input(levelTex, 3, v)) {
     y = scalar_of(v) * float(nl - 1);
   }
+  ggx_inputs(x, y, nr, nl, mw, clamp(c, 0.0, 1.0));
   if (!coloured && x == 0.0 && y == 0.0 && mw == 0.0 && nr == 1 && nl == 1) {
     return;
   }
@@ -170,8 +265,11 @@ void main()
   }
 #endif
   vec3 color = kd.rgb * rd * envStrength;
+  if (glossy != 0 && brdfModel == 3) {
+    color += ggx_specular(view, lobeN, t, b, n, W);
+  }
   /* eq. 41 with the one-lobe isotropic NDF view slice (eq. 17-22) */
-  if (glossy != 0) {
+  else if (glossy != 0) {
     vec3 o = view;
     vec3 nl = glossN;
     float c = dot(o, nl);

@@ -28,13 +28,21 @@
  *                     corners 00, 01, 10, 11. */
 
 const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
-const int ENTRY = 17;       /* ENTRY_TEXELS */
+const int ENTRY = 38;       /* ENTRY_TEXELS */
+const int GGX_TEXEL = 17;   /* GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E(r, mu) at 32
+                             * mu nodes (8 texels), then (metal part of A, F_ss main, F_ss metal)
+                             * per corner */
 
 int cosLobes;
 float cosLambda;
 int lightCount, ssdfRes, coeffTexels, envRes, envLevels, glossy, brdfModel, principled;
 float envStrength, envLambdaFirst, envRatio, envTop, roughness, ior, ndfLambda, ndfMu;
 vec4 kd, fresA, fresBd, fresBs, eye;
+/* GGX (brdfModel 3): the second coaxial lobe, the metal part of A, the two F_ms, and where
+ * the pixel's table entry is (for E(r, mu)) */
+float ndfLambda2, ndfMu2, entryX, entryY;
+int tableNr, tableNl;
+vec3 fresAm, fmsMain, fmsMetal;
 
 
 void read_parameters()

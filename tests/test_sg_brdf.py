@@ -53,7 +53,7 @@ def _rel_l2(a, b):
 # --------------------------------------------------------------------------- NDF fits
 
 def test_isotropic_table_is_the_least_squares_fit():
-    for model in sg_brdf.ISOTROPIC_MODELS:
+    for model in sg_brdf.ISO_NDF_TABLE:           # one lobe (GGX: the next test)
         c_lam, c_mu = sg_brdf.iso_table_fit(model)
         t_lam, t_mu = sg_brdf.ISO_NDF_TABLE[model]
         assert np.allclose(c_lam, t_lam, rtol=2e-6, atol=2e-7), model
@@ -205,8 +205,8 @@ def test_cycles_glossy_beckmann_03_within_6_percent():
 
 
 def test_principled_default_surface_error():
-    """Cycles' default surface (Principled, Multiscatter GGX, r = 0.5) mapped to
-    Cook-Torrance/Beckmann: total (diffuse + specular) error by quadrature."""
+    """Cycles' default surface (Principled, Multiscatter GGX, r = 0.5) mapped to the GGX
+    lobes: total (diffuse + specular) error by quadrature."""
     cm = brdf.principled_material()
     sm = sg_brdf.sg_material_from_brdf(cm)
     views = _views([0, 30, 60, 75])
@@ -219,8 +219,8 @@ def test_principled_default_surface_error():
     diff = sg_brdf.diffuse_albedo(sm)[None, :] / math.pi * np.sum(cos * L) * _FIB_W
     err = _rel_l2(spec + diff, ref)
     print(f"Principled default: rel L2 {err:.4f}")
-    # measured 0.093: GGX drawn with a Beckmann NDF, multiscatter energy dropped
-    assert err <= 0.10
+    # measured 0.062 (0.093 with the Beckmann lobe of the same alpha, no multiscatter)
+    assert err <= 0.07
 
 
 def test_textured_parameters_match_per_point_materials():
@@ -440,7 +440,9 @@ def test_glsl_specular_lobes_match_numpy():
         sg_brdf.SGMaterial(model="WARD", roughness=0.15),
         sg_brdf.SGMaterial(model="WARD_ANISO", alpha_x=0.3, alpha_y=0.1),
         sg_brdf.SGMaterial(model="ASHIKHMIN_SHIRLEY", nu=75, nv=1200, fresnel="SCHLICK", specular=(0.05, 0.05, 0.05)),
-        sg_brdf.sg_material_from_brdf(brdf.principled_material(base_color=(0.8, 0.4, 0.2), metallic=0.3, roughness=0.4)),
+        # the twin's models are 0-4: the Principled layering on a Beckmann lobe (GGX is drawn
+        # by ssdf_sg_frag.glsl: tests/test_textures.py's sphere against Cycles)
+        sg_brdf.sg_material_from_brdf(brdf.principled_material(base_color=(0.8, 0.4, 0.2), metallic=0.3, roughness=0.4), ggx=False),
     ]
     for mat in cases:
         ax, lam, mu = sg_brdf.specular_lobes(mat, n, v, t)
@@ -502,7 +504,7 @@ def test_blender_material_export_and_the_reflectance_panel():
     mat = bs.bsdf_material("SGMat", "ShaderNodeBsdfPrincipled", **{"Metallic": 0.2, "IOR": 1.45})
     assert mat.prt_sg.use_blender_material
     sgm = sg_material.export_sg_material(mat, [])
-    assert sgm.model == "COOK_TORRANCE" and sgm.fresnel == "PRINCIPLED"
+    assert sgm.model == "GGX" and sgm.multiscatter and sgm.fresnel == "PRINCIPLED"
     assert np.isclose(float(sgm.metallic), 0.2) and np.isclose(float(sgm.ior), 1.45)
 
     # the sliders: own model when "Use Blender Material" is off
@@ -562,3 +564,64 @@ def test_sharp_lobes_lambda_1e4_to_1e5_by_cap_quadrature(alpha):
         print(f"a={alpha} view {deg}: lam_W {lam[0, 0]:.0f}, SG/exact {got / ref:.4f}")
         # 88 deg: a = 0.005 hits the LAMBDA_MAX cap (warp 5.7e5), the lobe keeps its energy
         assert abs(got / ref - 1.0) < (0.02 if deg < 60 else 0.06 if deg < 80 else 0.25)
+
+
+def test_ggx_table_is_the_coaxial_least_squares_fit():
+    """GGX_NDF_TABLE is ggx_table_fit() (two coaxial lobes per alpha node); the two-lobe
+    fit follows GGX's tails where one lobe cannot (L2 over the hemisphere of h)."""
+    c_lam, c_mu = sg_brdf.ggx_table_fit()
+    t_lam, t_mu = sg_brdf.GGX_NDF_TABLE
+    np.testing.assert_allclose(c_lam, t_lam, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(c_mu, t_mu, rtol=1e-4, atol=1e-6)
+    for a in (0.09, 0.49):
+        one = sg_brdf.fit_coaxial_ndf("GGX", a, 1)[2]
+        two = sg_brdf.ndf_lobes(sg_brdf.SGMaterial(model="GGX", roughness=a)).rel_error
+        assert two < 0.05 < 0.14 < one, (a, one, two)
+
+
+def _forest_metal_sphere_errors(r, ggx):
+    """rel-L2 and mean ratio of the SG slice (lobes times the exact cosine) against the
+    quadrature of Cycles' Multiscatter GGX metal (core.brdf) under 'forest' (128 rows), at
+    the pixels of tests/test_textures.py's sphere seen from (0, -4, 1), one in four."""
+    bpy = pytest.importorskip("bpy")
+    from prt_relight.core import envmap
+    path = bpy.utils.system_resource("DATAFILES", path="studiolights/world") + "/forest.exr"
+    img = envmap.as_rgb(envmap.load_equirect(path))
+    while img.shape[0] > 128:
+        img = envmap.halve_equirect(img, rows=img.shape[0] // 2)
+    dirs, sa = envmap.equirect_directions(*img.shape[:2])
+    dirs = dirs.reshape(-1, 3)
+    radiance = img.reshape(-1, 3).astype(np.float64) * sa.reshape(-1, 1)
+    cam = np.array([0.0, -4.0, 1.0])
+    x, z = np.meshgrid(np.linspace(-0.95, 0.95, 20), np.linspace(-0.95, 0.95, 20))
+    keep = x * x + z * z < 0.98
+    look = -cam / np.linalg.norm(cam)
+    right = np.array([1.0, 0.0, 0.0])
+    up = np.cross(right, look)
+    n = x[keep, None] * right + z[keep, None] * up
+    n = n - np.sqrt(np.maximum(1.0 - np.sum(n * n, 1), 0.0))[:, None] * look   # facing the camera
+    o = cam - n
+    o /= np.linalg.norm(o, axis=1, keepdims=True)
+    m = brdf.principled_material(base_color=(0.9, 0.7, 0.5), metallic=1.0, roughness=r)
+    truth = np.einsum("pdc,dc->pc", brdf.specular_cosine(m, n, o, dirs).astype(np.float64),
+                      radiance)
+    axes, lam, mu = sg_brdf.specular_lobes(sg_brdf.sg_material_from_brdf(m, ggx=ggx), n, o)
+    cos = np.maximum(n @ dirs.T, 0.0)
+    lobes = sum(np.exp(lam[:, k, None] * (axes[:, k] @ dirs.T - 1.0))[..., None]
+                * mu[:, k, None, :] for k in range(axes.shape[1]))
+    ours = np.einsum("pdc,dc->pc", lobes * cos[..., None], radiance)
+    err = float(np.linalg.norm(ours - truth) / np.linalg.norm(truth))
+    return err, ours.mean(axis=0) / truth.mean(axis=0)
+
+
+@pytest.mark.parametrize("r, beckmann_min, ggx_max", [(0.3, 0.18, 0.13), (0.7, 0.30, 0.22)])
+def test_rough_metal_ggx_lobes_with_multiscatter_against_quadrature(r, beckmann_min, ggx_max):
+    """A Principled metal (base 0.9 / 0.7 / 0.5) under 'forest': two coaxial GGX lobes
+    normalised to Cycles' E(r, mu) with Cycles' multiscatter factor against the Beckmann
+    lobe of the same alpha, on a grid over the sphere's disc (measured 20.0 -> 12.0 % at
+    r 0.3, 32.1 -> 20.7 % at r 0.7, means within 3 / 9 %; docs/measurements.md "SG lobes
+    of a rough metal")."""
+    beck, beck_ratio = _forest_metal_sphere_errors(r, False)
+    ggx, ggx_ratio = _forest_metal_sphere_errors(r, True)
+    assert beck > beckmann_min and ggx < ggx_max, (beck, ggx)
+    assert np.all(np.abs(ggx_ratio - 1.0) < 0.1), ggx_ratio

@@ -3,8 +3,6 @@ Image Texture node, the node patterns read, per-pixel drawing for every method."
 
 from __future__ import annotations
 
-import math
-
 import bpy
 import numpy as np
 import pytest
@@ -353,7 +351,7 @@ def _principled(name, base=None, img=None, **inputs):
 
 
 def test_ssdf_sg_reads_the_base_colour_per_pixel(tmp_path):
-    """SSDF_SG's kd and Principled Fresnel terms are linear in the base colour: at each
+    """SSDF_SG's kd and Principled Fresnel terms are linear in the base colour (GGX): at each
     pixel, the textured frame is the frames of base colour 0 and 1 mixed by the texture read
     at the pixel's UV (core.textures.sample), a glossy metal-dielectric mix included."""
     bs.reset()
@@ -370,6 +368,9 @@ def test_ssdf_sg_reads_the_base_colour_per_pixel(tmp_path):
     for key, mat in (("tex", _principled("T", img=img, **glossy)),
                      ("white", _principled("W", (1.0, 1.0, 1.0), **glossy)),
                      ("black", _principled("B", (0.0, 0.0, 0.0), **glossy))):
+        # GGX: Multiscatter GGX's energy factor is not linear in the base colour (Cycles'
+        # F_ms of the metal lobe), the rest is
+        mat.node_tree.nodes["Principled BSDF"].distribution = "GGX"
         plane.data.materials.clear()
         plane.data.materials.append(mat)
         if key == "tex":
@@ -516,7 +517,8 @@ def test_roughness_texture_on_a_glossy_sphere_against_cycles(tmp_path):
     """A metal sphere whose Roughness is a Non-Color checker (0.3 / 0.7) under 'forest',
     64x64, against Cycles direct light: SSDF_SG and the sun pass read it per pixel, the
     per-vertex methods per point (quantized variants); each against its error at the two
-    constant roughnesses (per vertex: + the band along the checker's edges)."""
+    constant roughnesses (per vertex: + the band along the checker's edges), and SSDF_SG's
+    rough metal (constant 0.7, and the checker) within its measured bound."""
     bs.reset()
     bs.add_world(path=bs.hdri_path("forest"))
     bpy.ops.mesh.primitive_uv_sphere_add(segments=96, ring_count=48, radius=1.0)
@@ -562,7 +564,14 @@ def test_roughness_texture_on_a_glossy_sphere_against_cycles(tmp_path):
     errors = {m: (rel([(textured[m], textured["CYCLES"])]),
                   rel([(constant[v][m], constant[v]["CYCLES"]) for v in constant]))
               for m in methods}
-    print("roughness texture vs Cycles (textured, constant 0.3 and 0.7):", errors)
+    each = {v: rel([(constant[v]["SSDF_SG"], constant[v]["CYCLES"])]) for v in constant}
+    print("roughness texture vs Cycles (textured, constant 0.3 and 0.7):", errors,
+          "SSDF_SG at 0.3 / 0.7:", each)
     for m, (tex_err, const_err) in errors.items():
         # per vertex: a triangle-wide band along each cell edge (measured + 6.3 points)
         assert tex_err < const_err + (0.005 if m == "SSDF_SG" else 0.08), (m, errors)
+    # SSDF_SG's GGX lobes (docs/measurements.md "SG lobes of a rough metal"): measured
+    # 7.7 % textured, 7.8 % pooled, 8.0 / 7.5 % at 0.3 / 0.7 (12.8, 13.9, 10.0 / 19.8 % with
+    # a Beckmann lobe); Cycles' own noise at 256 spp is part of it (REFERENCE: 6.6 % at 0.3)
+    assert errors["SSDF_SG"][0] < 0.085 and errors["SSDF_SG"][1] < 0.085, errors
+    assert each[0.7] < 0.085, each

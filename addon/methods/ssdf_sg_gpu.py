@@ -156,24 +156,43 @@ def material_uniforms(material):
     """Push-constant values of one material slot (the CPU half of specular_lobes)."""
     m = sg_materials([material])[0]
     kd = np.asarray(sg_brdf.diffuse_albedo(m), np.float64).reshape(3) / np.pi
-    lam, mu = sg_brdf.iso_ndf_sg(m.model, m.roughness)
+    lam, mu = (np.asarray(x, np.float64).reshape(-1) for x in
+               sg_brdf.iso_ndf_lobes(m.model, float(np.asarray(m.roughness).reshape(-1)[0])))
+    lam, mu = np.append(lam, 1.0)[:2], np.append(mu, 0.0)[:2]
     A, Bd, Bs = (np.asarray(x, np.float64).reshape(3) for x in sg_brdf.fresnel_coefficients(m))
     glossy = is_glossy(m)
-    model = {"COOK_TORRANCE": 0, "BLINN_PHONG": 0, "WARD": 1}.get(m.model, 2)
+    model = {"COOK_TORRANCE": 0, "BLINN_PHONG": 0, "WARD": 1, "GGX": 3}.get(m.model, 2)
+    # GGX: E(r, mu) on Cycles' 32 mu nodes and E_avg (the lobes' normalisation and the
+    # multiscatter factor), the metal part of A and the two F_ss (linear in the base colour;
+    # the shader makes F_ms of them, core.sg_brdf.multiscatter_factors)
+    E, e_avg, am, fss = np.ones(GGX_E_NODES), np.ones(1), np.zeros(3), np.zeros((2, 3))
+    if m.model == "GGX":
+        E, e_avg = sg_brdf.ggx_albedo(m, np.linspace(0.0, 1.0, GGX_E_NODES), GGX_E_NODES)
+        if m.multiscatter:
+            fss = np.array([f[0] for f in sg_brdf.multiscatter_fss(m, 1)])
+        if m.fresnel == "PRINCIPLED":
+            am = float(np.asarray(m.metallic).reshape(-1)[0]) * np.clip(
+                np.asarray(m.diffuse, np.float64).reshape(3), 0.0, 1.0)
     return dict(kd=(*kd, 1.0), glossy=int(glossy), brdfModel=model,
                 principled=int(m.fresnel == "PRINCIPLED"),
                 roughness=float(np.asarray(m.roughness).reshape(-1)[0]),
-                ior=float(np.asarray(m.ior).reshape(-1)[0]), ndfLambda=float(lam),
-                ndfMu=float(mu), fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0))
+                ior=float(np.asarray(m.ior).reshape(-1)[0]), ndfLambda=float(lam[0]),
+                ndfMu=float(mu[0]), ndfLambda2=float(lam[1]), ndfMu2=float(mu[1]),
+                fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0), ggxE=E,
+                ggxEavg=float(e_avg[0]), multiscatter=int(m.multiscatter),
+                fresAm=(*am, 0.0), fssMain=(*fss[0], 0.0), fssMetal=(*fss[1], 0.0))
 
 
 #: texel of the first clamped-cosine lobe in the parameter texture
 COSINE_TEXEL = 28
 #: table nodes over a textured Roughness / Specular IOR Level (values i / (n - 1))
 ROUGHNESS_NODES, LEVEL_NODES = 33, 9
+#: Cycles' mu nodes of E(r, mu) (core.brdf_tables)
+GGX_E_NODES = 32
 #: texels per table entry: (lambda a^2, mu a^2, eta, -), then kd, A, B_d, B_s at the four
-#: (base colour, metallic) corners
-ENTRY_TEXELS = 17
+#: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E at
+#: the 32 mu nodes (8 texels), then the metal part of A, F_ss main, F_ss metal at the corners
+ENTRY_TEXELS = 17 + 1 + GGX_E_NODES // 4 + 12
 #: the textured inputs a slot's shader reads, in sampler and texel order
 INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
 
@@ -225,6 +244,12 @@ def _entry(uniforms, alpha):
     e[0] = (u["ndfLambda"] * alpha * alpha, u["ndfMu"] * alpha * alpha, u["ior"], 0.0)
     for c, v in enumerate(uniforms):
         e[1 + 4 * c:5 + 4 * c] = (v["kd"], v["fresA"], v["fresBd"], v["fresBs"])
+    e[17] = (u["ndfLambda2"] * alpha * alpha, u["ndfMu2"] * alpha * alpha, u["ggxEavg"],
+             u["multiscatter"])
+    e[18:18 + GGX_E_NODES // 4] = np.asarray(u["ggxE"]).reshape(-1, 4)
+    k = 18 + GGX_E_NODES // 4
+    for c, v in enumerate(uniforms):
+        e[k + 3 * c:k + 3 * c + 3] = (v["fresAm"], v["fssMain"], v["fssMetal"])
     return e
 
 
