@@ -86,7 +86,9 @@ K <= 7, the 7 lobes of Fig. 2 for ``nu = 75, nv = 1200``).  Each lobe is warped
 separately (§4.3) into an isotropic lobe of the view slice.
 
 What is approximated, and where it hurts: the isotropic warp at oblique views
-(§4.3 says so), ``M`` constant over each lobe (eq. 22), a rough GGX slice's shape (its
+(§4.3 says so; for GGX ``specular_lobes(fitted_warp=True)`` corrects each warped lobe's
+tilt, sharpness and share by a least-squares table over (r, n.o), :func:`fit_ggx_warp`,
+numpy only so far), ``M`` constant over each lobe (eq. 22), a rough GGX slice's shape (its
 energy is Cycles' by construction) and the F82 tint of Cycles' metal lobe (Schlick here).
 GGX lobes drawn as the Beckmann lobe of the same alpha without the multiscatter factor
 (before 2026-12-02, ``sg_material_from_brdf(ggx=False)``) were 14-20 % off on a rough
@@ -423,6 +425,151 @@ GGX_NDF_TABLE = (
     np.array([[1.992838, 0.3828076], [1.98416, 0.3794611], [1.957449, 0.3691366], [1.911287, 0.3512051], [1.84205, 0.3240784], [1.740421, 0.2836717], [1.611464, 0.2315964], [1.535449, 0.2018369], [1.501452, 0.1891955], [1.478714, 0.1796236], [1.456021, 0.1679977], [1.427885, 0.1521422], [1.390106, 0.130881], [1.338649, 0.1035195], [1.269413, 0.06974741], [1.178129, 0.02971582], [1.099019, 0], [1.08185, 0], [1.055609, 0], [1.019339, 0], [1.541843, 0]]),
     np.array([[0.7645672, 0.2045907], [0.7653469, 0.2035765], [0.7678104, 0.2003622], [0.7723066, 0.1944554], [0.7796551, 0.1846765], [0.7918028, 0.1680978], [0.8071456, 0.1459605], [0.8093663, 0.1417465], [0.8011657, 0.1528181], [0.7880022, 0.1708359], [0.7715373, 0.1929814], [0.7523974, 0.2180762], [0.7309676, 0.2453626], [0.7076121, 0.2741905], [0.6827244, 0.3039604], [0.6567133, 0.3341347], [0.6114557, 0.3842979], [0.5127084, 0.4888012], [0.3841785, 0.6200544], [0.217368, 0.7863972], [0, 1]]))
 
+#: view-cosine nodes of :data:`GGX_WARP_TABLE` (node 0 is fitted at ``n.o = WARP_MU_MIN``).
+WARP_MU = np.linspace(0.0, 1.0, 21)
+WARP_MU_MIN = 0.02
+#: Blender-roughness nodes of :data:`GGX_WARP_TABLE`.
+WARP_R = np.linspace(0.0, 1.0, 21)
+#: weight of the pull of the corrections toward none (relative to the slice's norm): pins a
+#: lobe's tilt where it does not matter (the constant lobe), so the table stays continuous.
+WARP_RIDGE = 1e-3
+
+
+def _warp_quadrature(a, mu_o, per_panel=8, nphi=48):
+    """Light directions ``i`` (N, 3) and their solid angles for the slice at view
+    ``o = (sqrt(1 - mu_o^2), 0, mu_o)`` (normal +z): a graded quadrature of the half vector
+    (:func:`_graded_theta_quadrature`, half the azimuths: the slice is symmetric about the
+    plane of incidence, weights doubled) mapped by ``i = 2 (o.h) h - o``,
+    ``d i = 4 (o.h) d h``; directions below the horizon dropped."""
+    th, wt = _graded_theta_quadrature(a, per_panel)
+    ph = (np.arange(nphi) + 0.5) * (math.pi / nphi)
+    T, PH = np.meshgrid(th, ph, indexing="ij")
+    h = np.stack([np.sin(T) * np.cos(PH), np.sin(T) * np.sin(PH), np.cos(T)], -1).reshape(-1, 3)
+    wh = (wt[:, None] / (2.0 * nphi) * 2.0 + 0.0 * PH).reshape(-1)
+    o = np.array([math.sqrt(max(1.0 - mu_o * mu_o, 0.0)), 0.0, mu_o])
+    oh = h @ o
+    i = 2.0 * oh[:, None] * h - o
+    keep = (oh > 0.0) & (i[:, 2] > 0.0)
+    return o, h[keep], i[keep], (wh * 4.0 * oh)[keep]
+
+
+def fit_ggx_warp(r, mu_o, x0=None, iterations=60):
+    """Least-squares correction of the two warped GGX lobes (eq. 17-21) of Blender roughness
+    ``r`` at view cosine ``mu_o``: each lobe's axis tilted by ``d_k`` (radians, in the plane
+    of incidence, away from the normal for ``d_k > 0``), its sharpness scaled by
+    ``exp(l_k)`` and its amplitude free, minimising
+    ``int_{n.i>0} (sum_k G_k(i) (n.i) - D(h) G2(i, o) / (4 n.o))^2 di`` against Cycles'
+    single-scattering GGX slice times the cosine (Fresnel 1), with the amplitudes solved by
+    linear least squares (kept non-negative) and ``(d_k, l_k)`` by Levenberg-Marquardt from
+    ``x0`` (plus the small pull :data:`WARP_RIDGE` toward none).  The isotropic warp of
+    §4.3 cannot follow the slice at oblique views (Wang et al. 2009 say so): it is broad in
+    the plane of incidence and narrow across it, its peak off the mirror direction and cut
+    by the horizon.  The axes stay above the horizon (eq. 40's cosine lobe, which
+    normalises the slice, is poor below).  Returns ``(params (6,) = (d_1, l_1, d_2, l_2,
+    f_1, f_2), rel_error, rel_error of the plain warp scaled to the slice's energy)`` with
+    ``f_k`` the lobes' shares of the amplitude (the slice is scaled to Cycles' ``E`` where
+    it is used, :func:`_ggx_normalisation`)."""
+    a = max(float(r) ** 2, ALPHA_MIN)
+    mu_o = max(float(mu_o), WARP_MU_MIN)
+    o, h, i, wi = _warp_quadrature(a, mu_o)
+    a2 = a * a
+    g2 = 1.0 / (1.0 + _lambda_raw("GGX", a2, np.maximum(i[:, 2], COS_MIN)) + _lambda_raw("GGX", a2, mu_o))
+    sw = np.sqrt(wi)
+    t = ndf_value("GGX", h, a) * g2 / (4.0 * mu_o) * sw
+    tn = float(np.linalg.norm(t))
+    lam_d, mu_d = iso_ndf_lobes("GGX", a)
+    lam_w = np.minimum(lam_d / (4.0 * mu_o), LAMBDA_MAX)
+    el0 = math.acos(mu_o)
+    cosi = i[:, 2] * sw
+
+    def basis(x):
+        cols = []
+        for k in range(2):
+            el = min(max(el0 + x[2 * k], -0.5 * math.pi), 0.5 * math.pi)   # axis above the horizon
+            ax = np.array([-math.sin(el), 0.0, math.cos(el)])
+            lam = min(lam_w[k] * math.exp(min(x[2 * k + 1], 30.0)), LAMBDA_MAX)
+            cols.append(np.exp(lam * (i @ ax - 1.0)) * cosi)
+        return np.stack(cols, 1)
+
+    def amps(B):
+        amp, *_ = np.linalg.lstsq(B, t, rcond=None)
+        if np.all(amp >= 0.0):
+            return amp
+        best = None                         # non-negative: the better lobe alone
+        for k in range(2):
+            a_k = max(float(B[:, k] @ t) / max(float(B[:, k] @ B[:, k]), 1e-300), 0.0)
+            trial = np.zeros(2)
+            trial[k] = a_k
+            c = float(np.linalg.norm(B @ trial - t))
+            if best is None or c < best[0]:
+                best = (c, trial)
+        return best[1]
+
+    def resid(x):
+        B = basis(x)
+        return np.concatenate([B @ amps(B) - t, WARP_RIDGE * tn * x])
+
+    B0 = basis(np.zeros(4)) @ mu_d
+    # the plain warp normalised to the slice's energy as specular_lobes does (E, not fitted)
+    scale = float(np.sum(B0 * sw)) and float(np.sum(t * sw)) / float(np.sum(B0 * sw))
+    err0 = float(np.linalg.norm(B0 * scale - t)) / tn
+    x = np.zeros(4) if x0 is None else np.array(x0[:4], dtype=np.float64)
+    x, _ = levenberg_marquardt(resid, x, iterations, fd_step=lambda v: 1e-6 * max(1.0, abs(v)),
+                               min_gain=1e-10)
+    x[0::2] = np.clip(el0 + x[0::2], -0.5 * math.pi, 0.5 * math.pi) - el0
+    B = basis(x)
+    amp = amps(B)
+    err = float(np.linalg.norm(B @ amp - t)) / tn
+    return np.concatenate([x, amp / max(float(np.sum(amp)), 1e-300)]), err, err0
+
+
+def ggx_warp_table_fit(r_nodes=None):
+    """``(len(r_nodes), len(WARP_MU), 6)`` corrections :func:`fit_ggx_warp` at the nodes
+    ``WARP_R[r_nodes]`` (all when None) and :data:`WARP_MU`, each column continued from
+    ``n.o = 1`` (start: no correction) down to grazing.  How :data:`GGX_WARP_TABLE` was made."""
+    idx = range(len(WARP_R)) if r_nodes is None else r_nodes
+    out = np.zeros((len(idx), len(WARP_MU), 6))
+    for a, ir in enumerate(idx):
+        x = None
+        for j in range(len(WARP_MU) - 1, -1, -1):
+            x, _, _ = fit_ggx_warp(WARP_R[ir], WARP_MU[j], x)
+            out[a, j] = x
+    return out
+
+
+def ggx_warp_params(r, cos_o):
+    """The corrections (..., 6) of :data:`GGX_WARP_TABLE` at Blender roughness ``r`` and view
+    cosine ``cos_o`` (bilinear; shapes broadcast)."""
+    r, c = np.broadcast_arrays(np.asarray(r, dtype=np.float64), np.asarray(cos_o, dtype=np.float64))
+    x = np.clip(r, 0.0, 1.0) * (len(WARP_R) - 1)
+    y = np.clip(c, 0.0, 1.0) * (len(WARP_MU) - 1)
+    i = np.minimum(x.astype(np.int64), len(WARP_R) - 2)
+    j = np.minimum(y.astype(np.int64), len(WARP_MU) - 2)
+    fx, fy = (x - i)[..., None], (y - j)[..., None]
+    from .sg_warp_table import GGX_WARP_TABLE as tb
+    return ((1 - fx) * ((1 - fy) * tb[i, j] + fy * tb[i, j + 1])
+            + fx * ((1 - fy) * tb[i + 1, j] + fy * tb[i + 1, j + 1]))
+
+
+def ggx_warp_correct(roughness, n, o, pw, lam_d, mu_d, P):
+    """The warped GGX lobes (axes (P, K, 3), sharpness (P, K)) and NDF amplitudes (P, K)
+    corrected by :func:`ggx_warp_params` at the point's roughness and ``n.o``: axis tilted in
+    the plane of ``n`` and the mirror direction, sharpness scaled, amplitudes the fitted
+    shares (the slice is normalised to Cycles' ``E`` afterwards, as without the correction)."""
+    cos_o = np.clip(np.sum(n * o, axis=1), 0.0, 1.0)
+    r = np.sqrt(np.clip(_per_point(roughness, P), 0.0, 1.0))
+    q = ggx_warp_params(r, cos_o)                                      # (P, 6)
+    u = pw - np.sum(pw * n[:, None, :], -1, keepdims=True) * n[:, None, :]
+    un = np.linalg.norm(u, axis=-1, keepdims=True)
+    fallback, _ = orthonormal_frame(n)
+    u = np.where(un > 1e-9, u / np.maximum(un, 1e-300), fallback[:, None, :])
+    el = np.arccos(np.clip(cos_o, -1.0, 1.0))[:, None] + q[:, [0, 2]]
+    axes = np.cos(el)[..., None] * n[:, None, :] + np.sin(el)[..., None] * u
+    lam_w = np.broadcast_to(lam_d, (P, lam_d.shape[-1])) / (4.0 * np.maximum(cos_o, WARP_MU_MIN))[:, None]
+    lam2 = np.minimum(np.minimum(lam_w, LAMBDA_MAX) * np.exp(q[:, [1, 3]]), LAMBDA_MAX)
+    return axes, lam2, np.maximum(q[:, 4:6], 0.0)
+
+
 def _table_lookup(table, a):
     x = np.clip(np.asarray(a, dtype=np.float64), 0.0, 1.0) * (len(table) - 1)
     i = np.minimum(x.astype(np.int64), len(table) - 2)
@@ -740,7 +887,7 @@ def _local_ndf_lobes(material, P):
     return np.tile([0.0, 0.0, 1.0], (1, K, 1)), lam, mu
 
 
-def specular_lobes(material: SGMaterial, normals, views, tangents=None):
+def specular_lobes(material: SGMaterial, normals, views, tangents=None, fitted_warp=False):
     """The view slice ``ks rho_s(o, i)`` of the specular BRDF as an SG mixture in
     ``i`` (eq. 15-22), without the cosine ``n . i``.
 
@@ -758,7 +905,9 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
       ``1/sqrt(cos)`` models) and the Fresnel of :func:`fresnel_coefficients`;
       lobes whose facet faces away from the view (``o.p <= 0``) get ``mu = 0``;
     * ``GGX``: ``M_o`` is the normalisation to Cycles' ``E(r, n.o)``, ``F`` at each lobe's
-      product with the cosine, times the multiscatter factor (module docstring).
+      product with the cosine, times the multiscatter factor (module docstring);
+      ``fitted_warp``: the warped lobes corrected by :data:`GGX_WARP_TABLE`
+      (:func:`ggx_warp_correct`; not yet in ``shaders/ssdf_sg_frag.glsl``, so off by default).
 
     ``normals``, ``views`` (toward the viewer), ``tangents``: (P, 3).  Per-point
     material arrays broadcast over P.  Returns ``axes (P, K, 3)``, ``lam (P, K)``,
@@ -783,8 +932,10 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None):
     lam_raw = np.broadcast_to(lam_d, (P, K)) / tau
     lam = np.minimum(lam_raw, LAMBDA_MAX)
     keep_energy = lam / lam_raw          # capped lobes keep their integral ~ mu / lam
-    cos_i = np.sum(n[:, None, :] * pw, axis=-1)
     cos_o = np.sum(n * o, axis=1)[:, None]
+    if material.model == "GGX" and fitted_warp:
+        pw, lam, mu_d = ggx_warp_correct(material.roughness, n, o, pw, lam_d, mu_d, P)
+    cos_i = np.sum(n[:, None, :] * pw, axis=-1)
     rough = material.roughness
     rough = rough[:, None] if np.ndim(rough) and np.size(rough) == P and P > 1 else rough
     if material.model == "GGX":
