@@ -87,8 +87,7 @@ separately (§4.3) into an isotropic lobe of the view slice.
 
 What is approximated, and where it hurts: the isotropic warp at oblique views
 (§4.3 says so; for GGX ``specular_lobes(fitted_warp=True)`` corrects each warped lobe's
-tilt, sharpness and share by a least-squares table over (r, n.o), :func:`fit_ggx_warp`,
-numpy only so far), ``M`` constant over each lobe (eq. 22), a rough GGX slice's shape (its
+tilt, sharpness and share by a least-squares table over (r, n.o), :func:`fit_ggx_warp`), ``M`` constant over each lobe (eq. 22), a rough GGX slice's shape (its
 energy is Cycles' by construction) and the F82 tint of Cycles' metal lobe (Schlick here).
 GGX lobes drawn as the Beckmann lobe of the same alpha without the multiscatter factor
 (before 2026-12-02, ``sg_material_from_brdf(ggx=False)``) were 14-20 % off on a rough
@@ -887,7 +886,7 @@ def _local_ndf_lobes(material, P):
     return np.tile([0.0, 0.0, 1.0], (1, K, 1)), lam, mu
 
 
-def specular_lobes(material: SGMaterial, normals, views, tangents=None, fitted_warp=False):
+def specular_lobes(material: SGMaterial, normals, views, tangents=None, fitted_warp=True):
     """The view slice ``ks rho_s(o, i)`` of the specular BRDF as an SG mixture in
     ``i`` (eq. 15-22), without the cosine ``n . i``.
 
@@ -907,7 +906,7 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None, fitted_w
     * ``GGX``: ``M_o`` is the normalisation to Cycles' ``E(r, n.o)``, ``F`` at each lobe's
       product with the cosine, times the multiscatter factor (module docstring);
       ``fitted_warp``: the warped lobes corrected by :data:`GGX_WARP_TABLE`
-      (:func:`ggx_warp_correct`; not yet in ``shaders/ssdf_sg_frag.glsl``, so off by default).
+      (:func:`ggx_warp_correct`, as ``shaders/ssdf_sg_frag.glsl``; False: the plain warp).
 
     ``normals``, ``views`` (toward the viewer), ``tangents``: (P, 3).  Per-point
     material arrays broadcast over P.  Returns ``axes (P, K, 3)``, ``lam (P, K)``,

@@ -91,13 +91,31 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 t, vec3 b, vec3 n, vec4 W[16])
     return vec3(0.0);
   }
   vec3 pw = normalize(2.0 * c * nl - o);
-  float tau = max(4.0 * c, 4.0 * COS_MIN);
-  float lams[2] = float[2](min(ndfLambda / tau, LAMBDA_MAX), min(ndfLambda2 / tau, LAMBDA_MAX));
-  float mus[2] = float[2](ndfMu, ndfMu2);
+  /* the fitted warp (core.sg_brdf.ggx_warp_correct): each lobe's axis tilted in the plane
+   * of nl and the mirror direction, its sharpness scaled, the shares of the amplitude; the
+   * table's corrections linear between its 21 n.o nodes */
+  float wx = clamp(c, 0.0, 1.0) * 20.0;
+  int wi = min(int(wx), 19);
+  float wf = wx - float(wi);
+  vec4 q = mix(table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + wi),
+               table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + wi + 1), wf);
+  vec4 s0 = table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + 21 + wi / 2);
+  vec4 s1 = table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + 21 + (wi + 1) / 2);
+  vec2 f = max(mix(wi % 2 == 0 ? s0.xy : s0.zw, (wi + 1) % 2 == 0 ? s1.xy : s1.zw, wf), vec2(0.0));
+  vec3 u = pw - dot(pw, nl) * nl;
+  float ul = length(u);
+  u = ul > 1e-9 ? u / ul : t;
+  float el0 = acos(clamp(c, 0.0, 1.0));
+  float tau = 4.0 * max(c, WARP_MU_MIN);
+  vec3 axes[2] = vec3[2](cos(el0 + q.x) * nl + sin(el0 + q.x) * u,
+                         cos(el0 + q.z) * nl + sin(el0 + q.z) * u);
+  float lams[2] = float[2](min(min(ndfLambda / tau, LAMBDA_MAX) * exp(q.y), LAMBDA_MAX),
+                           min(min(ndfLambda2 / tau, LAMBDA_MAX) * exp(q.w), LAMBDA_MAX));
+  float mus[2] = float[2](f.x, f.y);
   float E = ggx_albedo(max(c, SG_COS_VIEW_MIN));
   float asg = 0.0;
   for (int k = 0; k < 2; k++) {
-    asg += mus[k] * SG_COSINE_MU * sg_inner_product(pw, lams[k], nl, SG_COSINE_LAMBDA);
+    asg += mus[k] * SG_COSINE_MU * sg_inner_product(axes[k], lams[k], nl, SG_COSINE_LAMBDA);
   }
   float norm = E / max(asg, 1e-30);
   float missing = (1.0 - max(E, 1e-6)) / max(E, 1e-6);
@@ -108,7 +126,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 t, vec3 b, vec3 n, vec4 W[16])
     if (mus[k] <= 0.0) {
       continue;
     }
-    vec3 h = normalize(normalize(lams[k] * pw + SG_COSINE_LAMBDA * nl) + o);
+    vec3 h = normalize(normalize(lams[k] * axes[k] + SG_COSINE_LAMBDA * nl) + o);
     float cf = clamp(dot(h, o), 0.0, 1.0);
     float s5 = pow(1.0 - cf, 5.0);
     vec3 fres = fresA.rgb + fresBd.rgb * sg_fresnel_eq14(cf, ior) + fresBs.rgb * s5;
@@ -123,7 +141,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 t, vec3 b, vec3 n, vec4 W[16])
       vec3 cw = cl.x * lobeT + cl.y * lobeB + cl.z * nl;
       vec3 p;
       float lam;
-      float amp = sg_product(cw, cosLambda, pw, lams[k], p, lam);
+      float amp = sg_product(cw, cosLambda, axes[k], lams[k], p, lam);
       vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
       float theta = ssdf_value(local, W);
       vec3 gamma = env_lookup(p, lam) * envStrength * sg_integral(lam);

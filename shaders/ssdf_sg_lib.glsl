@@ -28,7 +28,11 @@
  *                     corners 00, 01, 10, 11. */
 
 const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
-const int ENTRY = 38;       /* ENTRY_TEXELS */
+const int ENTRY = 70;       /* ENTRY_TEXELS */
+const int WARP_TEXEL = 38;  /* WARP_TEXEL: GGX warp corrections (core.sg_brdf.ggx_warp_params)
+                             * at 21 n.o nodes: (d_1, l_1, d_2, l_2) per node, then the shares
+                             * (f_1, f_2) two nodes a texel */
+const float WARP_MU_MIN = 0.02;
 const int GGX_TEXEL = 17;   /* GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E(r, mu) at 32
                              * mu nodes (8 texels), then (metal part of A, F_ss main, F_ss metal)
                              * per corner */

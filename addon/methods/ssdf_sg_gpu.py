@@ -6,6 +6,7 @@ in ``core/ssdf_sg.py`` and ``core/ssdf_sg_scene.py``; the method is ``ssdf_sg.py
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -166,8 +167,11 @@ def material_uniforms(material):
     # multiscatter factor), the metal part of A and the two F_ss (linear in the base colour;
     # the shader makes F_ms of them, core.sg_brdf.multiscatter_factors)
     E, e_avg, am, fss = np.ones(GGX_E_NODES), np.ones(1), np.zeros(3), np.zeros((2, 3))
+    warp = np.zeros((len(sg_brdf.WARP_MU), 6))
     if m.model == "GGX":
         E, e_avg = sg_brdf.ggx_albedo(m, np.linspace(0.0, 1.0, GGX_E_NODES), GGX_E_NODES)
+        r = math.sqrt(min(max(float(np.asarray(m.roughness).reshape(-1)[0]), 0.0), 1.0))
+        warp = sg_brdf.ggx_warp_params(r, sg_brdf.WARP_MU)
         if m.multiscatter:
             fss = np.array([f[0] for f in sg_brdf.multiscatter_fss(m, 1)])
         if m.fresnel == "PRINCIPLED":
@@ -180,7 +184,8 @@ def material_uniforms(material):
                 ndfMu=float(mu[0]), ndfLambda2=float(lam[1]), ndfMu2=float(mu[1]),
                 fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0), ggxE=E,
                 ggxEavg=float(e_avg[0]), multiscatter=int(m.multiscatter),
-                fresAm=(*am, 0.0), fssMain=(*fss[0], 0.0), fssMetal=(*fss[1], 0.0))
+                fresAm=(*am, 0.0), fssMain=(*fss[0], 0.0), fssMetal=(*fss[1], 0.0),
+                ggxWarp=warp)
 
 
 #: texel of the first clamped-cosine lobe in the parameter texture
@@ -192,7 +197,11 @@ GGX_E_NODES = 32
 #: texels per table entry: (lambda a^2, mu a^2, eta, -), then kd, A, B_d, B_s at the four
 #: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E at
 #: the 32 mu nodes (8 texels), then the metal part of A, F_ss main, F_ss metal at the corners
-ENTRY_TEXELS = 17 + 1 + GGX_E_NODES // 4 + 12
+ENTRY_TEXELS = 17 + 1 + GGX_E_NODES // 4 + 12 + 32
+#: first texel of the GGX warp corrections in an entry (core.sg_brdf.ggx_warp_params at the
+#: entry's roughness and the 21 WARP_MU nodes): (d_1, l_1, d_2, l_2) per node (21 texels),
+#: then the shares (f_1, f_2) two nodes a texel (11 texels)
+WARP_TEXEL = 17 + 1 + GGX_E_NODES // 4 + 12
 #: the textured inputs a slot's shader reads, in sampler and texel order
 INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
 
@@ -250,6 +259,9 @@ def _entry(uniforms, alpha):
     k = 18 + GGX_E_NODES // 4
     for c, v in enumerate(uniforms):
         e[k + 3 * c:k + 3 * c + 3] = (v["fresAm"], v["fssMain"], v["fssMetal"])
+    w = np.asarray(u["ggxWarp"], np.float32)
+    e[WARP_TEXEL:WARP_TEXEL + 21] = w[:, :4]
+    e[WARP_TEXEL + 21:WARP_TEXEL + 32] = np.append(w[:, 4:6].reshape(-1), (0.0, 0.0)).reshape(-1, 4)
     return e
 
 
