@@ -570,8 +570,9 @@ def test_roughness_texture_on_a_glossy_sphere_against_cycles(tmp_path):
     for m, (tex_err, const_err) in errors.items():
         # per vertex: a triangle-wide band along each cell edge (measured + 6.3 points)
         assert tex_err < const_err + (0.005 if m == "SSDF_SG" else 0.08), (m, errors)
-    # SSDF_SG's GGX lobes (docs/measurements.md "SG lobes of a rough metal"): measured
-    # 7.7 % textured, 7.8 % pooled, 8.0 / 7.5 % at 0.3 / 0.7 (12.8, 13.9, 10.0 / 19.8 % with
-    # a Beckmann lobe); Cycles' own noise at 256 spp is part of it (REFERENCE: 6.6 % at 0.3)
-    assert errors["SSDF_SG"][0] < 0.085 and errors["SSDF_SG"][1] < 0.085, errors
-    assert each[0.7] < 0.085, each
+    # SSDF_SG's GGX lobes with the fitted warp (docs/measurements.md "SG lobes of a rough
+    # metal", "Fitted warp of the GGX lobes"): measured 7.1 % textured, 7.2 % pooled,
+    # 7.7 / 6.2 % at 0.3 / 0.7 (plain warp 7.7, 7.8, 8.0 / 7.5 %; a Beckmann lobe 12.8,
+    # 13.9, 10.0 / 19.8 %); Cycles' own noise at 256 spp is part of it (REFERENCE: 6.6 % at 0.3)
+    assert errors["SSDF_SG"][0] < 0.075 and errors["SSDF_SG"][1] < 0.075, errors
+    assert each[0.3] < 0.08 and each[0.7] < 0.066, each
