@@ -29,7 +29,7 @@
 
 const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
 const int ENTRY = 70;       /* ENTRY_TEXELS */
-const int WARP_TEXEL = 38;  /* WARP_TEXEL: GGX warp corrections (core.sg_brdf.ggx_warp_params)
+const int WARP_TEXEL = 38;  /* WARP_TEXEL: GGX warp corrections (core.sg_ndf.ggx_warp_params)
                              * at 21 n.o nodes: (d_1, l_1, d_2, l_2) per node, then the shares
                              * (f_1, f_2) two nodes a texel */
 const float WARP_MU_MIN = 0.02;

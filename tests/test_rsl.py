@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf, directions, envmap, mesh, reference, rsl, visibility
+from prt_relight.core import brdf, cpca, directions, envmap, mesh, reference, rsl, visibility
 
 CUBE = directions.cubemap(32)
 
@@ -423,11 +423,11 @@ def test_clustered_pca_is_exact_with_full_rank_and_meets_its_budget():
     groups = [rng.normal(size=(1, 64)) + 0.1 * rng.normal(size=(40, 3)) @ rng.normal(size=(3, 64))
               for _ in range(4)]
     X = np.concatenate(groups).astype(np.float32)
-    exact = rsl.clustered_pca(X, 4, 3)
-    assert rsl.relative_error(X, exact) < 1e-5
-    model, err, ratio = rsl.compress_by_budget(X, 0.05)
+    exact = cpca.clustered_pca(X, 4, 3)
+    assert cpca.relative_error(X, exact) < 1e-5
+    model, err, ratio = cpca.compress_by_budget(X, 0.05)
     # the reported error is relative_error's figure (the float32 model's residual is ~1e-7)
-    assert err < 1e-5 and err == pytest.approx(rsl.relative_error(X, model), rel=1e-3, abs=1e-9)
+    assert err < 1e-5 and err == pytest.approx(cpca.relative_error(X, model), rel=1e-3, abs=1e-9)
     assert ratio > 1.0
     np.testing.assert_allclose(model.reconstruct(), X, atol=0.2 * np.abs(X).max())
     # by rows and in half floats: the same vectors, each row from its own cluster
@@ -446,11 +446,11 @@ def test_cpca_budget_ignores_a_constant_offset():
               for _ in range(8)]
     X = np.concatenate(groups)
     X = (X + 0.03 * X.std() * rng.normal(size=X.shape)).astype(np.float32)
-    base, err, _ = rsl.compress_by_budget(X, 0.05)
-    shifted, err_s, _ = rsl.compress_by_budget(X + 50.0, 0.05)
+    base, err, _ = cpca.compress_by_budget(X, 0.05)
+    shifted, err_s, _ = cpca.compress_by_budget(X + 50.0, 0.05)
     assert shifted.bases.shape == base.bases.shape
     assert err_s <= 0.05 and err_s == pytest.approx(err, abs=1e-3)
-    assert rsl.relative_error(X + 50.0, shifted) == pytest.approx(err_s, rel=1e-3, abs=1e-9)
+    assert cpca.relative_error(X + 50.0, shifted) == pytest.approx(err_s, rel=1e-3, abs=1e-9)
 
 
 def test_offset_sat_keeps_float32_precision():

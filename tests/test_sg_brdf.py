@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf, sg, sg_brdf
+from prt_relight.core import brdf, sg, sg_brdf, sg_ndf
 from prt_relight.core.directions import fibonacci_sphere, orthonormal_frame
 
 _FIB = fibonacci_sphere(120_000)
@@ -569,12 +569,12 @@ def test_sharp_lobes_lambda_1e4_to_1e5_by_cap_quadrature(alpha):
 def test_ggx_table_is_the_coaxial_least_squares_fit():
     """GGX_NDF_TABLE is ggx_table_fit() (two coaxial lobes per alpha node); the two-lobe
     fit follows GGX's tails where one lobe cannot (L2 over the hemisphere of h)."""
-    c_lam, c_mu = sg_brdf.ggx_table_fit()
-    t_lam, t_mu = sg_brdf.GGX_NDF_TABLE
+    c_lam, c_mu = sg_ndf.ggx_table_fit()
+    t_lam, t_mu = sg_ndf.GGX_NDF_TABLE
     np.testing.assert_allclose(c_lam, t_lam, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(c_mu, t_mu, rtol=1e-4, atol=1e-6)
     for a in (0.09, 0.49):
-        one = sg_brdf.fit_coaxial_ndf("GGX", a, 1)[2]
+        one = sg_ndf.fit_coaxial_ndf("GGX", a, 1)[2]
         two = sg_brdf.ndf_lobes(sg_brdf.SGMaterial(model="GGX", roughness=a)).rel_error
         assert two < 0.05 < 0.14 < one, (a, one, two)
 
@@ -635,11 +635,11 @@ def test_ggx_warp_table_is_the_least_squares_fit():
     environment)."""
     from prt_relight.core.sg_warp_table import GGX_WARP_TABLE
     cols = (4, 10, 14)
-    np.testing.assert_allclose(sg_brdf.ggx_warp_table_fit(cols), GGX_WARP_TABLE[list(cols)],
+    np.testing.assert_allclose(sg_ndf.ggx_warp_table_fit(cols), GGX_WARP_TABLE[list(cols)],
                                rtol=1e-5, atol=1e-5)
     for ir, mu, gain in ((6, 0.3, 0.75), (10, 0.3, 0.75), (14, 0.2, 0.65), (14, 0.5, 0.8)):
         x = GGX_WARP_TABLE[ir, int(round(mu * 20))]
-        _, fit, plain = sg_brdf.fit_ggx_warp(sg_brdf.WARP_R[ir], mu, x)
+        _, fit, plain = sg_ndf.fit_ggx_warp(sg_ndf.WARP_R[ir], mu, x)
         assert fit < gain * plain, (ir, mu, fit, plain)
 
 

@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from ...core import brdf, directions, envmap, reference, rigid, rsl, shadow_fields
+from ...core import brdf, cpca, directions, envmap, reference, rigid, rsl, shadow_fields
 from .. import drawing, dynamic, keys, storage
 from . import Method, glossy_or_layered, register
 
@@ -122,7 +122,7 @@ def field_visibility(st, evaluator, state, cos_tables) -> np.ndarray:
 BLOB = "rsl"
 
 
-def cpca_blob(model: rsl.ClusteredPCA, resolution: int, rotation, probe) -> bytes:
+def cpca_blob(model: cpca.ClusteredPCA, resolution: int, rotation, probe) -> bytes:
     """One object's CPCA (float32 tables, int32 labels) and its pose at precompute
     (``rotation`` 3x3, ``probe`` object-space vertices) as a stored blob."""
     return storage.pack({"labels": np.asarray(model.labels, np.int32),
@@ -147,7 +147,7 @@ def _stored_tables(arrays, meta):
     if (res * res != D or means.shape != (C, D) or coeffs.shape != (len(labels), E)
             or (labels.size and not 0 <= labels.min() <= labels.max() < C)):
         raise storage.Unreadable("RSL data inconsistent")
-    model = rsl.ClusteredPCA(labels.astype(np.int64), means, bases, coeffs)
+    model = cpca.ClusteredPCA(labels.astype(np.int64), means, bases, coeffs)
     vdt = model.reconstruct(dtype=_held_dtype("VDT"))
     return vdt.reshape(-1, res, res), rotation, probe
 
@@ -224,7 +224,7 @@ class RSLMethod(Method):
                     raise Cancelled()
             vdt = derive_visibility(o.bits, o.points.normals, job.resolution, "VDT",
                                     np.float32, progress)
-            model, err, ratio = rsl.compress_by_budget(vdt.reshape(len(vdt), -1), budget)
+            model, err, ratio = cpca.compress_by_budget(vdt.reshape(len(vdt), -1), budget)
             out[o.name] = (model, err, ratio)
             C, E, _ = model.bases.shape
             notes.append(f"{o.name}: CPCA {C}x{E} error {err:.3f} ratio 1:{ratio:.0f}")

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...core import sg_brdf
+from ...core import sg_brdf, sg_ndf
 from ...core.brdf import slot_material
 from ...core.ssdf_sg_scene import (cosine_amplitudes, diffuse_slots, flat_triangles,
                                    is_glossy, sg_materials)
@@ -167,11 +167,11 @@ def material_uniforms(material):
     # multiscatter factor), the metal part of A and the two F_ss (linear in the base colour;
     # the shader makes F_ms of them, core.sg_brdf.multiscatter_factors)
     E, e_avg, am, fss = np.ones(GGX_E_NODES), np.ones(1), np.zeros(3), np.zeros((2, 3))
-    warp = np.zeros((len(sg_brdf.WARP_MU), 6))
+    warp = np.zeros((len(sg_ndf.WARP_MU), 6))
     if m.model == "GGX":
         E, e_avg = sg_brdf.ggx_albedo(m, np.linspace(0.0, 1.0, GGX_E_NODES), GGX_E_NODES)
         r = math.sqrt(min(max(float(np.asarray(m.roughness).reshape(-1)[0]), 0.0), 1.0))
-        warp = sg_brdf.ggx_warp_params(r, sg_brdf.WARP_MU)
+        warp = sg_ndf.ggx_warp_params(r, sg_ndf.WARP_MU)
         if m.multiscatter:
             fss = np.array([f[0] for f in sg_brdf.multiscatter_fss(m, 1)])
         if m.fresnel == "PRINCIPLED":
@@ -198,7 +198,7 @@ GGX_E_NODES = 32
 #: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E at
 #: the 32 mu nodes (8 texels), then the metal part of A, F_ss main, F_ss metal at the corners
 ENTRY_TEXELS = 17 + 1 + GGX_E_NODES // 4 + 12 + 32
-#: first texel of the GGX warp corrections in an entry (core.sg_brdf.ggx_warp_params at the
+#: first texel of the GGX warp corrections in an entry (core.sg_ndf.ggx_warp_params at the
 #: entry's roughness and the 21 WARP_MU nodes): (d_1, l_1, d_2, l_2) per node (21 texels),
 #: then the shares (f_1, f_2) two nodes a texel (11 texels)
 WARP_TEXEL = 17 + 1 + GGX_E_NODES // 4 + 12
