@@ -433,6 +433,17 @@ def test_ssdf_sg_textured_error_is_its_untextured_error(tmp_path):
     assert errors["plain"] < 0.04, errors
 
 
+def _rough_principled(name, cells, **inputs):
+    """(material, its Principled node) whose Roughness is the Non-Color image ``cells``
+    read with Closest interpolation."""
+    mat = bs.bsdf_material(name, "ShaderNodeBsdfPrincipled", **inputs)
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = _image("cells", cells), "Closest"
+    bsdf = next(nd for nd in mat.node_tree.nodes if nd.type == "BSDF_PRINCIPLED")
+    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Roughness"])
+    return mat, bsdf
+
+
 @pytest.mark.parametrize("socket, values, base", [
     ("Roughness", (0.25, 0.75), dict(Metallic=0.3)),
     ("Metallic", (0.0, 1.0), dict(Roughness=0.4)),
@@ -492,12 +503,8 @@ def test_sun_pass_reads_a_roughness_texture_per_pixel(tmp_path):
     cells = np.full((2, 2, 4), 0.25, np.float32)
     cells[0, 1, :3] = cells[1, 0, :3] = 0.75
     cells[..., 3] = 1.0
-    mat = bs.bsdf_material("Tex", "ShaderNodeBsdfPrincipled", Metallic=0.6,
-                           **{"Base Color": (0.7, 0.5, 0.3, 1.0)})
-    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
-    tex.image, tex.interpolation = _image("cells", cells), "Closest"
-    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
-    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Roughness"])
+    mat, bsdf = _rough_principled("Tex", cells, Metallic=0.6,
+                                  **{"Base Color": (0.7, 0.5, 0.3, 1.0)})
     plane.data.materials.append(mat)
     bpy.ops.prt.precompute()
     frame = bs.render_exr(tmp_path / "tex.exr")[::-1, :, :3]
@@ -528,12 +535,8 @@ def test_roughness_texture_on_a_glossy_sphere_against_cycles(tmp_path):
     yy, xx = np.mgrid[0:n, 0:n]
     cells = np.ones((n, n, 4), np.float32)
     cells[..., :3] = np.where((xx + yy) % 2 == 1, 0.7, 0.3)[..., None]
-    mat = bs.bsdf_material("Rough", "ShaderNodeBsdfPrincipled", Metallic=1.0,
-                           **{"Base Color": (0.9, 0.7, 0.5, 1.0)})
-    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
-    tex.image, tex.interpolation = _image("cells", cells), "Closest"
-    bsdf = next(nd for nd in mat.node_tree.nodes if nd.type == "BSDF_PRINCIPLED")
-    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Roughness"])
+    mat, bsdf = _rough_principled("Rough", cells, Metallic=1.0,
+                                  **{"Base Color": (0.9, 0.7, 0.5, 1.0)})
     sphere.data.materials.append(mat)
     bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
     bs.set_resolution(64, 64)
