@@ -111,7 +111,7 @@ def field_visibility(st, evaluator, state, cos_tables) -> np.ndarray:
         V[p, k] *= frac
     static = dynamic.static_bits(st, state)
     if static is not None:
-        vdt = derive_visibility(static, pts.normals, state.resolution, "VDT", np.float16)
+        vdt = derive_visibility(static, pts.normals, state.resolution, "VDT", _held_dtype("VDT"))
         V *= evaluator.diffuse_factors(pts.normals, "VDT", vdt, cos_tables)[0]
     return V
 
