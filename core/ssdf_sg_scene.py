@@ -136,7 +136,7 @@ def shade_points(field, normals, positions, materials_of_points, materials, worl
             lobes = (None, None, None)
             if glossy:
                 v = reference.point_views(positions[sel], eye, view_dir)
-                lobes = sg_brdf.specular_lobes(mat, n, v)
+                lobes = sg_brdf.specular_lobes(mat, n, v, cosine=cosine, cosine_frame=(t, b))
                 out[sel] += specular_radiance(field, sel, n, *lobes, env_lookup, t, b,
                                               cosine=cosine)
             if lamps:

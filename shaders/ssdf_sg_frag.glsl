@@ -81,10 +81,11 @@ float ggx_albedo(float mu)
 }
 
 /* Eq. 41 for the GGX model (core.sg_brdf.specular_lobes): two coaxial lobes warped alike,
- * scaled together so the slice has Cycles' albedo E(r, n.o) (against eq. 40's cosine),
+ * scaled together so the slice has Cycles' albedo E(r, n.o) against the cosine mixture it
+ * is shaded with, in the glossy frame (nl, gt, gb: the bump-corrected normal's),
  * each with the Fresnel at the half vector of its product with the cosine, times Cycles'
  * multiscatter factor per layer */
-vec3 ggx_specular(vec3 o, vec3 nl, vec3 t, vec3 b, vec3 n, vec4 W[16])
+vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec4 W[16])
 {
   float c = dot(o, nl);
   if (c <= 0.0) {
@@ -104,7 +105,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 t, vec3 b, vec3 n, vec4 W[16])
   vec2 f = max(mix(wi % 2 == 0 ? s0.xy : s0.zw, (wi + 1) % 2 == 0 ? s1.xy : s1.zw, wf), vec2(0.0));
   vec3 u = pw - dot(pw, nl) * nl;
   float ul = length(u);
-  u = ul > 1e-9 ? u / ul : t;
+  u = ul > 1e-9 ? u / ul : gt;
   float el0 = acos(clamp(c, 0.0, 1.0));
   float tau = 4.0 * max(c, WARP_MU_MIN);
   vec3 axes[2] = vec3[2](cos(el0 + q.x) * nl + sin(el0 + q.x) * u,
@@ -113,9 +114,14 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 t, vec3 b, vec3 n, vec4 W[16])
                            min(min(ndfLambda2 / tau, LAMBDA_MAX) * exp(q.w), LAMBDA_MAX));
   float mus[2] = float[2](f.x, f.y);
   float E = ggx_albedo(max(c, SG_COS_VIEW_MIN));
+  /* E against the cosine mixture the lobes are shaded with (core.sg_brdf._ggx_normalisation) */
   float asg = 0.0;
-  for (int k = 0; k < 2; k++) {
-    asg += mus[k] * SG_COSINE_MU * sg_inner_product(axes[k], lams[k], nl, SG_COSINE_LAMBDA);
+  for (int m = 0; m < cosLobes; m++) {
+    vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
+    vec3 cw = cl.x * gt + cl.y * gb + cl.z * nl;
+    for (int k = 0; k < 2; k++) {
+      asg += mus[k] * cl.w * sg_inner_product(axes[k], lams[k], cw, cosLambda);
+    }
   }
   float norm = E / max(asg, 1e-30);
   float missing = (1.0 - max(E, 1e-6)) / max(E, 1e-6);
@@ -138,7 +144,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 t, vec3 b, vec3 n, vec4 W[16])
     vec3 mu = mus[k] * norm * (fres * kmain + metal * (kmetal - kmain));
     for (int m = 0; m < cosLobes; m++) {
       vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
-      vec3 cw = cl.x * lobeT + cl.y * lobeB + cl.z * nl;
+      vec3 cw = cl.x * gt + cl.y * gb + cl.z * nl;
       vec3 p;
       float lam;
       float amp = sg_product(cw, cosLambda, axes[k], lams[k], p, lam);
@@ -284,7 +290,7 @@ void main()
 #endif
   vec3 color = kd.rgb * rd * envStrength;
   if (glossy != 0 && brdfModel == 3) {
-    color += ggx_specular(view, lobeN, t, b, n, W);
+    color += ggx_specular(view, glossN, glossT, glossB, t, b, n, W);
   }
   /* eq. 41 with the one-lobe isotropic NDF view slice (eq. 17-22) */
   else if (glossy != 0) {

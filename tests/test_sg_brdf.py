@@ -579,7 +579,7 @@ def test_ggx_table_is_the_coaxial_least_squares_fit():
         assert two < 0.05 < 0.14 < one, (a, one, two)
 
 
-def _forest_metal_sphere_errors(r, ggx, fitted_warp=False, metallic=1.0):
+def _forest_metal_sphere_errors(r, ggx, fitted_warp=False, metallic=1.0, cosine=None):
     """rel-L2 and mean ratio of the SG slice (lobes times the exact cosine) against the
     quadrature of Cycles' Multiscatter GGX metal (core.brdf) under 'forest' (128 rows), at
     the pixels of tests/test_textures.py's sphere seen from (0, -4, 1), one in four."""
@@ -606,7 +606,7 @@ def _forest_metal_sphere_errors(r, ggx, fitted_warp=False, metallic=1.0):
     truth = np.einsum("pdc,dc->pc", brdf.specular_cosine(m, n, o, dirs).astype(np.float64),
                       radiance)
     axes, lam, mu = sg_brdf.specular_lobes(sg_brdf.sg_material_from_brdf(m, ggx=ggx), n, o,
-                                           fitted_warp=fitted_warp)
+                                           fitted_warp=fitted_warp, cosine=cosine)
     cos = np.maximum(n @ dirs.T, 0.0)
     lobes = sum(np.exp(lam[:, k, None] * (axes[:, k] @ dirs.T - 1.0))[..., None]
                 * mu[:, k, None, :] for k in range(axes.shape[1]))
