@@ -6,11 +6,8 @@
     python bench/bench_sun_seeds.py [--seeds 12] [--spp 1024] [--size 128 96]
                                     [--methods REFERENCE,SH,...] [--out out/bench_sun_seeds]
 
-For a method's frame ``o``, the Cycles frames ``c_i`` and their mean ``m``:
-``E|o - m|² = |o - t|² + σ²/N`` (``t`` the converged frame, ``σ²`` the per-seed variance,
-estimated without bias by ``Σ|c_i - m|² / (N - 1)``), so the error against converged Cycles
-is estimated as ``sqrt(|o - m|² - σ²/N) / |m|``; printed with the raw figure and the mean's
-own noise.  Cycles frames are kept and reused (per seed, size and spp).
+The error against converged Cycles is ``core.report.rel_l2_converged`` (the per-seed
+variance subtracted), printed with the raw figure and the mean's own noise.  Cycles frames are kept and reused (per seed, size and spp).
 """
 
 from __future__ import annotations
@@ -19,24 +16,10 @@ import argparse
 import pathlib
 import sys
 
-import numpy as np
-
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import bench_lights  # noqa: E402
 import scenes  # noqa: E402
-
-
-def converged_error(ours, frames):
-    """(rel-L2 against the mean, the mean's noise, estimated rel-L2 against converged)."""
-    C = np.stack(frames)[..., :3].astype(np.float64)
-    n = len(frames)
-    mean = C.mean(0)
-    mask = np.stack(frames)[..., 3].mean(0) > 0.5
-    norm = float((mean ** 2).sum(-1)[mask].sum())
-    var = float(sum(((c - mean) ** 2).sum(-1)[mask].sum() for c in C)) / (n - 1)
-    e2 = float(((ours[..., :3] - mean) ** 2).sum(-1)[mask].sum())
-    return (np.sqrt(e2 / norm), np.sqrt(var / n / norm),
-            np.sqrt(max(e2 - var / n, 0.0) / norm))
+from prt_relight.core.report import rel_l2_converged  # noqa: E402  (scenes registers it)
 
 
 def main():
@@ -67,7 +50,7 @@ def main():
     for m in args.methods.split(","):
         sc.prt.method = m
         scenes.render_prt(out / f"{m}.exr")
-        raw, noise, est = converged_error(scenes.read_exr(out / f"{m}.exr"), frames)
+        raw, noise, est = rel_l2_converged(scenes.read_exr(out / f"{m}.exr"), frames)
         print(f"| {m} | {100 * raw:.2f} % | {100 * noise:.2f} % | {100 * est:.2f} % |",
               flush=True)
 

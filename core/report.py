@@ -50,6 +50,27 @@ def rel_l2(image: np.ndarray, reference: np.ndarray, mask: np.ndarray | None = N
     return diff / nb if nb > 0.0 else diff
 
 
+def rel_l2_converged(image: np.ndarray, frames) -> tuple[float, float, float]:
+    """Error against a converged reference estimated from ``frames``, N >= 2 renders of it
+    with different seeds: ``(rel-L2 against their mean, the mean's own noise, rel-L2 against
+    the converged frame)``.  ``E|o - m|^2 = |o - t|^2 + s^2 / N`` (``t`` converged, ``s^2``
+    the per-seed variance, estimated without bias by ``sum |c_i - m|^2 / (N - 1)``), so
+    ``|o - t| ~ sqrt(|o - m|^2 - s^2 / N)``; over the pixels where the frames' mean alpha
+    is > 0.5, RGB."""
+    F = np.stack([np.asarray(f) for f in frames])
+    n = len(F)
+    if n < 2:
+        raise ValueError("rel_l2_converged needs at least two seeds' frames")
+    C = F[..., :3].astype(np.float64)
+    mean = C.mean(0)
+    mask = F[..., 3].mean(0) > 0.5 if F.shape[-1] > 3 else np.ones(mean.shape[:2], bool)
+    norm = float((mean ** 2).sum(-1)[mask].sum())
+    var = float(sum(((c - mean) ** 2).sum(-1)[mask].sum() for c in C)) / (n - 1)
+    e2 = float(((np.asarray(image)[..., :3] - mean) ** 2).sum(-1)[mask].sum())
+    return (math.sqrt(e2 / norm), math.sqrt(var / n / norm),
+            math.sqrt(max(e2 - var / n, 0.0) / norm))
+
+
 def psnr(image: np.ndarray, reference: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Peak signal-to-noise ratio in dB, the peak being the reference's largest value
     among the masked pixels (``inf`` for identical images)."""
