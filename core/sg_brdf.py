@@ -98,7 +98,7 @@ metal: docs/measurements.md "SG lobes of a rough metal".  Measured errors:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -118,7 +118,7 @@ __all__ = [
     "MODELS", "ISOTROPIC_MODELS", "FRESNEL_MODES", "MAX_LOBES", "ALPHA_MIN",
     "SGMaterial", "NDFLobes", "ndf_value", "ndf_lobes", "fit_isotropic_ndf",
     "fit_anisotropic_ndf", "iso_ndf_sg", "specular_lobes", "specular_brdf",
-    "fresnel_coefficients", "fresnel_eq14", "diffuse_albedo", "diffuse_view_weight",
+    "fresnel_coefficients", "fresnel_eq14", "diffuse_albedo", "diffuse_view_ratio",
     "sg_material_from_brdf", "ISO_TABLE_ALPHA", "ISO_NDF_TABLE", "iso_table_fit",
     "MODEL_INDEX", "FRESNEL_INDEX",
 ]
@@ -161,6 +161,8 @@ class SGMaterial:
     metallic:   ``"PRINCIPLED"`` metal weight.
     multiscatter: scale the lobes by Cycles' multiple-scattering energy compensation
                 (Multiscatter GGX): :func:`multiscatter_factors`.
+    lobes:      False when the glossy lobes are drawn elsewhere (per pixel,
+                :func:`without_glossy`): only the Lambert base is shaded from this material.
     """
 
     model: str = "COOK_TORRANCE"
@@ -175,6 +177,7 @@ class SGMaterial:
     ior: object = 1.5
     metallic: object = 0.0
     multiscatter: bool = False
+    lobes: bool = True
 
     def __post_init__(self):
         self.model = str(self.model).upper()
@@ -568,8 +571,9 @@ def diffuse_albedo(material: SGMaterial):
     ``fresnel="PRINCIPLED"``: Cycles scales the base colour by ``(1 - metallic)``
     and a view-dependent layering weight (:func:`.brdf.diffuse_view_weight`);
     here its cosine-weighted average over views ``2 int w(mu) mu dmu``, so that
-    ``kd`` stays view independent (the weight varies by ~5 % between normal and
-    grazing views at roughness 0.5).  Other modes: ``material.diffuse``.
+    ``kd`` stays view independent; :func:`diffuse_view_ratio` is the view's share of it
+    (the shader and :func:`.ssdf_sg_scene.shade_points` multiply it per pixel / point).
+    Other modes: ``material.diffuse``.
     """
     if material.fresnel != "PRINCIPLED":
         return material.diffuse.copy()
@@ -598,13 +602,21 @@ def _principled_mean_layering(material):
     return float(np.sum(w * mu * weight))
 
 
-def diffuse_view_weight(material: SGMaterial, normals, views):
-    """(P,) exact per-view Principled layering weight (Cycles), 1 for other modes."""
-    n = _unit(normals, "normals")
+def diffuse_view_ratio(material: SGMaterial, cos_o):
+    """Cycles' Principled layering weight of the Lambert base at view cosines ``cos_o``
+    (any shape) over its mean that :func:`diffuse_albedo` folds into ``kd``: ``kd`` times
+    this is Cycles' base at that view (a factor of the view alone, like the multiscatter
+    factor: exact per pixel).  At roughness 0.3 it runs from 1.04 at a normal view to 0.6 at
+    grazing ones, where the dielectric layer takes most of the light.  1 for other modes."""
+    c = np.asarray(cos_o, dtype=np.float64)
     if material.fresnel != "PRINCIPLED":
-        return np.ones(n.shape[0])
+        return np.ones(c.shape)
     bm = _principled_brdf_material(material)
-    return core_brdf.diffuse_view_weight(bm, n, _unit(views, "views"))[:, 0].astype(np.float64)
+    flat = np.clip(c.reshape(-1), -1.0, 1.0)
+    v = np.stack([np.sqrt(1.0 - flat * flat), np.zeros_like(flat), flat], axis=1)
+    n = np.tile([0.0, 0.0, 1.0], (flat.size, 1))
+    w = core_brdf.diffuse_view_weight(bm, n, v)[:, 0].astype(np.float64)
+    return (w / max(_principled_mean_layering(material), 1e-12)).reshape(c.shape)
 
 
 # --------------------------------------------------------------------------- from core.brdf
@@ -640,8 +652,8 @@ def sg_material_from_brdf(material: core_brdf.Material, ggx: bool = True) -> SGM
 
 
 def without_glossy(material: SGMaterial) -> SGMaterial:
-    """The Lambert part of ``material`` alone, with the albedo it has there
-    (:func:`diffuse_albedo`: a Principled base keeps its layering weight): for slots
-    whose glossy lobes are drawn elsewhere (per pixel, :func:`.brdf.is_sharp`)."""
-    return SGMaterial(model="COOK_TORRANCE", diffuse=diffuse_albedo(material),
-                      specular=(0.0, 0.0, 0.0), roughness=material.roughness, fresnel="NONE")
+    """``material`` with its glossy lobes drawn elsewhere (per pixel, :func:`.brdf.is_sharp`):
+    only its Lambert base is shaded from it, with the albedo it has there
+    (:func:`diffuse_albedo`: a Principled base keeps its layering weight, and its view
+    ratio :func:`diffuse_view_ratio`)."""
+    return replace(material, lobes=False)

@@ -86,8 +86,9 @@ def sg_materials(materials) -> list:
 
 
 def is_glossy(material: sg_brdf.SGMaterial) -> bool:
-    """Whether an SG material has a specular lobe (specular or metallic above 0)."""
-    return bool(np.any(np.asarray(material.specular) > 0)
+    """Whether an SG material has a specular lobe drawn here (specular or metallic above 0,
+    and its lobes not drawn elsewhere)."""
+    return material.lobes and bool(np.any(np.asarray(material.specular) > 0)
                 or np.any(np.asarray(material.metallic) > 0))
 
 
@@ -132,16 +133,17 @@ def shade_points(field, normals, positions, materials_of_points, materials, worl
             rd = diffuse_transfer_per_cosine(
                 field, sel, n, axes, lam, cosine_amplitudes(mu, len(cosine.amplitudes)), t, b,
                 cosine=cosine)
-            out[sel] = rd * kd
+            v = reference.point_views(positions[sel], eye, view_dir)
+            kd_o = kd * sg_brdf.diffuse_view_ratio(mat, np.sum(n * v, axis=1))[:, None]
+            out[sel] = rd * kd_o
             lobes = (None, None, None)
             if glossy:
-                v = reference.point_views(positions[sel], eye, view_dir)
                 lobes = sg_brdf.specular_lobes(mat, n, v, cosine=cosine, cosine_frame=(t, b))
                 out[sel] += specular_radiance(field, sel, n, *lobes, env_lookup, t, b,
                                               cosine=cosine)
             if lamps:
                 la, ll, lm = sg_lighting.lamp_sgs(lamps, positions[sel])
-                out[sel] += lamp_radiance(field, sel, n, la, ll, lm, kd, *lobes, t, b,
+                out[sel] += lamp_radiance(field, sel, n, la, ll, lm, kd_o, *lobes, t, b,
                                           cosine=cosine)
     return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
 

@@ -80,6 +80,19 @@ float ggx_albedo(float mu)
   return mix(ti[i % 4], tj[j % 4], x - float(i));
 }
 
+/* the Lambert base's view ratio (core.sg_brdf.diffuse_view_ratio: Cycles' Principled
+ * layering weight over the mean in kd) at the pixel's table entry, linear in mu between
+ * the 32 nodes */
+float layer_ratio(float mu)
+{
+  float x = clamp(mu, 0.0, 1.0) * 31.0;
+  int i = min(int(x), 31);
+  int j = min(i + 1, 31);
+  vec4 ti = table_entry(entryX, entryY, tableNr, tableNl, LAYER_TEXEL + i / 4);
+  vec4 tj = table_entry(entryX, entryY, tableNr, tableNl, LAYER_TEXEL + j / 4);
+  return mix(ti[i % 4], tj[j % 4], x - float(i));
+}
+
 /* Eq. 41 for the GGX model (core.sg_brdf.specular_lobes): two coaxial lobes warped alike,
  * scaled together so the slice has Cycles' albedo E(r, n.o) against the cosine mixture it
  * is shaded with, in the glossy frame (nl, gt, gb: the bump-corrected normal's),
@@ -288,7 +301,7 @@ void main()
     }
   }
 #endif
-  vec3 color = kd.rgb * rd * envStrength;
+  vec3 color = kd.rgb * layer_ratio(dot(glossN, view)) * rd * envStrength;
   if (glossy != 0 && brdfModel == 3) {
     color += ggx_specular(view, glossN, glossT, glossB, t, b, n, W);
   }

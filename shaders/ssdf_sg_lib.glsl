@@ -28,7 +28,8 @@
  *                     corners 00, 01, 10, 11. */
 
 const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
-const int ENTRY = 70;       /* ENTRY_TEXELS */
+const int ENTRY = 78;       /* ENTRY_TEXELS */
+const int LAYER_TEXEL = 70; /* LAYER_TEXEL: the Lambert base's view ratio at the 32 mu nodes */
 const int WARP_TEXEL = 38;  /* WARP_TEXEL: GGX warp corrections (core.sg_ndf.ggx_warp_params)
                              * at 21 n.o nodes: (d_1, l_1, d_2, l_2) per node, then the shares
                              * (f_1, f_2) two nodes a texel */

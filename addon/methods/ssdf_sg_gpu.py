@@ -177,7 +177,8 @@ def material_uniforms(material):
         if m.fresnel == "PRINCIPLED":
             am = float(np.asarray(m.metallic).reshape(-1)[0]) * np.clip(
                 np.asarray(m.diffuse, np.float64).reshape(3), 0.0, 1.0)
-    return dict(kd=(*kd, 1.0), glossy=int(glossy), brdfModel=model,
+    layer = sg_brdf.diffuse_view_ratio(m, np.linspace(0.0, 1.0, GGX_E_NODES))
+    return dict(kd=(*kd, 1.0), glossy=int(glossy), brdfModel=model, layerRatio=layer,
                 principled=int(m.fresnel == "PRINCIPLED"),
                 roughness=float(np.asarray(m.roughness).reshape(-1)[0]),
                 ior=float(np.asarray(m.ior).reshape(-1)[0]), ndfLambda=float(lam[0]),
@@ -194,14 +195,18 @@ COSINE_TEXEL = 28
 ROUGHNESS_NODES, LEVEL_NODES = 33, 9
 #: Cycles' mu nodes of E(r, mu) (core.brdf_tables)
 GGX_E_NODES = 32
-#: texels per table entry: (lambda a^2, mu a^2, eta, -), then kd, A, B_d, B_s at the four
-#: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E at
-#: the 32 mu nodes (8 texels), then the metal part of A, F_ss main, F_ss metal at the corners
-ENTRY_TEXELS = 17 + 1 + GGX_E_NODES // 4 + 12 + 32
 #: first texel of the GGX warp corrections in an entry (core.sg_ndf.ggx_warp_params at the
 #: entry's roughness and the 21 WARP_MU nodes): (d_1, l_1, d_2, l_2) per node (21 texels),
 #: then the shares (f_1, f_2) two nodes a texel (11 texels)
 WARP_TEXEL = 17 + 1 + GGX_E_NODES // 4 + 12
+#: first texel of the Lambert base's view ratio (core.sg_brdf.diffuse_view_ratio) at the
+#: 32 mu nodes of E (8 texels)
+LAYER_TEXEL = WARP_TEXEL + 32
+#: texels per table entry: (lambda a^2, mu a^2, eta, -), then kd, A, B_d, B_s at the four
+#: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E at
+#: the 32 mu nodes (8 texels), then the metal part of A, F_ss main, F_ss metal at the
+#: corners; the warp corrections; the view ratio
+ENTRY_TEXELS = LAYER_TEXEL + GGX_E_NODES // 4
 #: the textured inputs a slot's shader reads, in sampler and texel order
 INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
 
@@ -262,6 +267,7 @@ def _entry(uniforms, alpha):
     w = np.asarray(u["ggxWarp"], np.float32)
     e[WARP_TEXEL:WARP_TEXEL + 21] = w[:, :4]
     e[WARP_TEXEL + 21:WARP_TEXEL + 32] = np.append(w[:, 4:6].reshape(-1), (0.0, 0.0)).reshape(-1, 4)
+    e[LAYER_TEXEL:LAYER_TEXEL + GGX_E_NODES // 4] = np.asarray(u["layerRatio"]).reshape(-1, 4)
     return e
 
 
