@@ -258,6 +258,12 @@ def test_diffuse_albedo_split():
     w = brdf.diffuse_view_weight(cm, n, v)[:, 0]
     mean = 2.0 * np.sum(w * mu) / 64          # cosine-weighted mean over views
     assert np.allclose(sg_brdf.diffuse_albedo(sm), 0.8 * mean, rtol=5e-3)
+    # kd times the view ratio is Cycles' layered base at each view (the Lambert radiance of
+    # core.brdf, per view), also when the lobes are drawn elsewhere
+    for m in (sm, sg_brdf.without_glossy(sm)):
+        got = sg_brdf.diffuse_albedo(m)[0] * sg_brdf.diffuse_view_ratio(m, mu)
+        np.testing.assert_allclose(got, 0.8 * w, rtol=1e-5)
+    assert np.all(sg_brdf.diffuse_view_ratio(sg_brdf.SGMaterial(), mu) == 1.0)
 
 
 # --------------------------------------------------------------------------- GLSL twin

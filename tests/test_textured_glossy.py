@@ -1,0 +1,115 @@
+"""Glossy Principled objects against converged Cycles (several seeds, their variance
+subtracted: core.report.rel_l2_converged): a Roughness image and a Normal Map of an image
+(issue 16's glossy case; SSDF_SG reads both per pixel, Wang et al. 2009 §4, §7), and the
+dielectric's view-dependent layering of its Lambert base."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from prt_relight.core import report
+
+from . import blender_scene as bs
+
+pytestmark = pytest.mark.usefixtures("registered_addon")
+
+
+def _roughness_and_normal_images(res=256):
+    """(roughness, tangent-space normal) images, top row first: roughness in smooth blobs
+    between 0.2 and 0.7, normals of an egg-crate relief (slopes up to 0.35, 19 degrees)."""
+    u = (np.arange(res) + 0.5) / res
+    U, V = np.meshgrid(u, u[::-1])
+    r = 0.45 + 0.25 * np.sin(2 * np.pi * (2 * U + 0.3)) * np.cos(3 * np.pi * V)
+    su = 0.35 * np.cos(16 * np.pi * U) * np.sin(8 * np.pi * V)
+    sv = 0.35 * np.sin(16 * np.pi * U) * np.cos(8 * np.pi * V)
+    n = np.stack([-su, -sv, np.ones_like(U)], -1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.repeat(r[..., None], 3, axis=2).astype(np.float32), (0.5 * (n + 1)).astype(np.float32)
+
+
+def _glossy_suzanne(metallic):
+    bpy.ops.mesh.primitive_monkey_add(size=2.0)
+    ob = bpy.context.object
+    mod = ob.modifiers.new("subdivide", "SUBSURF")
+    mod.levels = 2
+    bpy.ops.object.modifier_apply(modifier=mod.name)
+    bpy.ops.object.shade_smooth()
+    mat = bpy.data.materials.new("textured glossy")
+    nt = mat.node_tree
+    bsdf = nt.nodes["Principled BSDF"]
+    bsdf.inputs["Base Color"].default_value = (0.8, 0.5, 0.3, 1.0)
+    bsdf.inputs["Metallic"].default_value = metallic
+    rough, normal = _roughness_and_normal_images()
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = bs.float_image("roughness", rough)
+    nt.links.new(tex.outputs["Color"], bsdf.inputs["Roughness"])
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = bs.float_image("normal", normal)
+    node = nt.nodes.new("ShaderNodeNormalMap")
+    nt.links.new(tex.outputs["Color"], node.inputs["Color"])
+    nt.links.new(node.outputs["Normal"], bsdf.inputs["Normal"])
+    ob.data.materials.append(mat)
+    return bsdf
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("metallic", [0.0])
+def test_roughness_texture_and_normal_map_against_converged_cycles(tmp_path, metallic):
+    """Suzanne (subdivided twice) under 'forest', 64x64: SSDF_SG against Cycles direct light
+    converged (four seeds x 1024 spp, their variance subtracted), within the issue's 6 %;
+    drawn with the roughness's mean and without the normal map it is further off."""
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    bsdf = _glossy_suzanne(metallic)
+    bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
+    bs.set_resolution(64, 64)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 3
+    frames = []
+    for seed in range(4):
+        scene.cycles.seed = seed
+        frames.append(bs.render_exr(tmp_path / f"cycles{seed}.exr", engine="CYCLES",
+                                    samples=1024))
+    scene.prt.method = "SSDF_SG"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    _, noise, err = report.rel_l2_converged(bs.render_exr(tmp_path / "ours.exr"), frames)
+    nt = bsdf.id_data
+    for socket in ("Roughness", "Normal"):
+        nt.links.remove(bsdf.inputs[socket].links[0])
+    bsdf.inputs["Roughness"].default_value = 0.45
+    _, _, plain = report.rel_l2_converged(bs.render_exr(tmp_path / "plain.exr"), frames)
+    print(f"metallic {metallic}: SSDF_SG {100 * err:.2f} % (Cycles' mean's noise "
+          f"{100 * noise:.2f} %), untextured {100 * plain:.2f} %")
+    assert err < 0.06 and plain > 1.5 * err, (err, plain)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("roughness", [0.15, 0.3])
+def test_principled_dielectric_sphere_against_converged_cycles(tmp_path, roughness):
+    """A Principled dielectric sphere under 'forest' (64x64): Cycles' Lambert base is
+    weighted per view by what the specular layer takes (closure_layering_weight), up to 40 %
+    less at grazing views at r 0.3; SSDF_SG draws that weight per pixel (measured 0.8 / 1.0 %
+    at r 0.15 / 0.3; with the weight's mean over views 6.0 / 4.7 %, the rim too bright)."""
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=96, ring_count=48, radius=1.0)
+    bpy.ops.object.shade_smooth()
+    bpy.context.object.data.materials.append(bs.bsdf_material(
+        "dielectric", "ShaderNodeBsdfPrincipled", Roughness=roughness,
+        **{"Base Color": (0.9, 0.7, 0.5, 1.0)}))
+    bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
+    bs.set_resolution(64, 64)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 3
+    frames = []
+    for seed in range(4):
+        scene.cycles.seed = seed
+        frames.append(bs.render_exr(tmp_path / f"cycles{seed}.exr", engine="CYCLES",
+                                    samples=512))
+    scene.prt.method = "SSDF_SG"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    _, noise, err = report.rel_l2_converged(bs.render_exr(tmp_path / "ours.exr"), frames)
+    print(f"dielectric r {roughness}: SSDF_SG {100 * err:.2f} % (noise {100 * noise:.2f} %)")
+    assert err < 0.02, err
