@@ -19,13 +19,18 @@ pytestmark = [pytest.mark.usefixtures("registered_addon"), pytest.mark.slow]
 W, H = 48, 36
 
 
-def _scene():
+def _scene(principled=False):
     bs.reset()
     bs.add_world(path=bs.hdri_path("sunset"), rotation_z=0.4)
     bs.add_ground(size=6.0, cuts=12)
     suz = bs.add_suzanne(subdiv=1)
-    suz.data.materials.append(bs.bsdf_material("Glossy", "ShaderNodeBsdfGlossy",
-                                               distribution="BECKMANN", Roughness=0.3))
+    if principled:              # GGX: the fitted view-slice lobes (ggx_specular)
+        suz.data.materials.append(bs.bsdf_material(
+            "Metal", "ShaderNodeBsdfPrincipled", Metallic=1.0, Roughness=0.45,
+            **{"Base Color": (0.9, 0.7, 0.5, 1.0)}))
+    else:
+        suz.data.materials.append(bs.bsdf_material("Glossy", "ShaderNodeBsdfGlossy",
+                                                   distribution="BECKMANN", Roughness=0.3))
     bs.add_camera()
     bs.set_resolution(W, H)
     scene = bpy.context.scene
@@ -57,11 +62,12 @@ def _camera_matrices():
     return view, proj, np.array(cam.matrix_world.translation)
 
 
-def test_glsl_equals_numpy_per_pixel():
+@pytest.mark.parametrize("principled", [False, True])
+def test_glsl_equals_numpy_per_pixel(principled):
     import embreex.rtcore_scene as rtcs
     from embreex.mesh_construction import TriangleMesh
 
-    scene = _scene()
+    scene = _scene(principled)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     _gpu_ready()
     state = _state()
