@@ -38,7 +38,9 @@ With ``c = n . h`` (``theta`` its angle), ``cos_i = n . i``, ``cos_o = n . o``,
   is Cycles' Glossy BSDF (Beckmann) exactly, up to the SG approximation.
 ``GGX`` (Cycles' GGX / Multiscatter GGX, Principled): ``D = a^2 / (pi c^4 (a^2 + tan^2 theta)^2)``
   as :data:`.sg_ndf.GGX_LOBES` coaxial SGs (:data:`.sg_ndf.GGX_NDF_TABLE`, :func:`.sg_ndf.fit_coaxial_ndf`), each
-  warped like the one lobe of the other models.  ``M`` at the lobes' centre is replaced by
+  warped like the one lobe of the other models (``fitted_warp=False``); by default the view
+  slice is :data:`.sg_ndf.GGX_WARP_LOBES` lobes along the plane of incidence fitted to it
+  (:data:`GGX_WARP_TABLE`, :func:`.sg_ndf.fit_ggx_warp`).  ``M`` at the lobes' centre is replaced by
   the factor that gives the slice (Fresnel 1) Cycles' GGX albedo ``E(r, n.o)``
   (:func:`_ggx_normalisation`), the Fresnel is taken at each lobe's product with the
   cosine (:func:`_fresnel_cosine`), and Multiscatter GGX adds Cycles' energy factor per
@@ -86,9 +88,10 @@ K <= 7, the 7 lobes of Fig. 2 for ``nu = 75, nv = 1200``).  Each lobe is warped
 separately (§4.3) into an isotropic lobe of the view slice.
 
 What is approximated, and where it hurts: the isotropic warp at oblique views
-(§4.3 says so; for GGX ``specular_lobes(fitted_warp=True)`` corrects each warped lobe's
-tilt, sharpness and share by a least-squares table over (r, n.o), :func:`fit_ggx_warp`), ``M`` constant over each lobe (eq. 22), a rough GGX slice's shape (its
-energy is Cycles' by construction) and the F82 tint of Cycles' metal lobe (Schlick here).
+(§4.3 says so; for GGX ``specular_lobes(fitted_warp=True)`` draws the slice as lobes with
+their own tilt, sharpness and share by a least-squares table over (r, n.o),
+:func:`fit_ggx_warp`), ``M`` constant over each lobe (eq. 22), a rough GGX slice's shape
+(its energy is Cycles' by construction) and the F82 tint of Cycles' metal lobe (Schlick here).
 GGX lobes drawn as the Beckmann lobe of the same alpha without the multiscatter factor
 (before 2026-12-02, ``sg_material_from_brdf(ggx=False)``) were 14-20 % off on a rough
 metal: docs/measurements.md "SG lobes of a rough metal".  Measured errors:
@@ -344,8 +347,9 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None, fitted_w
       lobes whose facet faces away from the view (``o.p <= 0``) get ``mu = 0``;
     * ``GGX``: ``M_o`` is the normalisation to Cycles' ``E(r, n.o)``, ``F`` at each lobe's
       product with the cosine, times the multiscatter factor (module docstring);
-      ``fitted_warp``: the warped lobes corrected by :data:`GGX_WARP_TABLE`
-      (:func:`ggx_warp_correct`, as ``shaders/ssdf_sg_frag.glsl``; False: the plain warp);
+      ``fitted_warp``: the slice as the fitted lobes of :data:`GGX_WARP_TABLE`
+      (:func:`ggx_warp_correct`, as ``shaders/ssdf_sg_frag.glsl``; False: the plain warp of
+      the NDF's lobes);
       ``cosine`` is the clamped-cosine SG mixture the slice will be shaded with
       (``directions`` (M, 3) local to ``cosine_frame = (t, b)``, default the lobes' frame;
       ``amplitudes``, ``sharpness``: a :class:`.ssdf_sg.CosineLobes`), default eq. 40's
@@ -376,7 +380,9 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None, fitted_w
     keep_energy = lam / lam_raw          # capped lobes keep their integral ~ mu / lam
     cos_o = np.sum(n * o, axis=1)[:, None]
     if material.model == "GGX" and fitted_warp:
-        pw, lam, mu_d = ggx_warp_correct(material.roughness, n, o, pw, lam_d, mu_d, P)
+        pw, lam, mu_d = ggx_warp_correct(material.roughness, n, o, P)
+        K = lam.shape[1]                 # the fitted lobes replace the NDF's: o.n for o.h
+        c = np.broadcast_to(cos_o, (P, K))
     cos_i = np.sum(n[:, None, :] * pw, axis=-1)
     rough = material.roughness
     rough = rough[:, None] if np.ndim(rough) and np.size(rough) == P and P > 1 else rough

@@ -93,46 +93,49 @@ float layer_ratio(float mu)
   return mix(ti[i % 4], tj[j % 4], x - float(i));
 }
 
-/* Eq. 41 for the GGX model (core.sg_brdf.specular_lobes): two coaxial lobes warped alike,
- * scaled together so the slice has Cycles' albedo E(r, n.o) against the cosine mixture it
- * is shaded with, in the glossy frame (nl, gt, gb: the bump-corrected normal's),
- * each with the Fresnel at the half vector of its product with the cosine, times Cycles'
- * multiscatter factor per layer */
+/* Eq. 41 for the GGX model (core.sg_brdf.specular_lobes): the view slice as WARP_LOBES
+ * fitted lobes, scaled together so the slice has Cycles' albedo E(r, n.o) against the
+ * cosine mixture it is shaded with, in the glossy frame (nl, gt, gb: the bump-corrected
+ * normal's), each with the Fresnel at the half vector of its product with the cosine,
+ * times Cycles' multiscatter factor per layer */
 vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec4 W[16])
 {
   float c = dot(o, nl);
   if (c <= 0.0) {
     return vec3(0.0);
   }
-  vec3 pw = normalize(2.0 * c * nl - o);
-  /* the fitted warp (core.sg_brdf.ggx_warp_correct): each lobe's axis tilted in the plane
-   * of nl and the mirror direction, its sharpness scaled, the shares of the amplitude; the
-   * table's corrections linear between its 21 n.o nodes */
+  /* the fitted lobes (core.sg_ndf.ggx_warp_correct): the mirror direction tilted in the
+   * plane of nl and o, the plain warp's sharpness of the NDF's 2 / a^2 scaled, the shares
+   * of the amplitude; the table's three texels a node linear between its 21 n.o nodes */
   float wx = clamp(c, 0.0, 1.0) * 20.0;
   int wi = min(int(wx), 19);
   float wf = wx - float(wi);
-  vec4 q = mix(table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + wi),
-               table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + wi + 1), wf);
-  vec4 s0 = table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + 21 + wi / 2);
-  vec4 s1 = table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + 21 + (wi + 1) / 2);
-  vec2 f = max(mix(wi % 2 == 0 ? s0.xy : s0.zw, (wi + 1) % 2 == 0 ? s1.xy : s1.zw, wf), vec2(0.0));
-  vec3 u = pw - dot(pw, nl) * nl;
+  vec4 q[3];
+  for (int j = 0; j < 3; j++) {
+    q[j] = mix(table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + 3 * wi + j),
+               table_entry(entryX, entryY, tableNr, tableNl, WARP_TEXEL + 3 * wi + 3 + j), wf);
+  }
+  vec3 u = c * nl - o;
   float ul = length(u);
   u = ul > 1e-9 ? u / ul : gt;
   float el0 = acos(clamp(c, 0.0, 1.0));
-  float tau = 4.0 * max(c, WARP_MU_MIN);
-  vec3 axes[2] = vec3[2](cos(el0 + q.x) * nl + sin(el0 + q.x) * u,
-                         cos(el0 + q.z) * nl + sin(el0 + q.z) * u);
-  float lams[2] = float[2](min(min(ndfLambda / tau, LAMBDA_MAX) * exp(q.y), LAMBDA_MAX),
-                           min(min(ndfLambda2 / tau, LAMBDA_MAX) * exp(q.w), LAMBDA_MAX));
-  float mus[2] = float[2](f.x, f.y);
+  float a = max(roughness, SG_ALPHA_MIN);
+  float lamW = min(2.0 / (a * a) / (4.0 * max(c, WARP_MU_MIN)), LAMBDA_MAX);
+  vec3 axes[WARP_LOBES];
+  float lams[WARP_LOBES];
+  float mus[WARP_LOBES];
+  for (int k = 0; k < WARP_LOBES; k++) {
+    axes[k] = cos(el0 + q[0][k]) * nl + sin(el0 + q[0][k]) * u;
+    lams[k] = min(lamW * exp(q[1][k]), LAMBDA_MAX);
+    mus[k] = max(q[2][k], 0.0);
+  }
   float E = ggx_albedo(max(c, SG_COS_VIEW_MIN));
   /* E against the cosine mixture the lobes are shaded with (core.sg_brdf._ggx_normalisation) */
   float asg = 0.0;
   for (int m = 0; m < cosLobes; m++) {
     vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
     vec3 cw = cl.x * gt + cl.y * gb + cl.z * nl;
-    for (int k = 0; k < 2; k++) {
+    for (int k = 0; k < WARP_LOBES; k++) {
       asg += mus[k] * cl.w * sg_inner_product(axes[k], lams[k], cw, cosLambda);
     }
   }
@@ -141,7 +144,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
   vec3 kmain = 1.0 + missing * fmsMain;
   vec3 kmetal = 1.0 + missing * fmsMetal;
   vec3 color = vec3(0.0);
-  for (int k = 0; k < 2; k++) {
+  for (int k = 0; k < WARP_LOBES; k++) {
     if (mus[k] <= 0.0) {
       continue;
     }

@@ -28,11 +28,12 @@
  *                     corners 00, 01, 10, 11. */
 
 const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
-const int ENTRY = 78;       /* ENTRY_TEXELS */
-const int LAYER_TEXEL = 70; /* LAYER_TEXEL: the Lambert base's view ratio at the 32 mu nodes */
-const int WARP_TEXEL = 38;  /* WARP_TEXEL: GGX warp corrections (core.sg_ndf.ggx_warp_params)
-                             * at 21 n.o nodes: (d_1, l_1, d_2, l_2) per node, then the shares
-                             * (f_1, f_2) two nodes a texel */
+const int ENTRY = 109;      /* ENTRY_TEXELS */
+const int LAYER_TEXEL = 101; /* LAYER_TEXEL: the Lambert base's view ratio at the 32 mu nodes */
+const int WARP_TEXEL = 38;  /* WARP_TEXEL: the GGX view slice's lobes (core.sg_ndf.ggx_warp_params)
+                             * at 21 n.o nodes, three texels a node: the WARP_LOBES lobes'
+                             * tilts, log-sharpness factors, shares */
+const int WARP_LOBES = 4;   /* WARP_LOBES_MAX (core.sg_ndf.GGX_WARP_LOBES, zero shares past it) */
 const float WARP_MU_MIN = 0.02;
 const int GGX_TEXEL = 17;   /* GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E(r, mu) at 32
                              * mu nodes (8 texels), then (metal part of A, F_ss main, F_ss metal)

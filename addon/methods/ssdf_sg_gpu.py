@@ -167,7 +167,7 @@ def material_uniforms(material):
     # multiscatter factor), the metal part of A and the two F_ss (linear in the base colour;
     # the shader makes F_ms of them, core.sg_brdf.multiscatter_factors)
     E, e_avg, am, fss = np.ones(GGX_E_NODES), np.ones(1), np.zeros(3), np.zeros((2, 3))
-    warp = np.zeros((len(sg_ndf.WARP_MU), 6))
+    warp = np.zeros((len(sg_ndf.WARP_MU), 3 * sg_ndf.GGX_WARP_LOBES))
     if m.model == "GGX":
         E, e_avg = sg_brdf.ggx_albedo(m, np.linspace(0.0, 1.0, GGX_E_NODES), GGX_E_NODES)
         r = math.sqrt(min(max(float(np.asarray(m.roughness).reshape(-1)[0]), 0.0), 1.0))
@@ -195,17 +195,19 @@ COSINE_TEXEL = 28
 ROUGHNESS_NODES, LEVEL_NODES = 33, 9
 #: Cycles' mu nodes of E(r, mu) (core.brdf_tables)
 GGX_E_NODES = 32
-#: first texel of the GGX warp corrections in an entry (core.sg_ndf.ggx_warp_params at the
-#: entry's roughness and the 21 WARP_MU nodes): (d_1, l_1, d_2, l_2) per node (21 texels),
-#: then the shares (f_1, f_2) two nodes a texel (11 texels)
+#: most GGX view-slice lobes an entry holds (shaders/ssdf_sg_lib.glsl WARP_LOBES)
+WARP_LOBES_MAX = 4
+#: first texel of the GGX view slice's lobes in an entry (core.sg_ndf.ggx_warp_params at the
+#: entry's roughness and the 21 WARP_MU nodes): per node three texels, the tilts, the
+#: log-sharpness factors and the shares of up to WARP_LOBES_MAX lobes (zero past K)
 WARP_TEXEL = 17 + 1 + GGX_E_NODES // 4 + 12
 #: first texel of the Lambert base's view ratio (core.sg_brdf.diffuse_view_ratio) at the
 #: 32 mu nodes of E (8 texels)
-LAYER_TEXEL = WARP_TEXEL + 32
+LAYER_TEXEL = WARP_TEXEL + 3 * len(sg_ndf.WARP_MU)
 #: texels per table entry: (lambda a^2, mu a^2, eta, -), then kd, A, B_d, B_s at the four
 #: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E at
 #: the 32 mu nodes (8 texels), then the metal part of A, F_ss main, F_ss metal at the
-#: corners; the warp corrections; the view ratio
+#: corners; the view slice's lobes; the view ratio
 ENTRY_TEXELS = LAYER_TEXEL + GGX_E_NODES // 4
 #: the textured inputs a slot's shader reads, in sampler and texel order
 INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
@@ -265,8 +267,10 @@ def _entry(uniforms, alpha):
     for c, v in enumerate(uniforms):
         e[k + 3 * c:k + 3 * c + 3] = (v["fresAm"], v["fssMain"], v["fssMetal"])
     w = np.asarray(u["ggxWarp"], np.float32)
-    e[WARP_TEXEL:WARP_TEXEL + 21] = w[:, :4]
-    e[WARP_TEXEL + 21:WARP_TEXEL + 32] = np.append(w[:, 4:6].reshape(-1), (0.0, 0.0)).reshape(-1, 4)
+    K = w.shape[1] // 3
+    node = np.zeros((len(w), 3, WARP_LOBES_MAX), np.float32)
+    node[:, :, :K] = w.reshape(len(w), 3, K)              # (d_k), (l_k), (f_k)
+    e[WARP_TEXEL:WARP_TEXEL + 3 * len(w)] = node.reshape(-1, 4)
     e[LAYER_TEXEL:LAYER_TEXEL + GGX_E_NODES // 4] = np.asarray(u["layerRatio"]).reshape(-1, 4)
     return e
 
