@@ -138,7 +138,8 @@ def shade_points(field, normals, positions, materials_of_points, materials, worl
             out[sel] = rd * kd_o
             lobes = (None, None, None)
             if glossy:
-                lobes = sg_brdf.specular_lobes(mat, n, v, cosine=cosine, cosine_frame=(t, b))
+                lobes = sg_brdf.specular_lobes(mat, n, v, cosine=cosine, cosine_frame=(t, b),
+                                               horizon=True)
                 out[sel] += specular_radiance(field, sel, n, *lobes, env_lookup, t, b,
                                               cosine=cosine)
             if lamps:

@@ -130,13 +130,19 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
     mus[k] = max(q[2][k], 0.0);
   }
   float E = ggx_albedo(max(c, SG_COS_VIEW_MIN));
-  /* E against the cosine mixture the lobes are shaded with (core.sg_brdf._ggx_normalisation) */
+  /* E against the cosine mixture the lobes are shaded with, each product weighted by the
+   * visibility factor of the open hemisphere over nl (its elevation), as a flat open
+   * surface is drawn below (core.sg_brdf._ggx_normalisation) */
   float asg = 0.0;
   for (int m = 0; m < cosLobes; m++) {
     vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
     vec3 cw = cl.x * gt + cl.y * gb + cl.z * nl;
     for (int k = 0; k < WARP_LOBES; k++) {
-      asg += mus[k] * cl.w * sg_inner_product(axes[k], lams[k], cw, cosLambda);
+      vec3 p;
+      float lam;
+      float amp = sg_product(cw, cosLambda, axes[k], lams[k], p, lam);
+      float vis = fh_hat(asin(clamp(dot(p, nl), -1.0, 1.0)), lam);
+      asg += mus[k] * cl.w * amp * sg_integral(lam) * vis;
     }
   }
   float norm = E / max(asg, 1e-30);

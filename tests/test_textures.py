@@ -572,13 +572,14 @@ def test_roughness_texture_on_a_glossy_sphere_against_cycles(tmp_path):
           "SSDF_SG at 0.3 / 0.7:", each)
     for m, (tex_err, const_err) in errors.items():
         # per vertex: a triangle-wide band along each cell edge (measured + 6.3 points);
-        # SSDF_SG + 0.7 (against 1024 spp: 4.32 % textured, 4.15 % the constant frames
-        # composed by the checker, 4.09 % pooled: the rim's error falls on either value)
+        # SSDF_SG + 0.9 (four lobes, against 1024 spp: 4.32 % textured, 4.15 % the constant
+        # frames composed by the checker, 4.09 % pooled: the rim's error falls on either)
         assert tex_err < const_err + (0.01 if m == "SSDF_SG" else 0.08), (m, errors)
     # SSDF_SG's GGX view slice as four fitted lobes (docs/measurements.md "SG lobes of a rough
     # metal", "Fitted warp of the GGX lobes", "Four fitted lobes of the GGX view slice"):
-    # measured 6.3 % textured, 5.6 % pooled, 6.2 / 4.1 % at 0.3 / 0.7 (two fitted lobes 7.1,
-    # 7.2, 7.7 / 6.2 %; plain warp 7.7, 7.8, 8.0 / 7.5 %; a Beckmann lobe 12.8, 13.9, 10.0 /
-    # 19.8 %); Cycles' own noise at 256 spp is part of it (REFERENCE: 5.6 % pooled)
-    assert errors["SSDF_SG"][0] < 0.07 and errors["SSDF_SG"][1] < 0.065, errors
-    assert each[0.3] < 0.07 and each[0.7] < 0.05, each
+    # measured 6.1 % textured, 5.2 % pooled, 6.0 / 2.7 % at 0.3 / 0.7 (E against the open
+    # hemisphere's visibility; without: 6.3, 5.6, 6.2 / 4.1 %; two fitted lobes 7.1, 7.2,
+    # 7.7 / 6.2 %; plain warp 7.7, 7.8, 8.0 / 7.5 %; a Beckmann lobe 12.8, 13.9, 10.0 / 19.8 %);
+    # Cycles' own noise at 256 spp is part of it (REFERENCE: 5.6 % pooled)
+    assert errors["SSDF_SG"][0] < 0.07 and errors["SSDF_SG"][1] < 0.06, errors
+    assert each[0.3] < 0.07 and each[0.7] < 0.035, each
