@@ -29,12 +29,15 @@ def _roughness_and_normal_images(res=256):
     return np.repeat(r[..., None], 3, axis=2).astype(np.float32), (0.5 * (n + 1)).astype(np.float32)
 
 
-def _glossy_suzanne(metallic):
-    bpy.ops.mesh.primitive_monkey_add(size=2.0)
+def _glossy_object(metallic, shape="SUZANNE"):
+    if shape == "SUZANNE":
+        bpy.ops.mesh.primitive_monkey_add(size=2.0)
+        mod = bpy.context.object.modifiers.new("subdivide", "SUBSURF")
+        mod.levels = 2
+        bpy.ops.object.modifier_apply(modifier=mod.name)
+    else:
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=96, ring_count=48, radius=1.0)
     ob = bpy.context.object
-    mod = ob.modifiers.new("subdivide", "SUBSURF")
-    mod.levels = 2
-    bpy.ops.object.modifier_apply(modifier=mod.name)
     bpy.ops.object.shade_smooth()
     mat = bpy.data.materials.new("textured glossy")
     nt = mat.node_tree
@@ -60,7 +63,7 @@ def test_painting_or_swapping_the_roughness_and_normal_images_redraws_ssdf_sg(tm
     fresh precompute."""
     bs.reset()
     bs.add_world(path=bs.hdri_path("forest"))
-    bsdf = _glossy_suzanne(0.0)
+    bsdf = _glossy_object(0.0)
     bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
     bs.set_resolution(32, 32)
     scene = bpy.context.scene
@@ -86,14 +89,18 @@ def test_painting_or_swapping_the_roughness_and_normal_images_redraws_ssdf_sg(tm
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("metallic", [0.0])
-def test_roughness_texture_and_normal_map_against_converged_cycles(tmp_path, metallic):
-    """Suzanne (subdivided twice) under 'forest', 64x64: SSDF_SG against Cycles direct light
-    converged (four seeds x 1024 spp, their variance subtracted), within the issue's 6 %;
-    drawn with the roughness's mean and without the normal map it is further off."""
+@pytest.mark.parametrize("shape, metallic, bound", [("SUZANNE", 0.0, 0.035),
+                                                    ("SPHERE", 1.0, 0.04)])
+def test_roughness_texture_and_normal_map_against_converged_cycles(tmp_path, shape, metallic,
+                                                                   bound):
+    """Suzanne (subdivided twice) or a UV sphere under 'forest', 64x64: SSDF_SG against
+    Cycles direct light converged (four seeds x 1024 spp, their variance subtracted), within
+    the issue's 6 % (measured 2.5 % dielectric Suzanne, 2.5 % metal sphere; the metal Suzanne
+    is 6.7 %: docs/measurements.md "Four fitted lobes of the GGX view slice"); drawn with the
+    roughness's mean and without the normal map it is further off."""
     bs.reset()
     bs.add_world(path=bs.hdri_path("forest"))
-    bsdf = _glossy_suzanne(metallic)
+    bsdf = _glossy_object(metallic, shape)
     bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
     bs.set_resolution(64, 64)
     scene = bpy.context.scene
@@ -111,9 +118,9 @@ def test_roughness_texture_and_normal_map_against_converged_cycles(tmp_path, met
         nt.links.remove(bsdf.inputs[socket].links[0])
     bsdf.inputs["Roughness"].default_value = 0.45
     _, _, plain = report.rel_l2_converged(bs.render_exr(tmp_path / "plain.exr"), frames)
-    print(f"metallic {metallic}: SSDF_SG {100 * err:.2f} % (Cycles' mean's noise "
+    print(f"{shape} metallic {metallic}: SSDF_SG {100 * err:.2f} % (Cycles' mean's noise "
           f"{100 * noise:.2f} %), untextured {100 * plain:.2f} %")
-    assert err < 0.06 and plain > 1.5 * err, (err, plain)
+    assert err < bound and plain > 3 * err, (err, plain)
 
 
 @pytest.mark.slow
