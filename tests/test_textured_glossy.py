@@ -57,6 +57,25 @@ def _glossy_object(metallic, shape="SUZANNE"):
     return bsdf
 
 
+def _converged_cycles_and_ssdf_sg(tmp_path, spp):
+    """The camera of tests/test_textures.py's sphere (64x64, 3x3 supersamples); Cycles
+    direct light with four seeds of ``spp``; SSDF_SG precomputed: ``(frames, error of
+    SSDF_SG's frame against them, the mean's noise)``."""
+    bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
+    bs.set_resolution(64, 64)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 3
+    frames = []
+    for seed in range(4):
+        scene.cycles.seed = seed
+        frames.append(bs.render_exr(tmp_path / f"cycles{seed}.exr", engine="CYCLES",
+                                    samples=spp))
+    scene.prt.method = "SSDF_SG"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    _, noise, err = report.rel_l2_converged(bs.render_exr(tmp_path / "ours.exr"), frames)
+    return frames, err, noise
+
+
 def test_painting_or_swapping_the_roughness_and_normal_images_redraws_ssdf_sg(tmp_path):
     """Texture Paint on the Roughness image and a new image in the Normal Map's Image Texture
     redraw SSDF_SG's next frame without a precompute: the frame equals the one after a
@@ -101,18 +120,7 @@ def test_roughness_texture_and_normal_map_against_converged_cycles(tmp_path, sha
     bs.reset()
     bs.add_world(path=bs.hdri_path("forest"))
     bsdf = _glossy_object(metallic, shape)
-    bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
-    bs.set_resolution(64, 64)
-    scene = bpy.context.scene
-    scene.prt.supersampling = 3
-    frames = []
-    for seed in range(4):
-        scene.cycles.seed = seed
-        frames.append(bs.render_exr(tmp_path / f"cycles{seed}.exr", engine="CYCLES",
-                                    samples=1024))
-    scene.prt.method = "SSDF_SG"
-    assert bpy.ops.prt.precompute() == {"FINISHED"}
-    _, noise, err = report.rel_l2_converged(bs.render_exr(tmp_path / "ours.exr"), frames)
+    frames, err, noise = _converged_cycles_and_ssdf_sg(tmp_path, 1024)
     nt = bsdf.id_data
     for socket in ("Roughness", "Normal"):
         nt.links.remove(bsdf.inputs[socket].links[0])
@@ -137,17 +145,6 @@ def test_principled_dielectric_sphere_against_converged_cycles(tmp_path, roughne
     bpy.context.object.data.materials.append(bs.bsdf_material(
         "dielectric", "ShaderNodeBsdfPrincipled", Roughness=roughness,
         **{"Base Color": (0.9, 0.7, 0.5, 1.0)}))
-    bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
-    bs.set_resolution(64, 64)
-    scene = bpy.context.scene
-    scene.prt.supersampling = 3
-    frames = []
-    for seed in range(4):
-        scene.cycles.seed = seed
-        frames.append(bs.render_exr(tmp_path / f"cycles{seed}.exr", engine="CYCLES",
-                                    samples=512))
-    scene.prt.method = "SSDF_SG"
-    assert bpy.ops.prt.precompute() == {"FINISHED"}
-    _, noise, err = report.rel_l2_converged(bs.render_exr(tmp_path / "ours.exr"), frames)
+    _, err, noise = _converged_cycles_and_ssdf_sg(tmp_path, 512)
     print(f"dielectric r {roughness}: SSDF_SG {100 * err:.2f} % (noise {100 * noise:.2f} %)")
     assert err < 0.02, err
