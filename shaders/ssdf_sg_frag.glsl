@@ -50,10 +50,7 @@ void ggx_inputs(float x, float y, int nr, int nl, float mw, vec3 cf)
   if (brdfModel != 3) {
     return;
   }
-  float a2 = roughness * roughness;       /* the pixel's alpha (set above when textured) */
   vec4 e = table_entry(x, y, nr, nl, GGX_TEXEL);
-  ndfLambda2 = max(e.x / a2, 1e-4);
-  ndfMu2 = e.y / a2;
   vec3 q[3];
   int k0 = GGX_TEXEL + 1 + 8;
   for (int j = 0; j < 3; j++) {

@@ -35,7 +35,7 @@ const int WARP_TEXEL = 38;  /* WARP_TEXEL: the GGX view slice's lobes (core.sg_n
                              * tilts, log-sharpness factors, shares */
 const int WARP_LOBES = 4;   /* WARP_LOBES_MAX (core.sg_ndf.GGX_WARP_LOBES, zero shares past it) */
 const float WARP_MU_MIN = 0.02;
-const int GGX_TEXEL = 17;   /* GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E(r, mu) at 32
+const int GGX_TEXEL = 17;   /* GGX: (-, -, E_avg, multiscatter), E(r, mu) at 32
                              * mu nodes (8 texels), then (metal part of A, F_ss main, F_ss metal)
                              * per corner */
 
@@ -44,9 +44,9 @@ float cosLambda;
 int lightCount, ssdfRes, coeffTexels, envRes, envLevels, glossy, brdfModel, principled;
 float envStrength, envLambdaFirst, envRatio, envTop, roughness, ior, ndfLambda, ndfMu;
 vec4 kd, fresA, fresBd, fresBs, eye;
-/* GGX (brdfModel 3): the second coaxial lobe, the metal part of A, the two F_ms, and where
- * the pixel's table entry is (for E(r, mu)) */
-float ndfLambda2, ndfMu2, entryX, entryY;
+/* GGX (brdfModel 3): the metal part of A, the two F_ms, and where the pixel's table entry
+ * is (for E(r, mu), the view slice's lobes) */
+float entryX, entryY;
 int tableNr, tableNl;
 vec3 fresAm, fmsMain, fmsMetal;
 

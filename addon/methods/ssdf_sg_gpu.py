@@ -159,7 +159,6 @@ def material_uniforms(material):
     kd = np.asarray(sg_brdf.diffuse_albedo(m), np.float64).reshape(3) / np.pi
     lam, mu = (np.asarray(x, np.float64).reshape(-1) for x in
                sg_brdf.iso_ndf_lobes(m.model, float(np.asarray(m.roughness).reshape(-1)[0])))
-    lam, mu = np.append(lam, 1.0)[:2], np.append(mu, 0.0)[:2]
     A, Bd, Bs = (np.asarray(x, np.float64).reshape(3) for x in sg_brdf.fresnel_coefficients(m))
     glossy = is_glossy(m)
     model = {"COOK_TORRANCE": 0, "BLINN_PHONG": 0, "WARD": 1, "GGX": 3}.get(m.model, 2)
@@ -182,7 +181,7 @@ def material_uniforms(material):
                 principled=int(m.fresnel == "PRINCIPLED"),
                 roughness=float(np.asarray(m.roughness).reshape(-1)[0]),
                 ior=float(np.asarray(m.ior).reshape(-1)[0]), ndfLambda=float(lam[0]),
-                ndfMu=float(mu[0]), ndfLambda2=float(lam[1]), ndfMu2=float(mu[1]),
+                ndfMu=float(mu[0]),
                 fresA=(*A, 0.0), fresBd=(*Bd, 0.0), fresBs=(*Bs, 0.0), ggxE=E,
                 ggxEavg=float(e_avg[0]), multiscatter=int(m.multiscatter),
                 fresAm=(*am, 0.0), fssMain=(*fss[0], 0.0), fssMetal=(*fss[1], 0.0),
@@ -205,7 +204,7 @@ WARP_TEXEL = 17 + 1 + GGX_E_NODES // 4 + 12
 #: 32 mu nodes of E (8 texels)
 LAYER_TEXEL = WARP_TEXEL + 3 * len(sg_ndf.WARP_MU)
 #: texels per table entry: (lambda a^2, mu a^2, eta, -), then kd, A, B_d, B_s at the four
-#: (base colour, metallic) corners; GGX: (lambda_2 a^2, mu_2 a^2, E_avg, multiscatter), E at
+#: (base colour, metallic) corners; GGX: (-, -, E_avg, multiscatter), E at
 #: the 32 mu nodes (8 texels), then the metal part of A, F_ss main, F_ss metal at the
 #: corners; the view slice's lobes; the view ratio
 ENTRY_TEXELS = LAYER_TEXEL + GGX_E_NODES // 4
@@ -260,8 +259,7 @@ def _entry(uniforms, alpha):
     e[0] = (u["ndfLambda"] * alpha * alpha, u["ndfMu"] * alpha * alpha, u["ior"], 0.0)
     for c, v in enumerate(uniforms):
         e[1 + 4 * c:5 + 4 * c] = (v["kd"], v["fresA"], v["fresBd"], v["fresBs"])
-    e[17] = (u["ndfLambda2"] * alpha * alpha, u["ndfMu2"] * alpha * alpha, u["ggxEavg"],
-             u["multiscatter"])
+    e[17] = (0.0, 0.0, u["ggxEavg"], u["multiscatter"])
     e[18:18 + GGX_E_NODES // 4] = np.asarray(u["ggxE"]).reshape(-1, 4)
     k = 18 + GGX_E_NODES // 4
     for c, v in enumerate(uniforms):
