@@ -614,14 +614,20 @@ def _principled_brdf_material(material, rough_r=None, f0=None):
                               metallic=0.0)
 
 
-def _principled_mean_layering(material):
+def _principled_layering(material, mu):
+    """Cycles' layering weight of the Principled base (without ``1 - metallic``) at view
+    cosines ``mu`` (1-D) over a normal ``+z`` (:func:`.brdf.diffuse_view_weight`)."""
+    mu = np.clip(np.asarray(mu, dtype=np.float64), -1.0, 1.0)
+    v = np.stack([np.sqrt(1.0 - mu * mu), np.zeros_like(mu), mu], axis=1)
+    n = np.tile([0.0, 0.0, 1.0], (mu.size, 1))
     bm = _principled_brdf_material(material)
+    return core_brdf.diffuse_view_weight(bm, n, v)[:, 0].astype(np.float64)
+
+
+def _principled_mean_layering(material):
     x, w = np.polynomial.legendre.leggauss(16)
     mu = 0.5 * (x + 1.0)
-    n = np.tile([0.0, 0.0, 1.0], (mu.size, 1))
-    v = np.stack([np.sqrt(1.0 - mu * mu), 0 * mu, mu], axis=1)
-    weight = core_brdf.diffuse_view_weight(bm, n, v)[:, 0].astype(np.float64)
-    return float(np.sum(w * mu * weight))
+    return float(np.sum(w * mu * _principled_layering(material, mu)))
 
 
 def diffuse_view_ratio(material: SGMaterial, cos_o):
@@ -633,11 +639,7 @@ def diffuse_view_ratio(material: SGMaterial, cos_o):
     c = np.asarray(cos_o, dtype=np.float64)
     if material.fresnel != "PRINCIPLED":
         return np.ones(c.shape)
-    bm = _principled_brdf_material(material)
-    flat = np.clip(c.reshape(-1), -1.0, 1.0)
-    v = np.stack([np.sqrt(1.0 - flat * flat), np.zeros_like(flat), flat], axis=1)
-    n = np.tile([0.0, 0.0, 1.0], (flat.size, 1))
-    w = core_brdf.diffuse_view_weight(bm, n, v)[:, 0].astype(np.float64)
+    w = _principled_layering(material, c.reshape(-1))
     return (w / max(_principled_mean_layering(material), 1e-12)).reshape(c.shape)
 
 

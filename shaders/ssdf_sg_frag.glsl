@@ -65,28 +65,16 @@ void ggx_inputs(float x, float y, int nr, int nl, float mw, vec3 cf)
   fmsMetal = e.w > 0.5 ? q[2] * ea / max(1.0 - q[2] * (1.0 - ea), vec3(1e-12)) : vec3(0.0);
 }
 
-/* Cycles' GGX single-scattering albedo E(r, mu) at the pixel's table entry (linear in mu
- * between the 32 nodes, as core.brdf_tables.ggx_E) */
-float ggx_albedo(float mu)
+/* a curve of the pixel's table entry at the 32 mu nodes from texel `first` (four a texel),
+ * linear in mu between them: Cycles' GGX albedo E(r, mu) (as core.brdf_tables.ggx_E), or
+ * the Lambert base's view ratio (core.sg_brdf.diffuse_view_ratio) */
+float entry_mu_curve(int first, float mu)
 {
   float x = clamp(mu, 0.0, 1.0) * 31.0;
   int i = min(int(x), 31);
   int j = min(i + 1, 31);
-  vec4 ti = table_entry(entryX, entryY, tableNr, tableNl, GGX_TEXEL + 1 + i / 4);
-  vec4 tj = table_entry(entryX, entryY, tableNr, tableNl, GGX_TEXEL + 1 + j / 4);
-  return mix(ti[i % 4], tj[j % 4], x - float(i));
-}
-
-/* the Lambert base's view ratio (core.sg_brdf.diffuse_view_ratio: Cycles' Principled
- * layering weight over the mean in kd) at the pixel's table entry, linear in mu between
- * the 32 nodes */
-float layer_ratio(float mu)
-{
-  float x = clamp(mu, 0.0, 1.0) * 31.0;
-  int i = min(int(x), 31);
-  int j = min(i + 1, 31);
-  vec4 ti = table_entry(entryX, entryY, tableNr, tableNl, LAYER_TEXEL + i / 4);
-  vec4 tj = table_entry(entryX, entryY, tableNr, tableNl, LAYER_TEXEL + j / 4);
+  vec4 ti = table_entry(entryX, entryY, tableNr, tableNl, first + i / 4);
+  vec4 tj = table_entry(entryX, entryY, tableNr, tableNl, first + j / 4);
   return mix(ti[i % 4], tj[j % 4], x - float(i));
 }
 
@@ -126,7 +114,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
     lams[k] = min(lamW * exp(q[1][k]), LAMBDA_MAX);
     mus[k] = max(q[2][k], 0.0);
   }
-  float E = ggx_albedo(max(c, SG_COS_VIEW_MIN));
+  float E = entry_mu_curve(GGX_TEXEL + 1, max(c, SG_COS_VIEW_MIN));
   /* E against the cosine mixture the lobes are shaded with, each product weighted by the
    * visibility factor of the open hemisphere over nl (its elevation), as a flat open
    * surface is drawn below (core.sg_brdf._ggx_normalisation) */
@@ -307,7 +295,7 @@ void main()
     }
   }
 #endif
-  vec3 color = kd.rgb * layer_ratio(dot(glossN, view)) * rd * envStrength;
+  vec3 color = kd.rgb * entry_mu_curve(LAYER_TEXEL, dot(glossN, view)) * rd * envStrength;
   if (glossy != 0 && brdfModel == 3) {
     color += ggx_specular(view, glossN, glossT, glossB, t, b, n, W);
   }
