@@ -305,12 +305,16 @@ def square_coordinates(local):
     return 0.5 * (a + 1.0), 0.5 * (b + 1.0)
 
 
-def bilinear(images, u, v, n: int):
+def bilinear(images, u, v, n: int, gradient: bool = False):
     """GL-style bilinear lookup (texel centres at (i+1/2)/n, clamp to edge).
 
-    ``images`` (P, C, n*n) or (C, n*n); ``u``, ``v`` (P, L) -> (P, L, C) (or (L, C))."""
-    x = np.clip(np.asarray(u) * n - 0.5, 0.0, n - 1.0)
-    y = np.clip(np.asarray(v) * n - 0.5, 0.0, n - 1.0)
+    ``images`` (P, C, n*n) or (C, n*n); ``u``, ``v`` (P, L) -> (P, L, C) (or (L, C)).
+    ``gradient``: also the derivatives of the bilinear patch with respect to ``u`` and
+    ``v`` (the slope of the cell the lookup falls in, as ``shaders/ssdf_sg_lib.glsl``)."""
+    xr = np.asarray(u) * n - 0.5
+    yr = np.asarray(v) * n - 0.5
+    x = np.clip(xr, 0.0, n - 1.0)
+    y = np.clip(yr, 0.0, n - 1.0)
     x0 = np.minimum(np.floor(x).astype(np.int64), n - 2) if n > 1 else np.zeros_like(x, np.int64)
     y0 = np.minimum(np.floor(y).astype(np.int64), n - 2) if n > 1 else np.zeros_like(y, np.int64)
     fx, fy = x - x0, y - y0
@@ -329,7 +333,15 @@ def bilinear(images, u, v, n: int):
     w10 = (fx * (1 - fy))[..., None]
     w01 = ((1 - fx) * fy)[..., None]
     w11 = (fx * fy)[..., None]
-    return (take(y0, x0) * w00 + take(y0, x1) * w10 + take(y1, x0) * w01 + take(y1, x1) * w11)
+    t00, t10, t01, t11 = take(y0, x0), take(y0, x1), take(y1, x0), take(y1, x1)
+    value = t00 * w00 + t10 * w10 + t01 * w01 + t11 * w11
+    if not gradient:
+        return value
+    fx, fy = fx[..., None], fy[..., None]
+    # clamped to the edge (the outer half texel): flat in that coordinate
+    du = n * ((t10 - t00) * (1 - fy) + (t11 - t01) * fy) * (x == xr)[..., None]
+    dv = n * ((t01 - t00) * (1 - fx) + (t11 - t10) * fx) * (y == yr)[..., None]
+    return value, du, dv
 
 
 def lookup_ssdf(images, local, n: int):

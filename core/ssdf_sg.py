@@ -49,6 +49,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import sg
+from .directions import orthonormal_frame
 from .ssdf import bilinear, ssdf_frames, square_coordinates
 
 LAMBDA_C, MU_C = sg.clamped_cosine_sg()
@@ -85,6 +86,32 @@ COSINE_SG19 = CosineLobes(np.concatenate([[[0.0, 0.0, 1.0]], _ring(0.5, 6), _rin
 COSINE_MODELS = {"EQ40": COSINE_EQ40, "SG7": COSINE_SG7, "SG19": COSINE_SG19}
 
 
+#: step (radians) of the finite difference that maps the SSDF square's slope to a
+#: direction's (:func:`theta_d_slopes`; the square's own slope is the bilinear cell's)
+SLOPE_STEP = 1e-3
+
+
+def _horizon(local):
+    return np.arcsin(np.clip(-np.asarray(local)[..., 2], 0.0, 1.0))
+
+
+def theta_d_slopes(sample, local, e1, e2):
+    """``theta_d`` at local directions ``local`` (R, L, 3) and its derivatives along the
+    unit tangents ``e1``, ``e2`` there: ``(theta, d1, d2)`` (R, L).  ``sample(u, v)`` gives
+    the SSDF square's bilinear value and its slopes in u, v; the map from directions to
+    the square is differenced over :data:`SLOPE_STEP` (as the GLSL twin)."""
+    u, v = square_coordinates(local)
+    val, du, dv = sample(u, v)
+    hor = _horizon(local)
+    out = [val - hor]
+    for e in (e1, e2):
+        q = local + SLOPE_STEP * e
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        uq, vq = square_coordinates(q)
+        out.append((du * (uq - u) + dv * (vq - v) - (_horizon(q) - hor)) / SLOPE_STEP)
+    return tuple(out)
+
+
 class PCAField:
     """The SSDF of every point of one object in PCA form (eq. 24).
 
@@ -103,7 +130,16 @@ class PCAField:
         u, v = square_coordinates(local)
         val = bilinear(self.images, u, v, self.resolution)                        # (R, L, K+1)
         val = np.einsum("rlk,rk->rl", val, self.weights[rows])
-        return val - np.arcsin(np.clip(-np.asarray(local)[..., 2], 0.0, 1.0))
+        return val - _horizon(local)
+
+    def theta_d_slopes(self, rows, local, e1, e2):
+        """:func:`theta_d_slopes` of points ``rows``."""
+        w = self.weights[rows]
+
+        def sample(u, v):
+            return tuple(np.einsum("rlk,rk->rl", x, w)
+                         for x in bilinear(self.images, u, v, self.resolution, gradient=True))
+        return theta_d_slopes(sample, local, e1, e2)
 
 
 class ImageField:
@@ -116,7 +152,16 @@ class ImageField:
     def theta_d(self, rows, local):
         u, v = square_coordinates(local)
         val = bilinear(self.images[rows][:, None, :], u, v, self.resolution)[..., 0]
-        return val - np.arcsin(np.clip(-np.asarray(local)[..., 2], 0.0, 1.0))
+        return val - _horizon(local)
+
+    def theta_d_slopes(self, rows, local, e1, e2):
+        """:func:`theta_d_slopes` of points ``rows``."""
+        images = self.images[rows][:, None, :]
+
+        def sample(u, v):
+            return tuple(x[..., 0] for x in bilinear(images, u, v, self.resolution,
+                                                     gradient=True))
+        return theta_d_slopes(sample, local, e1, e2)
 
 
 def _local(dirs, n, t, b):
@@ -201,11 +246,62 @@ def diffuse_transfer_per_cosine(field, rows, normals, light_axes, light_lam, cos
     return np.einsum("rmj,mjc->rc", T, np.asarray(cosine_mu, np.float64))
 
 
+#: the visible part's lobe (:func:`visible_lobe`): its axis moves at most this far
+#: (radians), and its spread across the cut keeps at least this share of the lobe's
+SHIFT_MAX = 1.2
+SPREAD_MIN = 0.02
+#: the standard normal CDF's argument is clamped here (the ratio pdf/CDF stays accurate
+#: in float32; a lobe 4 widths inside the shadow is dark by f_h anyway)
+Z_RANGE = (-4.0, 6.0)
+
+
+def normal_cdf(z):
+    """Standard normal CDF through erfc of Abramowitz & Stegun 7.1.26 (|error| < 1.5e-7;
+    the GLSL twin uses the same formula)."""
+    z = np.asarray(z, np.float64)
+    x = np.abs(z) / math.sqrt(2.0)
+    t = 1.0 / (1.0 + 0.3275911 * x)
+    y = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027
+                                                                          + t * 1.061405429))))
+    half_erfc = 0.5 * y * np.exp(-x * x)
+    return np.where(z >= 0.0, 1.0 - half_erfc, half_erfc)
+
+
+def visible_lobe(lam, theta, slope1, slope2):
+    """The lobe standing for the visible part of ``G(i; p, lam)`` cut by the visibility
+    boundary of eq. 31 -- a great circle at signed distance ``theta`` from ``p`` -- whose
+    side is given by the SSDF's slopes ``(slope1, slope2)`` along tangents ``e1, e2`` at
+    ``p``.  In the lobe's tangent plane (a Gaussian of variance ``s^2 = 1/lam``) the cut
+    keeps ``x . g > -theta`` (``g`` the slope's direction); the kept part has its mean at
+    ``s h`` along ``g`` and variance ``s^2 (1 - z h - h^2)`` there (``z = theta / s``,
+    ``h = phi(z) / Phi(z)``: the truncated normal), ``s^2`` across.
+
+    Returns ``(shift (R, K), (g1, g2) the unit slope direction's components along e1, e2,
+    lam_v (R, K))``: the visible part's axis is ``cos(shift) p + sin(shift) g`` and its
+    sharpness ``lam_v = 2 / (s^2 + var)`` (the same mean cosine).  Eq. 41's
+    ``Gamma_L`` is read there: eq. 31 keeps the axis, i.e. the light of the whole lobe,
+    where a lobe half in shadow sees only its open side's.  Far from the boundary
+    (``z`` large) it is ``p`` and ``lam``; a flat field (no slope) keeps ``p``."""
+    lam = np.asarray(lam, np.float64)
+    s = 1.0 / np.sqrt(lam)
+    z = np.clip(np.asarray(theta, np.float64) / s, *Z_RANGE)
+    h = np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi) / np.maximum(normal_cdf(z), 1e-30)
+    shift = np.minimum(s * h, SHIFT_MAX)
+    var = s * s * np.maximum(1.0 - z * h - h * h, SPREAD_MIN)
+    length = np.hypot(slope1, slope2)
+    flat = length < 1e-6
+    inv = 1.0 / np.where(flat, 1.0, length)
+    shift = np.where(flat, 0.0, shift)
+    return shift, (slope1 * inv, slope2 * inv), 2.0 / (s * s + var)
+
+
 def specular_radiance(field, rows, normals, lobe_axes, lobe_lam, lobe_mu, env_lookup,
                       tangents=None, bitangents=None, exact_fh=False, cosine=COSINE_EQ40):
     """Eq. 41: ``R_s(o)`` (R, 3) from the view slice ``(lobe_axes (R, K, 3), lobe_lam (R, K),
     lobe_mu (R, K, 3))`` of ``ks rho_s`` (world space, no cosine) and ``env_lookup(dirs
-    (M, 3), lam (M,)) -> (M, 3)``, the SG-prefiltered environment ``Gamma_L`` (eq. 35)."""
+    (M, 3), lam (M,)) -> (M, 3)``, the SG-prefiltered environment ``Gamma_L`` (eq. 35).
+    Each product lobe's visible fraction is eq. 31's; ``Gamma_L`` is read at the lobe of
+    its visible part (:func:`visible_lobe`, from the SSDF's slope at the axis)."""
     n = np.asarray(normals, np.float64)
     R = len(n)
     ax = np.asarray(lobe_axes, np.float64)
@@ -214,12 +310,19 @@ def specular_radiance(field, rows, normals, lobe_axes, lobe_lam, lobe_mu, env_lo
         return out
     if tangents is None:
         tangents, bitangents = ssdf_frames(n)
+    frame = np.stack([tangents, bitangents, n], axis=1)                         # (R, 3, 3)
     for p, lam_m, amp in _cosine_products(cosine, n, tangents, bitangents, ax,
                                           np.asarray(lobe_lam, np.float64)):
-        theta = field.theta_d(rows, _local(p, n, tangents, bitangents))
+        local = _local(p, n, tangents, bitangents)
+        e1, e2 = (x.reshape(local.shape) for x in orthonormal_frame(local.reshape(-1, 3)))
+        theta, d1, d2 = field.theta_d_slopes(rows, local, e1, e2)
         scale = amp * visibility_ratio(theta, lam_m, exact_fh)                    # (R, K)
-        gamma = np.asarray(env_lookup(p.reshape(-1, 3), lam_m.reshape(-1)), np.float64)
-        gamma = gamma.reshape(p.shape[:2] + (3,))
+        shift, (g1, g2), lam_v = visible_lobe(lam_m, theta, d1, d2)
+        c = (np.cos(shift)[..., None] * local
+             + np.sin(shift)[..., None] * (g1[..., None] * e1 + g2[..., None] * e2))
+        c = np.einsum("rkx,rxy->rky", c, frame)
+        gamma = np.asarray(env_lookup(c.reshape(-1, 3), lam_v.reshape(-1)), np.float64)
+        gamma = gamma.reshape(p.shape[:2] + (3,)) * (sg.integral(lam_m) / sg.integral(lam_v))[..., None]
         out += np.einsum("rk,rkc,rkc->rc", scale, np.asarray(lobe_mu, np.float64), gamma)
     return out
 

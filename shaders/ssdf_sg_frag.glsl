@@ -155,10 +155,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
       vec3 p;
       float lam;
       float amp = sg_product(cw, cosLambda, axes[k], lams[k], p, lam);
-      vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
-      float theta = ssdf_value(local, W);
-      vec3 gamma = env_lookup(p, lam) * envStrength * sg_integral(lam);
-      color += cl.w * amp * fh_hat(theta, lam) * mu * gamma;
+      color += cl.w * amp * mu * visible_lighting(p, lam, t, b, n, W) * envStrength;
     }
   }
   return color;
@@ -323,11 +320,7 @@ void main()
       vec3 p;
       float lam, amp;
       amp = sg_product(cw, cosLambda, pw, lam_w, p, lam);
-      vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
-      float theta = ssdf_value(local, W);
-      float scale = cl.w * amp * fh_hat(theta, lam);
-      vec3 gamma = env_lookup(p, lam) * envStrength * sg_integral(lam);
-      color += scale * mu * gamma;
+      color += cl.w * amp * mu * visible_lighting(p, lam, t, b, n, W) * envStrength;
     }
   }
   /* a closed mesh's inner side (core.mesh.closed_side) sees only itself: black, as in

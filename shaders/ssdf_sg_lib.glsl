@@ -93,6 +93,11 @@ const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.53452
 const float FRAME_SWITCH = 0.999;
 const float COS_MIN = 1e-4;
 const float LAMBDA_MAX = 1e5;
+/* core.ssdf_sg: SLOPE_STEP, SHIFT_MAX, SPREAD_MIN, Z_RANGE (visible_lobe) */
+const float SLOPE_STEP = 1e-3;
+const float SHIFT_MAX = 1.2;
+const float SPREAD_MIN = 0.02;
+const vec2 Z_RANGE = vec2(-4.0, 6.0);
 
 /* ------------------------------------------------------------ SG helpers (core/sg.py) */
 float one_minus_exp_neg_over(float lam, float x)   /* (1 - exp(-lam x)) / lam */
@@ -176,6 +181,57 @@ float ssdf_value(vec3 local, vec4 W[16])
   return v - asin(clamp(-local.z, 0.0, 1.0));
 }
 
+/* ssdf_value and its derivatives d1, d2 along the unit tangents e1, e2 at local
+ * (core.ssdf_sg.theta_d_slopes): the bilinear cell's slope in the square, the map from
+ * directions to the square differenced over SLOPE_STEP. */
+float ssdf_value_slopes(vec3 local, vec3 e1, vec3 e2, vec4 W[16], out float d1, out float d2)
+{
+  vec2 uv = square_coordinates(local);
+  float n = float(ssdfRes);
+  float x = clamp(uv.x * n - 0.5, 0.0, n - 1.0);
+  float y = clamp(uv.y * n - 0.5, 0.0, n - 1.0);
+  int x0 = clamp(int(floor(x)), 0, max(ssdfRes - 2, 0));
+  int y0 = clamp(int(floor(y)), 0, max(ssdfRes - 2, 0));
+  float fx = x - float(x0), fy = y - float(y0);
+  int x1 = min(x0 + 1, ssdfRes - 1);
+  int y1 = min(y0 + 1, ssdfRes - 1);
+  float v = 0.0, du = 0.0, dv = 0.0;
+  for (int l = 0; l < coeffTexels; l++) {
+    vec4 e00 = texelFetch(eigenTex, ivec3(x0, y0, l), 0);
+    vec4 e10 = texelFetch(eigenTex, ivec3(x1, y0, l), 0);
+    vec4 e01 = texelFetch(eigenTex, ivec3(x0, y1, l), 0);
+    vec4 e11 = texelFetch(eigenTex, ivec3(x1, y1, l), 0);
+    v += dot(e00 * ((1.0 - fx) * (1.0 - fy)) + e10 * (fx * (1.0 - fy)) +
+             e01 * ((1.0 - fx) * fy) + e11 * (fx * fy), W[l]);
+    du += dot((e10 - e00) * (1.0 - fy) + (e11 - e01) * fy, W[l]);
+    dv += dot((e01 - e00) * (1.0 - fx) + (e11 - e10) * fx, W[l]);
+  }
+  /* clamped to the edge (the outer half texel): flat in that coordinate */
+  du *= (uv.x * n - 0.5 == x) ? n : 0.0;
+  dv *= (uv.y * n - 0.5 == y) ? n : 0.0;
+  float hor = asin(clamp(-local.z, 0.0, 1.0));
+  vec3 q = normalize(local + SLOPE_STEP * e1);
+  vec2 uq = square_coordinates(q);
+  d1 = (du * (uq.x - uv.x) + dv * (uq.y - uv.y) - (asin(clamp(-q.z, 0.0, 1.0)) - hor)) /
+       SLOPE_STEP;
+  q = normalize(local + SLOPE_STEP * e2);
+  uq = square_coordinates(q);
+  d2 = (du * (uq.x - uv.x) + dv * (uq.y - uv.y) - (asin(clamp(-q.z, 0.0, 1.0)) - hor)) /
+       SLOPE_STEP;
+  return v - hor;
+}
+
+/* standard normal CDF (core.ssdf_sg.normal_cdf: erfc of Abramowitz & Stegun 7.1.26) */
+float normal_cdf(float z)
+{
+  float x = abs(z) * 0.7071067811865476;
+  float t = 1.0 / (1.0 + 0.3275911 * x);
+  float y = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 +
+                                                                          t * 1.061405429))));
+  float half_erfc = 0.5 * y * exp(-x * x);
+  return z >= 0.0 ? 1.0 - half_erfc : half_erfc;
+}
+
 vec4 coeff_fetch(float point, int l)
 {
   int idx = int(point + 0.5) * coeffTexels + l;
@@ -213,6 +269,28 @@ vec3 env_lookup(vec3 world_dir, float lam)
   int l1 = min(l0 + 1, envLevels - 1);
   float f = x - float(l0);
   return env_level(l0, face, s, t) * (1.0 - f) + env_level(l1, face, s, t) * f;
+}
+
+/* Eq. 41's term of one product lobe (p, lam) with unit amplitude, without the world's
+ * strength: eq. 31's visible fraction times Gamma_L read at the lobe of the part the SSDF
+ * leaves visible (core.ssdf_sg.visible_lobe: the truncated Gaussian's mean and spread). */
+vec3 visible_lighting(vec3 p, float lam, vec3 t, vec3 b, vec3 n, vec4 W[16])
+{
+  vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
+  vec3 e1, e2;
+  sg_frame(local, vec3(0.0), e1, e2);
+  float d1, d2;
+  float theta = ssdf_value_slopes(local, e1, e2, W, d1, d2);
+  float s = inversesqrt(lam);
+  float z = clamp(theta / s, Z_RANGE.x, Z_RANGE.y);
+  float h = exp(-0.5 * z * z) * 0.3989422804014327 / max(normal_cdf(z), 1e-30);
+  float var = s * s * max(1.0 - z * h - h * h, SPREAD_MIN);
+  float len = length(vec2(d1, d2));
+  float shift = len < 1e-6 ? 0.0 : min(s * h, SHIFT_MAX);
+  vec2 g = len < 1e-6 ? vec2(0.0) : vec2(d1, d2) / len;
+  vec3 c = cos(shift) * local + sin(shift) * (g.x * e1 + g.y * e2);
+  vec3 cw = c.x * t + c.y * b + c.z * n;
+  return fh_hat(theta, lam) * sg_integral(lam) * env_lookup(cw, 2.0 / (s * s + var));
 }
 
 /* ------------------------------------------------------------ BRDF view slice (core/sg_brdf.py) */

@@ -687,6 +687,11 @@ class _OpenHemisphere:
     def theta_d(self, rows, local):
         return np.arcsin(np.clip(np.asarray(local)[..., 2], -1.0, 1.0))
 
+    def theta_d_slopes(self, rows, local, e1, e2):
+        z = np.clip(np.asarray(local)[..., 2], -1.0, 1.0)
+        root = np.sqrt(np.maximum(1.0 - z * z, 1e-12))
+        return self.theta_d(rows, local), e1[..., 2] / root, e2[..., 2] / root
+
 
 @pytest.mark.parametrize("r", [0.3, 0.7, 1.0])
 def test_ggx_slice_returns_E_as_drawn_on_an_open_surface(r):

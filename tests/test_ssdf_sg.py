@@ -185,3 +185,61 @@ def test_pca_field_matches_full_images(scene):
     a = full.theta_d(scene["rows"], local)
     b = scene["field"].theta_d(scene["rows"], local)
     assert np.sqrt(np.mean((a - b) ** 2)) <= 0.05 + 1e-6
+
+
+def test_normal_cdf_against_erf():
+    z = np.linspace(-7.0, 7.0, 1401)
+    want = np.array([0.5 * (1.0 + math.erf(x / math.sqrt(2.0))) for x in z])
+    np.testing.assert_allclose(ssdf_sg.normal_cdf(z), want, rtol=0, atol=2e-7)
+
+
+@pytest.mark.parametrize("lam", [30.0, 200.0])
+@pytest.mark.parametrize("z", [-3.0, -1.0, 0.0, 1.0, 6.0])
+def test_visible_lobe_against_quadrature(lam, z):
+    """An SG at +z cut by a great circle at signed distance ``theta`` (``z`` lobe widths;
+    the visible side toward +x): the visible part's mean direction and mean cosine by
+    quadrature against visible_lobe's shift and sharpness (the tangent-plane truncated
+    Gaussian)."""
+    theta = z / math.sqrt(lam)
+    d = directions.fibonacci_sphere(400_000)
+    g = np.exp(lam * (d[:, 2] - 1.0))
+    # the boundary's plane has the normal (cos theta, 0, sin theta): +z is theta inside
+    keep = d @ np.array([math.cos(theta), 0.0, math.sin(theta)]) > 0.0
+    m = (g[keep, None] * d[keep]).sum(0) / g[keep].sum()
+    shift_q = math.atan2(m[0], m[2])
+    lam_q = 1.0 / (1.0 - np.linalg.norm(m))
+    shift, (g1, g2), lam_v = ssdf_sg.visible_lobe(np.array(lam), np.array(theta),
+                                                  np.array(1.0), np.array(0.0))
+    assert (g1, g2) == (1.0, 0.0)
+    s = 1.0 / math.sqrt(lam)
+    assert abs(float(shift) - shift_q) < 0.05 * s + 0.02 * abs(shift_q), (shift, shift_q)
+    # a sliver past the boundary (z < 0) is curved on the sphere: looser there
+    assert abs(float(lam_v) / lam_q - 1.0) < 0.1 + 0.05 * max(-z, 0.0), (lam_v, lam_q)
+    # far inside the visible side nothing moves
+    if z > 5.0:
+        assert float(shift) < 1e-5 and abs(float(lam_v) / lam - 1.0) < 1e-4
+
+
+def test_theta_d_slopes_are_the_derivatives_of_theta_d(scene):
+    """theta_d_slopes (the bilinear cell's slope through the square's map) against central
+    differences of theta_d, for the PCA field and full images, above and below the horizon
+    (not near the nadir, where the square's map is singular, nor within SLOPE_STEP of its
+    sectors' seams |x| = |y|, where the map's own slope jumps)."""
+    rng = np.random.default_rng(3)
+    rows = np.arange(40)
+    local = _unit(rng.normal(size=(40, 6, 3)) + [0.0, 0.0, 0.6])
+    local[..., 2] = np.maximum(local[..., 2], -0.5)
+    local = _unit(local)
+    seam = np.abs(np.abs(local[..., 0]) - np.abs(local[..., 1])) < 4 * ssdf_sg.SLOPE_STEP
+    local[seam] = _unit(local[seam] * [1.0, 0.5, 1.0])
+    e1, e2 = (x.reshape(local.shape) for x in directions.orthonormal_frame(local.reshape(-1, 3)))
+    field = scene["field"]
+    images = ssdf_sg.ImageField(field.weights @ field.images, field.resolution)
+    eps = 1e-6
+    for f in (field, images):
+        theta, d1, d2 = f.theta_d_slopes(rows, local, e1, e2)
+        np.testing.assert_allclose(theta, f.theta_d(rows, local), atol=1e-12)
+        for e, got in ((e1, d1), (e2, d2)):
+            up = f.theta_d(rows, _unit(local + eps * e))
+            down = f.theta_d(rows, _unit(local - eps * e))
+            np.testing.assert_allclose(got, (up - down) / (2 * eps), rtol=2e-2, atol=2e-3)
