@@ -37,8 +37,8 @@ __all__ = [
     "CLAMPED_COSINE_LAMBDA", "CLAMPED_COSINE_MU", "clamped_cosine_sg",
     "visibility_integral_fh", "fh_hat", "fh_hat_approx",
     "visibility_integral_fh_approx", "visibility_product", "tabulate_fh_hat",
-    "fit_fh_coefficients", "fh_fit_errors", "FH_A", "FH_COEFFS",
-    "FH_VARIABLE", "FH_COEFFS_PAPER", "FH_FIT_MAX_ABS_ERROR", "FH_FIT_RMS_ERROR",
+    "fit_fh_coefficients", "fh_fit_errors", "fh_hat_slope", "fh_slope", "normal_cdf",
+    "FH_COEFFS", "FH_FIT_MAX_ABS_ERROR", "FH_FIT_RMS_ERROR",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -322,79 +322,65 @@ def fh_hat(theta_d, lam, **kw):
     return visibility_integral_fh(theta_d, lam, **kw) / hemisphere_integral(lam)
 
 
-#: Eq. 47: sigmoid scale ``a`` (the paper's value, kept fixed in the refit).
-FH_A = 1.05
-
-#: Eq. 48 as printed (cubic in lam, highest power first) -- kept for reference
-#: only.  With the sigmoid read as ``a/(1 + exp(-k theta_d)) + (1 - a)/2`` these
-#: constants do not reproduce the tabulated f_h (k(0) = 0.067 gives an almost
-#: flat curve where the true small-lam f_h_hat is ``1/2 + theta_d/pi``, and
-#: ``k ~ lam^3`` grows far faster than the true ``~1.7 sqrt(lam)``); see
-#: ``fh_fit_errors(FH_COEFFS_PAPER, variable="lambda")``.
-FH_COEFFS_PAPER = (0.204, -0.892, 2.995, 0.067)
-
-# Our refit (see fit_fh_coefficients).  Same model as eq. 47-49 -- sigmoid in
-# theta_d with a = 1.05 and a cubic polynomial for the slope k -- but the cubic
-# is in s = sqrt(lam) instead of lam, because the true slope grows like
-# sqrt(lam) (a lobe of sharpness lam has angular width ~1/sqrt(lam)) and no
-# cubic in lam can follow that across lam in [1e-3, 1e5] (refitting the cubic
-# in lam on the same table gives max abs error 0.35; the printed eq. 48
-# constants give 0.47).
-# Obtained by ``fit_fh_coefficients()`` with its defaults: the table of
-# ``tabulate_fh_hat()`` (lam = logspace(-3, 5, 81); per lam, theta_d = 121
-# uniform points on [-pi/2, pi/2] plus 61 points within +-5/sqrt(lam)), exact
-# values from visibility_integral_fh (1-D quadrature, rel. error ~1e-14),
-# initial per-lam logit-linearised slopes, np.linalg.lstsq for the cubic, then
-# Levenberg-Marquardt on the sigmoid residual over the whole table.
-# Errors of the clipped approximation on that table (fh_fit_errors()):
-#   max |fh_hat_approx - fh_hat| = 0.0793  (= max error of eq. 49 relative to
-#   f_h(pi/2, lam)), rms 0.0312, mean squared 9.76e-4, max relative error of
-#   f_h where fh_hat >= 0.1: 0.644 (small lam, theta_d ~ -0.9: the single
-#   logistic cannot follow the nearly linear 1/2 + theta_d/pi of broad lobes).
-#: refit polynomial k(s), s = sqrt(lam), highest power first.
-FH_COEFFS = (-4.091177817839644e-05, 0.013875614940571624, 0.8602564494071566, 1.4436420622237864)
-FH_VARIABLE = "sqrt"
-#: max |fh_hat_approx - fh_hat| over the default table (clipped sigmoid), rounded up.
-FH_FIT_MAX_ABS_ERROR = 0.080
+# Eq. 47-49 fit f_h / f_h(pi/2) with a sigmoid of slope k(lam) in theta_d: the logistic
+# ``a / (1 + e^{-k theta_d}) + (1 - a)/2`` with a = 1.05 and k a cubic in lam.  As printed
+# the constants do not reproduce the tabulated f_h (k(0) = 0.067 is almost flat where the
+# true small-lam curve is 1/2 + theta_d/pi; k ~ lam^3 grows far faster than ~sqrt(lam):
+# max error 0.47), and no logistic follows the true tails (refitted with a cubic in
+# sqrt(lam): 0.079 off in every lam range; a lobe 3 widths inside a shadow kept 4 % of its
+# light instead of 0.1 %).  Ours keeps the structure, one slope per lobe (what the GPU's
+# pair table stores), with the sigmoid of a sharp lobe: cut by a great circle at theta_d
+# it keeps Phi(theta_d sqrt(lam)) of itself (a Gaussian in its tangent plane), so
+#     fh_hat ~ Phi(k theta_d),  k^2 = lam + c0 - b lam / (lam + d),
+# k -> sqrt(lam) for sharp lobes and sqrt(c0) for broad ones.  (c0, b, d) by
+# fit_fh_coefficients() on tabulate_fh_hat()'s table (lam = logspace(-3, 5, 81); per lam
+# 121 uniform theta_d on [-pi/2, pi/2] plus 61 within +-5/sqrt(lam); exact values from
+# visibility_integral_fh): max error 0.049 (lam < 1, where the exact curve is nearly the
+# straight 1/2 + theta_d/pi), 0.034 at lam 1-10, 0.007 at 10-100, 0.0015 beyond (rms
+# 0.0225, was 0.031); the best slope per lam alone reaches 0.049 / 0.033 / 0.006 / 0.0015.
+#: (c0, b, d) of k(lam)
+FH_COEFFS = (1.1106767556576755, 3.3005551117042846, 3.364294616078551)
+#: max |fh_hat_approx - fh_hat| over the default table (clipped), rounded up.
+FH_FIT_MAX_ABS_ERROR = 0.049
 #: rms of the same, rounded up.
-FH_FIT_RMS_ERROR = 0.032
+FH_FIT_RMS_ERROR = 0.023
 
 
-def _poly_variable(lam, variable):
+def normal_cdf(z):
+    """Standard normal CDF through erfc of Abramowitz & Stegun 7.1.26 (|error| < 1.5e-7;
+    the GLSL twins use the same formula)."""
+    z = np.asarray(z, np.float64)
+    x = np.abs(z) / math.sqrt(2.0)
+    t = 1.0 / (1.0 + 0.3275911 * x)
+    y = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027
+                                                                          + t * 1.061405429))))
+    half_erfc = 0.5 * y * np.exp(-x * x)
+    return np.where(z >= 0.0, 1.0 - half_erfc, half_erfc)
+
+
+def fh_slope(lam, coeffs=None):
+    """The sigmoid's slope ``k(lam) = sqrt(lam + c0 - b lam / (lam + d))`` (:data:`FH_COEFFS`)."""
+    c0, b, d = FH_COEFFS if coeffs is None else coeffs
     lam = _f64(lam)
-    if variable == "sqrt":
-        return np.sqrt(lam)
-    if variable == "lambda":
-        return lam
-    raise ValueError(f"unknown polynomial variable {variable!r}")
+    return np.sqrt(np.maximum(lam + c0 - b * lam / (lam + d), 1e-12))
 
 
-def _expit(z):
-    return 0.5 * (1.0 + np.tanh(0.5 * z))
-
-
-def fh_hat_approx(theta_d, lam, coeffs=None, a=FH_A, variable=None, clip=True):
-    """Eq. 47-48: ``fh_hat ~ sigma(theta_d, k) = a / (1 + e^{-k theta_d}) + (1 - a)/2``
-    with ``k = polyval(coeffs, x)``, ``x = sqrt(lam)`` (our refit, default) or
-    ``x = lam`` (the paper's variable, ``variable="lambda"``).
-
-    The result is clipped to [0, 1] (the scaled sigmoid overshoots to
-    ``(1 - a)/2 = -0.025`` and ``(1 + a)/2``); clipping never increases the
-    error since the exact value lies in [0, 1].
-    """
-    if coeffs is None:
-        coeffs = FH_COEFFS
-        variable = FH_VARIABLE if variable is None else variable
-    variable = "sqrt" if variable is None else variable
-    k = np.polyval(np.asarray(coeffs, dtype=np.float64), _poly_variable(lam, variable))
+def fh_hat_slope(theta_d, k, clip=True):
+    """``Phi(k theta_d)`` for ``theta_d`` clipped to [-pi/2, pi/2] (the GLSL ``fh_hat_slope``;
+    ``clip``: the result too, to [0, 1])."""
     td = np.clip(_f64(theta_d), -0.5 * math.pi, 0.5 * math.pi)
-    sig = a * _expit(k * td) + 0.5 * (1.0 - a)
-    return np.clip(sig, 0.0, 1.0) if clip else sig
+    val = normal_cdf(_f64(k) * td)
+    return np.clip(val, 0.0, 1.0) if clip else val
 
 
-def visibility_integral_fh_approx(theta_d, lam, coeffs=None, a=FH_A, variable=None):
-    """Eq. 49: ``f_h(theta_d, lam) ~ sigma(theta_d, f_k(lam)) f_h(pi/2, lam)``."""
-    return fh_hat_approx(theta_d, lam, coeffs, a, variable) * hemisphere_integral(lam)
+def fh_hat_approx(theta_d, lam, coeffs=None, clip=True):
+    """Eq. 47-48 refitted: ``fh_hat ~ Phi(k(lam) theta_d)`` (:func:`fh_slope`)."""
+    return fh_hat_slope(theta_d, fh_slope(lam, coeffs), clip)
+
+
+def visibility_integral_fh_approx(theta_d, lam, coeffs=None):
+    """Eq. 49: ``f_h(theta_d, lam) ~ fh_hat_approx(theta_d, lam) f_h(pi/2, lam)``."""
+    return fh_hat_approx(theta_d, lam, coeffs) * hemisphere_integral(lam)
 
 
 def visibility_product(p, lam, mu, theta_d, exact=False):
@@ -422,71 +408,55 @@ def tabulate_fh_hat(theta_d=None, lam=None):
     return theta_d, lam, fh_hat(theta_d, lam[:, None])
 
 
-def fit_fh_coefficients(theta_d=None, lam=None, fhat=None, a=FH_A, degree=3,
-                        variable="sqrt", iterations=100):
-    """Least-squares fit of eq. 47-48 to a tabulation of ``fh_hat`` (eq. 46).
-
-    1. per ``lam``, the slope ``k`` of the linearised model
-       ``logit((fhat - (1-a)/2)/a) = k theta_d`` (well defined since a > 1);
-    2. ``np.linalg.lstsq`` of a degree-``degree`` polynomial in ``x`` (``sqrt(lam)``
-       or ``lam``) to those slopes;
-    3. Levenberg-Marquardt on all coefficients jointly, minimising
-       ``sum (sigma(theta_d, k(x)) - fhat)^2`` over the whole (lam, theta_d) grid.
-
-    ``fhat`` defaults to :func:`tabulate_fh_hat` on ``theta_d`` x ``lam``.
-    Returns the coefficients, highest power first (``np.polyval`` order).
-    """
+def fit_fh_coefficients(theta_d=None, lam=None, fhat=None, start=FH_COEFFS, iterations=100):
+    """Least-squares fit of ``(c0, b, d)`` of :func:`fh_slope` to a tabulation of ``fh_hat``
+    (eq. 46; default :func:`tabulate_fh_hat`): Levenberg-Marquardt from ``start`` on
+    ``sum (Phi(k theta_d) - fhat)^2`` over the whole (lam, theta_d) grid, the Jacobian by
+    central differences.  Returns the coefficients."""
     if fhat is None:
         theta_d, lam, fhat = tabulate_fh_hat(theta_d, lam)
-    theta_d = _f64(theta_d)
-    lam = _f64(lam)
+    th = np.broadcast_to(_f64(theta_d), np.shape(fhat))
+    lam = _f64(lam)[:, None]
     fhat = _f64(fhat)
-    x = _poly_variable(lam, variable)
-    # 1. linearised slopes
-    y = np.clip((fhat - 0.5 * (1.0 - a)) / a, 1e-12, 1.0 - 1e-12)
-    logit = np.log(y) - np.log1p(-y)
-    th = np.broadcast_to(theta_d, fhat.shape)
-    k0 = np.sum(th * logit, axis=1) / np.sum(th * th, axis=1)
-    # 2. polynomial through the slopes
-    V = np.vander(x, degree + 1)
-    c, *_ = np.linalg.lstsq(V, k0, rcond=None)
 
-    # 3. Levenberg-Marquardt
-    def residual(cc):
-        k = V @ cc
-        z = k[:, None] * th
-        s = _expit(z)
-        r = (a * s + 0.5 * (1.0 - a) - fhat).ravel()
-        dk = (a * s * (1.0 - s) * th)                     # d sigma / d k, (L, T)
-        J = (dk[:, :, None] * V[:, None, :]).reshape(-1, V.shape[1])
-        return r, J
+    def residual(c):
+        return (fh_hat_slope(th, fh_slope(lam, c), clip=False) - fhat).ravel()
 
-    r, J = residual(c)
+    def jacobian(c):
+        cols = []
+        for i in range(len(c)):
+            h = 1e-6 * max(abs(c[i]), 1.0)
+            up, down = np.array(c, float), np.array(c, float)
+            up[i] += h
+            down[i] -= h
+            cols.append((residual(up) - residual(down)) / (2.0 * h))
+        return np.stack(cols, axis=1)
+
+    c = np.array(start, np.float64)
+    r = residual(c)
     cost = r @ r
-    mu_damp = 1e-3
+    damp = 1e-3
     for _ in range(int(iterations)):
-        JTJ = J.T @ J
-        g = J.T @ r
+        J = jacobian(c)
+        JTJ, g = J.T @ J, J.T @ r
         improved = False
         for _ in range(30):
-            A = JTJ + mu_damp * np.diag(np.diag(JTJ) + 1e-300)
-            step = np.linalg.solve(A, -g)
-            c_new = c + step
-            r_new, J_new = residual(c_new)
+            step = np.linalg.solve(JTJ + damp * np.diag(np.diag(JTJ) + 1e-300), -g)
+            r_new = residual(c + step)
             cost_new = r_new @ r_new
             if cost_new < cost:
                 improved = True
                 rel = (cost - cost_new) / max(cost, 1e-300)
-                c, r, J, cost = c_new, r_new, J_new, cost_new
-                mu_damp = max(mu_damp / 3.0, 1e-12)
+                c, r, cost = c + step, r_new, cost_new
+                damp = max(damp / 3.0, 1e-12)
                 break
-            mu_damp *= 4.0
-        if not improved or rel < 1e-13:
+            damp *= 4.0
+        if not improved or rel < 1e-12:
             break
-    return c
+    return tuple(float(x) for x in c)
 
 
-def fh_fit_errors(coeffs=None, theta_d=None, lam=None, fhat=None, a=FH_A, variable=None):
+def fh_fit_errors(coeffs=None, theta_d=None, lam=None, fhat=None):
     """Errors of :func:`fh_hat_approx` against a tabulation (default :func:`tabulate_fh_hat`).
 
     Returns a dict: ``max_abs`` = max |approx - fhat| (this is also the max error
@@ -497,7 +467,8 @@ def fh_fit_errors(coeffs=None, theta_d=None, lam=None, fhat=None, a=FH_A, variab
     """
     if fhat is None:
         theta_d, lam, fhat = tabulate_fh_hat(theta_d, lam)
-    approx = fh_hat_approx(np.broadcast_to(_f64(theta_d), np.shape(fhat)), _f64(lam)[:, None], coeffs, a, variable)
+    approx = fh_hat_approx(np.broadcast_to(_f64(theta_d), np.shape(fhat)), _f64(lam)[:, None],
+                           coeffs)
     err = approx - fhat
     mask = fhat >= 0.1
     return {

@@ -255,18 +255,6 @@ SPREAD_MIN = 0.02
 Z_RANGE = (-4.0, 6.0)
 
 
-def normal_cdf(z):
-    """Standard normal CDF through erfc of Abramowitz & Stegun 7.1.26 (|error| < 1.5e-7;
-    the GLSL twin uses the same formula)."""
-    z = np.asarray(z, np.float64)
-    x = np.abs(z) / math.sqrt(2.0)
-    t = 1.0 / (1.0 + 0.3275911 * x)
-    y = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027
-                                                                          + t * 1.061405429))))
-    half_erfc = 0.5 * y * np.exp(-x * x)
-    return np.where(z >= 0.0, 1.0 - half_erfc, half_erfc)
-
-
 def visible_lobe(lam, theta, slope1, slope2):
     """The lobe standing for the visible part of ``G(i; p, lam)`` cut by the visibility
     boundary of eq. 31 -- a great circle at signed distance ``theta`` from ``p`` -- whose
@@ -285,7 +273,7 @@ def visible_lobe(lam, theta, slope1, slope2):
     lam = np.asarray(lam, np.float64)
     s = 1.0 / np.sqrt(lam)
     z = np.clip(np.asarray(theta, np.float64) / s, *Z_RANGE)
-    h = np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi) / np.maximum(normal_cdf(z), 1e-30)
+    h = np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi) / np.maximum(sg.normal_cdf(z), 1e-30)
     shift = np.minimum(s * h, SHIFT_MAX)
     var = s * s * np.maximum(1.0 - z * h - h * h, SPREAD_MIN)
     length = np.hypot(slope1, slope2)

@@ -85,9 +85,8 @@ void read_parameters()
 
 const float PI = 3.14159265358979;
 const float TWO_PI = 6.28318530717959;
-const float FH_A = 1.05;
-const vec4 FH_K = vec4(-4.091177817839644e-05, 0.013875614940571624, 0.8602564494071566,
-                       1.4436420622237864);
+/* core.sg.FH_COEFFS */
+const vec3 FH_COEFFS = vec3(1.1106767556576755, 3.3005551117042846, 3.364294616078551);
 const vec3 FRAME_REF = vec3(0.2672612419124244, 0.5345224838248488, 0.8017837257372732);
 const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.5345224838248488);
 const float FRAME_SWITCH = 0.999;
@@ -107,20 +106,28 @@ float one_minus_exp_neg_over(float lam, float x)   /* (1 - exp(-lam x)) / lam */
 
 float sg_hemisphere_integral(float lam) { return TWO_PI * one_minus_exp_neg_over(lam, 1.0); }
 
-/* eq. 47-48 (refit in sqrt(lam), core/sg.py): f_h(theta_d, lam) / f_h(pi/2, lam) is a
- * sigmoid of slope fh_slope(lam) in theta_d */
+/* standard normal CDF (core.sg.normal_cdf: erfc of Abramowitz & Stegun 7.1.26) */
+float normal_cdf(float z)
+{
+  float x = abs(z) * 0.7071067811865476;
+  float t = 1.0 / (1.0 + 0.3275911 * x);
+  float y = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 +
+                                                                          t * 1.061405429))));
+  float half_erfc = 0.5 * y * exp(-x * x);
+  return z >= 0.0 ? 1.0 - half_erfc : half_erfc;
+}
+
+/* eq. 47-48 refitted (core/sg.py): f_h(theta_d, lam) / f_h(pi/2, lam) ~ Phi(k theta_d),
+ * k^2 = lam + c0 - b lam / (lam + d) */
 float fh_slope(float lam)
 {
-  float x = sqrt(max(lam, 0.0));
-  return ((FH_K.x * x + FH_K.y) * x + FH_K.z) * x + FH_K.w;
+  float l = max(lam, 0.0);
+  return sqrt(max(l + FH_COEFFS.x - FH_COEFFS.y * l / (l + FH_COEFFS.z), 1e-12));
 }
 
 float fh_hat_slope(float theta_d, float k)
 {
-  float td = clamp(theta_d, -0.5 * PI, 0.5 * PI);
-  float z = clamp(k * td, -60.0, 60.0);
-  float sig = FH_A * 0.5 * (1.0 + tanh(0.5 * z)) + 0.5 * (1.0 - FH_A);
-  return clamp(sig, 0.0, 1.0);
+  return clamp(normal_cdf(k * clamp(theta_d, -0.5 * PI, 0.5 * PI)), 0.0, 1.0);
 }
 
 float fh_hat(float theta_d, float lam) { return fh_hat_slope(theta_d, fh_slope(lam)); }
@@ -219,17 +226,6 @@ float ssdf_value_slopes(vec3 local, vec3 e1, vec3 e2, vec4 W[16], out float d1, 
   d2 = (du * (uq.x - uv.x) + dv * (uq.y - uv.y) - (asin(clamp(-q.z, 0.0, 1.0)) - hor)) /
        SLOPE_STEP;
   return v - hor;
-}
-
-/* standard normal CDF (core.ssdf_sg.normal_cdf: erfc of Abramowitz & Stegun 7.1.26) */
-float normal_cdf(float z)
-{
-  float x = abs(z) * 0.7071067811865476;
-  float t = 1.0 / (1.0 + 0.3275911 * x);
-  float y = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 +
-                                                                          t * 1.061405429))));
-  float half_erfc = 0.5 * y * exp(-x * x);
-  return z >= 0.0 ? 1.0 - half_erfc : half_erfc;
 }
 
 vec4 coeff_fetch(float point, int l)

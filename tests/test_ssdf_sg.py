@@ -187,12 +187,6 @@ def test_pca_field_matches_full_images(scene):
     assert np.sqrt(np.mean((a - b) ** 2)) <= 0.05 + 1e-6
 
 
-def test_normal_cdf_against_erf():
-    z = np.linspace(-7.0, 7.0, 1401)
-    want = np.array([0.5 * (1.0 + math.erf(x / math.sqrt(2.0))) for x in z])
-    np.testing.assert_allclose(ssdf_sg.normal_cdf(z), want, rtol=0, atol=2e-7)
-
-
 @pytest.mark.parametrize("lam", [30.0, 200.0])
 @pytest.mark.parametrize("z", [-3.0, -1.0, 0.0, 1.0, 6.0])
 def test_visible_lobe_against_quadrature(lam, z):

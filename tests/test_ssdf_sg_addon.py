@@ -160,9 +160,7 @@ def test_pair_table_holds_eq39_at_the_flat_points():
     table = table.reshape(len(flat_points), stride, 4)
     theta = table[:, :theta_texels].reshape(len(flat_points), -1)[:, :pairs]
     w, k = table[:, theta_texels:, :3], table[:, theta_texels:, 3]
-    sigma = core_sg.FH_A / (1.0 + np.exp(-k * np.clip(theta, -np.pi / 2, np.pi / 2))) \
-        + 0.5 * (1.0 - core_sg.FH_A)
-    gpu_rd = np.einsum("qpc,qp->qc", w, np.clip(sigma, 0.0, 1.0))
+    gpu_rd = np.einsum("qpc,qp->qc", w, core_sg.fh_hat_slope(theta, k))
     normals = ground.points.normals[flat_points]
     numpy_rd = core_ssdf_sg.diffuse_transfer_per_cosine(
         field.numpy, flat_points, normals, fit[0] @ state.world.rotation, fit[1],
