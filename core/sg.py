@@ -330,20 +330,21 @@ def fh_hat(theta_d, lam, **kw):
 # sqrt(lam): 0.079 off in every lam range; a lobe 3 widths inside a shadow kept 4 % of its
 # light instead of 0.1 %).  Ours keeps the structure, one slope per lobe (what the GPU's
 # pair table stores), with the sigmoid of a sharp lobe: cut by a great circle at theta_d
-# it keeps Phi(theta_d sqrt(lam)) of itself (a Gaussian in its tangent plane), so
-#     fh_hat ~ Phi(k theta_d),  k^2 = lam + c0 - b lam / (lam + d),
-# k -> sqrt(lam) for sharp lobes and sqrt(c0) for broad ones.  (c0, b, d) by
-# fit_fh_coefficients() on tabulate_fh_hat()'s table (lam = logspace(-3, 5, 81); per lam
-# 121 uniform theta_d on [-pi/2, pi/2] plus 61 within +-5/sqrt(lam); exact values from
-# visibility_integral_fh): max error 0.049 (lam < 1, where the exact curve is nearly the
-# straight 1/2 + theta_d/pi), 0.034 at lam 1-10, 0.007 at 10-100, 0.0015 beyond (rms
-# 0.0225, was 0.031); the best slope per lam alone reaches 0.049 / 0.033 / 0.006 / 0.0015.
+# it keeps Phi(theta_d sqrt(lam)) of itself (a Gaussian in its tangent plane), scaled so
+# that theta_d = -pi/2 and pi/2 give 0 and 1 exactly as eq. 46 does (fh_hat_slope; as
+# k -> 0 that is the broad lobe's 1/2 + theta_d/pi):
+#     fh_hat ~ (Phi(k theta_d) - Phi(-k pi/2)) / (1 - 2 Phi(-k pi/2)),
+#     k^2 = lam + c0 - b lam / (lam + d),
+# (c0, b, d) by fit_fh_coefficients() on tabulate_fh_hat()'s table (lam = logspace(-3, 5,
+# 81); per lam 121 uniform theta_d on [-pi/2, pi/2] plus 61 within +-5/sqrt(lam); exact
+# values from visibility_integral_fh): max error 0.0019 at lam < 1, 0.0046 at 1-10, 0.0032
+# at 10-100, 0.0007 beyond (rms 0.00076; the logistic refit: 0.079 / 0.031).
 #: (c0, b, d) of k(lam)
-FH_COEFFS = (1.1106767556576755, 3.3005551117042846, 3.364294616078551)
+FH_COEFFS = (0.0046413591658328954, 1.4672958011923942, 3.6002488734472657)
 #: max |fh_hat_approx - fh_hat| over the default table (clipped), rounded up.
-FH_FIT_MAX_ABS_ERROR = 0.049
+FH_FIT_MAX_ABS_ERROR = 0.0047
 #: rms of the same, rounded up.
-FH_FIT_RMS_ERROR = 0.023
+FH_FIT_RMS_ERROR = 0.0008
 
 
 def normal_cdf(z):
@@ -366,10 +367,14 @@ def fh_slope(lam, coeffs=None):
 
 
 def fh_hat_slope(theta_d, k, clip=True):
-    """``Phi(k theta_d)`` for ``theta_d`` clipped to [-pi/2, pi/2] (the GLSL ``fh_hat_slope``;
-    ``clip``: the result too, to [0, 1])."""
+    """``(Phi(k theta_d) - Phi(-k pi/2)) / (1 - 2 Phi(-k pi/2))`` for ``theta_d`` clipped to
+    [-pi/2, pi/2]: 0 and 1 at the ends as eq. 46 (a lobe whose whole hemisphere is blocked
+    is black), ``1/2 + theta_d/pi`` as ``k -> 0`` (the GLSL ``fh_hat_slope``; ``clip``: the
+    result too, to [0, 1])."""
     td = np.clip(_f64(theta_d), -0.5 * math.pi, 0.5 * math.pi)
-    val = normal_cdf(_f64(k) * td)
+    k = _f64(k)
+    low = normal_cdf(-0.5 * math.pi * k)
+    val = (normal_cdf(k * td) - low) / (1.0 - 2.0 * low)
     return np.clip(val, 0.0, 1.0) if clip else val
 
 

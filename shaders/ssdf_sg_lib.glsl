@@ -86,7 +86,7 @@ void read_parameters()
 const float PI = 3.14159265358979;
 const float TWO_PI = 6.28318530717959;
 /* core.sg.FH_COEFFS */
-const vec3 FH_COEFFS = vec3(1.1106767556576755, 3.3005551117042846, 3.364294616078551);
+const vec3 FH_COEFFS = vec3(0.0046413591658328954, 1.4672958011923942, 3.6002488734472657);
 const vec3 FRAME_REF = vec3(0.2672612419124244, 0.5345224838248488, 0.8017837257372732);
 const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.5345224838248488);
 const float FRAME_SWITCH = 0.999;
@@ -117,8 +117,8 @@ float normal_cdf(float z)
   return z >= 0.0 ? 1.0 - half_erfc : half_erfc;
 }
 
-/* eq. 47-48 refitted (core/sg.py): f_h(theta_d, lam) / f_h(pi/2, lam) ~ Phi(k theta_d),
- * k^2 = lam + c0 - b lam / (lam + d) */
+/* eq. 47-48 refitted (core/sg.py): f_h(theta_d, lam) / f_h(pi/2, lam) ~ Phi(k theta_d)
+ * scaled to 0 and 1 at theta_d = -pi/2, pi/2; k^2 = lam + c0 - b lam / (lam + d) */
 float fh_slope(float lam)
 {
   float l = max(lam, 0.0);
@@ -127,7 +127,9 @@ float fh_slope(float lam)
 
 float fh_hat_slope(float theta_d, float k)
 {
-  return clamp(normal_cdf(k * clamp(theta_d, -0.5 * PI, 0.5 * PI)), 0.0, 1.0);
+  float low = normal_cdf(-0.5 * PI * k);
+  return clamp((normal_cdf(k * clamp(theta_d, -0.5 * PI, 0.5 * PI)) - low) / (1.0 - 2.0 * low),
+               0.0, 1.0);
 }
 
 float fh_hat(float theta_d, float lam) { return fh_hat_slope(theta_d, fh_slope(lam)); }
