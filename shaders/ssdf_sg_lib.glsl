@@ -166,28 +166,40 @@ vec2 square_coordinates(vec3 d)
   return vec2(0.5 * (a + 1.0), 0.5 * (b + 1.0));
 }
 
+/* the SSDF square's bilinear cell at uv (GL clamp to edge): texels (x0, y0, x1, y1), the
+ * weights f, and per axis the slope factor of the square's coordinate (its resolution, or 0
+ * in the outer half texel where the lookup is clamped flat) */
+void ssdf_cell(vec2 uv, out ivec4 cell, out vec2 f, out vec2 slope)
+{
+  float n = float(ssdfRes);
+  vec2 raw = uv * n - 0.5;
+  vec2 xy = clamp(raw, 0.0, n - 1.0);
+  int x0 = clamp(int(floor(xy.x)), 0, max(ssdfRes - 2, 0));   /* NaN-safe: no fetch outside */
+  int y0 = clamp(int(floor(xy.y)), 0, max(ssdfRes - 2, 0));
+  f = xy - vec2(float(x0), float(y0));
+  cell = ivec4(x0, y0, min(x0 + 1, ssdfRes - 1), min(y0 + 1, ssdfRes - 1));
+  slope = vec2(raw.x == xy.x ? n : 0.0, raw.y == xy.y ? n : 0.0);
+}
+
+/* the SSDF's continuation below the horizon: the elevation under it (core.ssdf_sg) */
+float ssdf_horizon(vec3 d) { return asin(clamp(-d.z, 0.0, 1.0)); }
+
 /* SSDF value (eq. 24 reconstruction) at a local direction: bilinear per eigen-image
  * layer, combined with the interpolated weights W (first weight 1 = the mean). */
 float ssdf_value(vec3 local, vec4 W[16])
 {
-  vec2 uv = square_coordinates(local);
-  float n = float(ssdfRes);
-  float x = clamp(uv.x * n - 0.5, 0.0, n - 1.0);
-  float y = clamp(uv.y * n - 0.5, 0.0, n - 1.0);
-  int x0 = clamp(int(floor(x)), 0, max(ssdfRes - 2, 0));   /* NaN-safe: no fetch outside */
-  int y0 = clamp(int(floor(y)), 0, max(ssdfRes - 2, 0));
-  float fx = x - float(x0), fy = y - float(y0);
-  int x1 = min(x0 + 1, ssdfRes - 1);
-  int y1 = min(y0 + 1, ssdfRes - 1);
+  ivec4 c;
+  vec2 f, flat_;
+  ssdf_cell(square_coordinates(local), c, f, flat_);
   float v = 0.0;
   for (int l = 0; l < coeffTexels; l++) {
-    vec4 e = texelFetch(eigenTex, ivec3(x0, y0, l), 0) * ((1.0 - fx) * (1.0 - fy)) +
-             texelFetch(eigenTex, ivec3(x1, y0, l), 0) * (fx * (1.0 - fy)) +
-             texelFetch(eigenTex, ivec3(x0, y1, l), 0) * ((1.0 - fx) * fy) +
-             texelFetch(eigenTex, ivec3(x1, y1, l), 0) * (fx * fy);
+    vec4 e = texelFetch(eigenTex, ivec3(c.x, c.y, l), 0) * ((1.0 - f.x) * (1.0 - f.y)) +
+             texelFetch(eigenTex, ivec3(c.z, c.y, l), 0) * (f.x * (1.0 - f.y)) +
+             texelFetch(eigenTex, ivec3(c.x, c.w, l), 0) * ((1.0 - f.x) * f.y) +
+             texelFetch(eigenTex, ivec3(c.z, c.w, l), 0) * (f.x * f.y);
     v += dot(e, W[l]);
   }
-  return v - asin(clamp(-local.z, 0.0, 1.0));
+  return v - ssdf_horizon(local);
 }
 
 /* ssdf_value and its derivatives d1, d2 along the unit tangents e1, e2 at local
@@ -196,37 +208,29 @@ float ssdf_value(vec3 local, vec4 W[16])
 float ssdf_value_slopes(vec3 local, vec3 e1, vec3 e2, vec4 W[16], out float d1, out float d2)
 {
   vec2 uv = square_coordinates(local);
-  float n = float(ssdfRes);
-  float x = clamp(uv.x * n - 0.5, 0.0, n - 1.0);
-  float y = clamp(uv.y * n - 0.5, 0.0, n - 1.0);
-  int x0 = clamp(int(floor(x)), 0, max(ssdfRes - 2, 0));
-  int y0 = clamp(int(floor(y)), 0, max(ssdfRes - 2, 0));
-  float fx = x - float(x0), fy = y - float(y0);
-  int x1 = min(x0 + 1, ssdfRes - 1);
-  int y1 = min(y0 + 1, ssdfRes - 1);
+  ivec4 c;
+  vec2 f, slope;
+  ssdf_cell(uv, c, f, slope);
   float v = 0.0, du = 0.0, dv = 0.0;
   for (int l = 0; l < coeffTexels; l++) {
-    vec4 e00 = texelFetch(eigenTex, ivec3(x0, y0, l), 0);
-    vec4 e10 = texelFetch(eigenTex, ivec3(x1, y0, l), 0);
-    vec4 e01 = texelFetch(eigenTex, ivec3(x0, y1, l), 0);
-    vec4 e11 = texelFetch(eigenTex, ivec3(x1, y1, l), 0);
-    v += dot(e00 * ((1.0 - fx) * (1.0 - fy)) + e10 * (fx * (1.0 - fy)) +
-             e01 * ((1.0 - fx) * fy) + e11 * (fx * fy), W[l]);
-    du += dot((e10 - e00) * (1.0 - fy) + (e11 - e01) * fy, W[l]);
-    dv += dot((e01 - e00) * (1.0 - fx) + (e11 - e10) * fx, W[l]);
+    vec4 e00 = texelFetch(eigenTex, ivec3(c.x, c.y, l), 0);
+    vec4 e10 = texelFetch(eigenTex, ivec3(c.z, c.y, l), 0);
+    vec4 e01 = texelFetch(eigenTex, ivec3(c.x, c.w, l), 0);
+    vec4 e11 = texelFetch(eigenTex, ivec3(c.z, c.w, l), 0);
+    v += dot(e00 * ((1.0 - f.x) * (1.0 - f.y)) + e10 * (f.x * (1.0 - f.y)) +
+             e01 * ((1.0 - f.x) * f.y) + e11 * (f.x * f.y), W[l]);
+    du += dot((e10 - e00) * (1.0 - f.y) + (e11 - e01) * f.y, W[l]);
+    dv += dot((e01 - e00) * (1.0 - f.x) + (e11 - e10) * f.x, W[l]);
   }
-  /* clamped to the edge (the outer half texel): flat in that coordinate */
-  du *= (uv.x * n - 0.5 == x) ? n : 0.0;
-  dv *= (uv.y * n - 0.5 == y) ? n : 0.0;
-  float hor = asin(clamp(-local.z, 0.0, 1.0));
+  du *= slope.x;
+  dv *= slope.y;
+  float hor = ssdf_horizon(local);
   vec3 q = normalize(local + SLOPE_STEP * e1);
   vec2 uq = square_coordinates(q);
-  d1 = (du * (uq.x - uv.x) + dv * (uq.y - uv.y) - (asin(clamp(-q.z, 0.0, 1.0)) - hor)) /
-       SLOPE_STEP;
+  d1 = (du * (uq.x - uv.x) + dv * (uq.y - uv.y) - (ssdf_horizon(q) - hor)) / SLOPE_STEP;
   q = normalize(local + SLOPE_STEP * e2);
   uq = square_coordinates(q);
-  d2 = (du * (uq.x - uv.x) + dv * (uq.y - uv.y) - (asin(clamp(-q.z, 0.0, 1.0)) - hor)) /
-       SLOPE_STEP;
+  d2 = (du * (uq.x - uv.x) + dv * (uq.y - uv.y) - (ssdf_horizon(q) - hor)) / SLOPE_STEP;
   return v - hor;
 }
 
