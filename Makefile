@@ -4,6 +4,9 @@
 #   make wheels  download the embreex wheels named in blender_manifest.toml
 #   make build   validate + build per-platform extension zips into dist/
 #   make test    run the test suite (PYTEST_ARGS="-k foo -x" to pass options)
+#   make test-core  the Blender-free tests of core/ (tests/core, under a minute)
+#   make lint    the house rules (tools/lint.py: file and folder sizes, private names, cycles, core free of bpy)
+#   make docs    write docs/architecture.md's module map from the tree (tools/architecture.py)
 #   make demo    render the demo into out/demo
 #   make bench   run the precompute benchmark
 #   make bench-scale  production scale: 25k-500k vertices (time, memory, storage, AUTO)
@@ -33,7 +36,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test demo bench bench-scale bench-dynamic bench-methods report clean distclean
+.PHONY: setup apt venv wheels validate build test test-core lint docs demo bench bench-scale bench-dynamic bench-methods report clean distclean
 
 setup: apt venv
 
@@ -87,6 +90,15 @@ build: setup wheels validate
 test: setup wheels
 	$(VENV_PY) -m pytest tests -q $(PYTEST_ARGS)
 
+test-core: setup
+	$(VENV_PY) -m pytest tests/core -q $(PYTEST_ARGS)
+
+lint:
+	python3 tools/lint.py
+
+docs:
+	python3 tools/architecture.py
+
 demo: setup
 	$(VENV_PY) bench/demo.py --out out/demo
 
@@ -101,7 +113,7 @@ SCALE_ARGS ?=
 bench-scale: setup
 	$(VENV_PY) bench/bench_scale.py $(SCALE_ARGS)
 
-# Dynamic objects (shadow fields, addon/dynamic.py): field precompute time and stored size
+# Dynamic objects (shadow fields, addon/frame/dynamic.py): field precompute time and stored size
 # per detail (LOW/MEDIUM/HIGH), and frame time with 1/4/16 dynamic objects against the same
 # scene static, relit and moved (about 5 minutes on 2 cores; DYNAMIC_ARGS="--big" adds a
 # 60k-vertex object, "--append docs/measurements.md" records the run).

@@ -4,7 +4,10 @@ import atexit
 
 import bpy
 
-from . import drawing, engine, keys, operators, panels, properties, report, runtime, sg_material
+from .gpu import drawing
+from .frame import engine, keys, state as runtime
+from .ui import operators, panels, properties, sg_material
+from .benchmark import operator as report
 
 _MODULES = (properties, sg_material, operators, report, engine, panels)
 

@@ -86,9 +86,13 @@ def main(argv=None):
     r.resolution_x, r.resolution_y, r.resolution_percentage = w, h, 100
     pre = scenes.precompute(resolution=args.directions, method="BLOCKS")
 
-    from prt_relight.addon import keys, runtime
-    from prt_relight.addon.methods import blocks as method, reference as ref_method
-    from prt_relight.core import blocks as B, blocks_encoding, directions, reference
+    from prt_relight.addon.frame import keys, state as runtime
+    from prt_relight.addon.methods.blocks import shading as method
+    from prt_relight.addon.methods.reference import shading as ref_method
+    from prt_relight.core.methods.blocks import shading as B, encoding as blocks_encoding
+    from prt_relight.core.methods.blocks import light_tables
+    from prt_relight.core.sphere import directions
+    from prt_relight.core.methods.reference import shading as reference
 
     say(f"BLOCKS vs REFERENCE: {args.mesh.stem} (Glossy BSDF, Beckmann, roughness "
         f"{args.roughness}) on a diffuse 96^2 grid, HDRI {args.hdri} rotated 0.6 rad, cubemap "
@@ -158,10 +162,10 @@ def main(argv=None):
 
     def relight(m):
         if m == "REFERENCE":
-            ref_method._IRRADIANCE_CACHE.clear()
+            ref_method.IRRADIANCE_CACHE.clear()
         else:
-            method._TABLES.clear()
-            method._LIGHT_VIS.clear()
+            method.TABLES.clear()
+            method.LIGHT_VIS.clear()
         return frame(m)
 
     t_ref_relight, _ = timed(lambda: relight("REFERENCE"), 1)
@@ -181,7 +185,7 @@ def main(argv=None):
     res = state.resolution
     cube = directions.cubemap(res)
     L = keys.environment_cubemap(state.world, res)
-    tables = B.light_tables(L, res)
+    tables = light_tables.light_tables(L, res)
     say("")
     say("core shade_points per object (camera moved; REFERENCE with its cached irradiance, "
         "BLOCKS with its cached line-9 products):")
@@ -191,11 +195,11 @@ def main(argv=None):
     relight_rows = []
     for st in state.objects:
         pts = st.points
-        dv, _ = method.BlocksMethod().visibility_of(st, res)
-        pairs = B.active_pairs(dv)
+        dv, _ = method.BlocksShading().visibility_of(st, res)
+        pairs = light_tables.active_pairs(dv)
         t0 = time.perf_counter()
-        lv = B.light_vis_sums(pairs, tables)
-        E = B.lambert_irradiance(lv, pts.normals)
+        lv = light_tables.light_vis_sums(pairs, tables)
+        E = light_tables.lambert_irradiance(lv, pts.normals)
         t_lv = time.perf_counter() - t0
         irr = reference.diffuse_irradiance(st.bits, pts.normals, cube, L)
         rs, _ = timed(lambda: reference.shade_points(st.bits, pts.positions, pts.normals,
@@ -249,7 +253,7 @@ def main(argv=None):
         "REFERENCE diffuse irradiance: " + ", ".join(
             f"{name} {tb:.3f} s vs {tr:.3f} s" for name, tr, tb in relight_rows))
     t0 = time.perf_counter()
-    B.light_tables(L, res)
+    light_tables.light_tables(L, res)
     say(f"  lighting block forms (§4.3: pixel, suffix sums, DCT, moments): "
         f"{time.perf_counter() - t0:.3f} s")
 

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Dynamic objects (shadow fields, addon/dynamic.py): field precompute and storage per
+"""Dynamic objects (shadow fields, addon/frame/dynamic.py): field precompute and storage per
 detail, and frame time with 1 / 4 / 16 dynamic objects against the same scene static.
 
     python bench/bench_dynamic.py [--big] [--methods REFERENCE,SH] [--counts 1,4,16]
@@ -13,7 +13,7 @@ Everything runs in one process (compare the ratios: the machine is shared).
    under 'city', marked dynamic, precomputed at each ``scene.prt.field_detail``: the
    precompute's seconds (``timings["shadow_fields"]``: the occluder field + the static
    scene's field where it goes), against the precompute of the same scene with Suzanne
-   static; the stored blob ``dynamic.FIELD`` (compressed bytes) and the raw sizes of its
+   static; the stored blob ``storage.SHADOW_FIELD`` (compressed bytes) and the raw sizes of its
    occluder field (OVDF: independent of the vertex count) and static field; Suzanne's own
    stored visibility (grows with its vertices); then a frame after Suzanne moved
    (``--field-method``, SH: little besides the product) against the static scene's relit
@@ -26,7 +26,7 @@ Everything runs in one process (compare the ratios: the machine is shared).
    ``shade(eye)`` (per-corner radiance); medians of ``--repeat`` frames after a warm one.
    *relit*: the world's Mapping turned to a new angle (same poses: the products of the
    fields are cached per pose); *moved*: every dynamic object at a new pose (the products
-   are made again: ``addon.dynamic._product``, its seconds summed as "product"); *one
+   are made again: ``addon.frame.dynamic.posed_bits``, its seconds summed as "product"); *one
    moved*: only the first of them at a new pose (an animation where one object moves).
 """
 
@@ -75,12 +75,12 @@ def parse_args(argv=None):
 # ------------------------------------------------------------------ helpers
 
 class ProductClock:
-    """Seconds spent in ``addon.dynamic._product`` (the per-pose visibility products)."""
+    """Seconds spent in ``addon.frame.dynamic.posed_bits`` (the per-pose visibility products)."""
 
     def __init__(self):
-        from prt_relight.addon import dynamic
+        from prt_relight.addon.frame import dynamic
         self.dynamic = dynamic
-        self.inner = dynamic._product
+        self.inner = dynamic.posed_bits
         self.seconds = 0.0
         self.calls = 0
 
@@ -91,7 +91,7 @@ class ProductClock:
             finally:
                 self.seconds += time.perf_counter() - t0
                 self.calls += 1
-        dynamic._product = timed
+        dynamic.posed_bits = timed
 
     def reset(self):
         self.seconds, self.calls = 0.0, 0
@@ -100,7 +100,7 @@ class ProductClock:
 def frame(method):
     """One frame as F12 / the viewport make it before rasterising: sync + shade."""
     import bpy
-    from prt_relight.addon import runtime
+    from prt_relight.addon.frame import state as runtime
     bpy.context.scene.prt.method = method
     state = runtime.FrameState()
     state.sync(bpy.context.evaluated_depsgraph_get())
@@ -171,7 +171,8 @@ def move(ob, rng, home):
 # ------------------------------------------------------------------ 1. fields
 
 def field_rows(args, clock):
-    from prt_relight.addon import dynamic, storage
+    from prt_relight.addon.frame import dynamic
+    from prt_relight.addon.blender import storage
     from bench_scale import add_suzanne as cut_suzanne
     objects = [("Suzanne subdiv 1", lambda: diffuse(scenes.add_suzanne(subdiv=1)))]
     if args.big:
@@ -204,7 +205,7 @@ def field_rows(args, clock):
                 object=label, vertices=vertex_count(ob), detail=detail,
                 precompute=t["total"], fields=t.get("shadow_fields", 0.0),
                 static_precompute=t_static,
-                stored=storage.stored_bytes(ob, dynamic.FIELD),
+                stored=storage.stored_bytes(ob, storage.SHADOW_FIELD),
                 ovdf_raw=data.field.nbytes,
                 static_raw=data.static.nbytes if data.static is not None else 0,
                 pca_error=data.field.error,
@@ -337,7 +338,7 @@ def tables(args, field, frames, seconds):
             f"fields at {r0['detail']}; a frame = new FrameState, sync, shade (per-corner "
             f"radiance, no rasterising), median of {args.repeat}.  *relit*: the world's "
             "Mapping turned (same poses); *moved*: every dynamic object at a new pose "
-            "(*product*: seconds in `dynamic._product` per frame); *one moved*: only the "
+            "(*product*: seconds in `dynamic.posed_bits` per frame); *one moved*: only the "
             "first at a new pose.  Ratios are dynamic ÷ the static scene's relit frame "
             "(the same objects, not dynamic).",
             "",

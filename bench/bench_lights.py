@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Compact sources per pixel (addon/lights.py): error against Cycles and relit F12 time
+"""Compact sources per pixel (addon/gpu/lights.py): error against Cycles and relit F12 time
 per method, with and without the split, against Workbench's F12 of the same scene in
 the same run.
 
@@ -87,8 +87,8 @@ def median_time(fn, repeats=3):
 def run(kind, methods, out_dir, lines):
     import bpy
     build(kind)                            # registers the add-on as prt_relight
-    from prt_relight.addon.engine import in_render, render_pixels, render_view
-    from prt_relight.addon.runtime import FrameState
+    from prt_relight.addon.frame.engine import in_render, render_pixels, render_view
+    from prt_relight.addon.frame.state import FrameState
     scene = bpy.context.scene
     scenes.precompute(32)
     d = out_dir / kind

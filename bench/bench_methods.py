@@ -27,7 +27,7 @@ def sweeps():
     from prt_relight.addon import methods
     out = []
     for m in methods.REGISTRY.values():
-        setting, values = m.budget if m.budget else (None, [None])
+        setting, values = m.bench.budget if m.bench.budget else (None, [None])
         out.append((m.id, setting, list(values)))
     out.sort(key=lambda row: row[0] != "REFERENCE")
     return out
@@ -42,7 +42,7 @@ def psnr(a: np.ndarray, ref: np.ndarray) -> float:
 
 def shade_time(repeats: int) -> float:
     import bpy
-    from prt_relight.addon.runtime import FrameState
+    from prt_relight.addon.frame.state import FrameState
     state = FrameState()
     state.sync(bpy.context.evaluated_depsgraph_get())
     cam = bpy.context.scene.camera

@@ -8,7 +8,7 @@ Prints (and writes to out/bench/precompute.txt):
 
 1. the add-on's precompute time split (export, BVH build, rays, encode, storage) and
    its rays/s on the whole scene;
-2. ray throughput of ``core.visibility.trace_visibility`` (default threads)
+2. ray throughput of ``core.scene.visibility.trace_visibility`` (default threads)
    against ONE bare single-threaded embreex ``scene.run(..., query='OCCLUDED')``
    over exactly the same rays, on a fixed random subset of shading points
    (the full ray set does not fit in memory as one call); target ours/bare >= 1.6
@@ -66,8 +66,10 @@ def main(argv=None):
     args = parse_args(argv)
     import bpy
     scenes.reset()                                   # also registers prt_relight
-    from prt_relight.addon import precompute as pc
-    from prt_relight.core import directions, visibility
+    from prt_relight.addon.blender import precompute as pc
+    from prt_relight.core.sphere import directions
+    from prt_relight.core.scene import visibility
+    from prt_relight.core.common import parallel
 
     scenes.add_world(args.hdri)
     scenes.add_ground()
@@ -75,7 +77,7 @@ def main(argv=None):
     scenes.add_camera(target=(0.0, 0.0, 0.7), resolution=args.size)
     tri = sum(len(o.evaluated_get(bpy.context.evaluated_depsgraph_get()).data.polygons)
               for o in bpy.context.scene.objects if o.type == "MESH")
-    threads = visibility.default_threads()
+    threads = parallel.default_threads()
 
     # 1. the add-on's precompute on the whole scene
     t = scenes.precompute(resolution=32)

@@ -30,7 +30,7 @@ COUNTS = (10, 30, 60, 100)
 
 def _state():
     import bpy
-    from prt_relight.addon.runtime import FrameState
+    from prt_relight.addon.frame.state import FrameState
     state = FrameState()
     state.sync(bpy.context.evaluated_depsgraph_get())
     return state
@@ -51,8 +51,9 @@ def _shade(state, repeats=3):
 def run_scene(mesh, hdri, w, h, out_dir, lines):
     import bpy
     scenes.reset()
-    from prt_relight.core import directions, rsl
-    from prt_relight.addon.methods import rsl as rsl_method
+    from prt_relight.core.sphere import directions
+    from prt_relight.core.methods.rsl import square_lights
+    from prt_relight.addon.methods.rsl import shading as rsl_method
     scenes.add_world(hdri, rotation_z=0.6)
     ground = scenes.add_ground(cuts=96)
     scenes.add_bsdf_material(ground, "Ground", "ShaderNodeBsdfDiffuse",
@@ -76,7 +77,7 @@ def run_scene(mesh, hdri, w, h, out_dir, lines):
 
     prt.method = "RSL"
     state = _state()
-    _, lighting = rsl_method._unrotated_lighting(state.world, 32)
+    _, lighting = rsl_method.unrotated_lighting(state.world, 32)
     cube = directions.cubemap(32)
     head = (f"{mesh.stem if mesh.is_file() else 'suzanne'} + 96² grid, HDRI {hdri} (rot 0.6), "
             f"{w}x{h}, {pre['points']} points (RSL precompute: rays {pre.get('rays', 0):.1f} s, "
@@ -87,7 +88,7 @@ def run_scene(mesh, hdri, w, h, out_dir, lines):
     print(lines[-2] + "\n" + lines[-1], flush=True)
     for K in COUNTS:
         t0 = time.perf_counter()
-        rsl.decompose(lighting, cube, K)
+        square_lights.decompose(lighting, cube, K)
         decomp = time.perf_counter() - t0
         prt.rsl_lights = K
         path = out_dir / f"rsl_{hdri}_{K}.exr"
@@ -117,8 +118,9 @@ def main(argv=None):
              "machine, one run)"]
     for hdri in args.hdri:
         run_scene(args.mesh, hdri, w, h, out_dir, lines)
-    from prt_relight.core import brdf, rsl
-    for mat in (brdf.principled_material(roughness=0.5), brdf.principled_material(roughness=0.3)):
+    from prt_relight.core.shading import materials
+    from prt_relight.core.methods.rsl import shading as rsl
+    for mat in (materials.principled_material(roughness=0.5), materials.principled_material(roughness=0.3)):
         rsl.brdf_tables(mat)                          # warm (Cycles' albedo tables load once)
         t0 = time.perf_counter()
         rsl.brdf_tables(mat, 32, 32, 3)

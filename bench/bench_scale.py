@@ -156,10 +156,10 @@ def child(spec: str, args) -> dict:
     saved for the other methods' F12s, ESC, AUTO's choice and its first F12."""
     import bpy
     scenes.reset()                                    # registers prt_relight
-    from prt_relight.addon import storage
-    from prt_relight.addon.engine import PRTRenderEngine
-    from prt_relight.addon.methods import auto
-    from prt_relight.addon.report import ensure_gpu
+    from prt_relight.addon.blender import storage
+    from prt_relight.addon.frame.engine import PRTRenderEngine
+    from prt_relight.addon.methods.auto import shading as auto
+    from prt_relight.addon.gpu.drawing import ensure_gpu
     kind, value = spec.split("=")
     scenes.add_world(args.hdri)
     scenes.add_ground(cuts=64)
@@ -200,7 +200,7 @@ def child(spec: str, args) -> dict:
 
     # AUTO's choice (nothing measured before), then its first frame with that choice
     scene.prt.method = "AUTO"
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     _reset_peak()
     t0 = time.perf_counter()
     bpy.ops.prt.auto_choose()

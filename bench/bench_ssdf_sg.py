@@ -61,7 +61,7 @@ def run_scene(label, build, kind, w, h, samples, out_dir, lines):
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y = w, h
     t = scenes.precompute(32, method="SSDF_SG")
-    from prt_relight.addon.methods import ssdf_sg as method
+    from prt_relight.addon.methods.ssdf_sg import shading as method
     d = out_dir / label
     scene.prt.method = "REFERENCE"
     scenes.render_prt(d.with_suffix(".ref.exr"))                     # warm caches

@@ -5,7 +5,7 @@
 
 Each case is one object on the ground grid (``scenes.add_ground``) under a bundled
 HDRI, precomputed with REFERENCE.  Per object it prints the points, the stored
-visibility blob (``addon.storage``) in bytes per point against the 6N^2/8 bit-packed
+visibility blob (``addon.blender.storage``) in bytes per point against the 6N^2/8 bit-packed
 bytes, and the best-of-N time to read the blob back from the object and decode it; per
 case the trace and encode (zlib, all objects) times and the growth of the saved .blend.  Writes out/bench/storage.txt as well.
 """
@@ -53,7 +53,7 @@ def main(argv=None):
     args = parse_args(argv)
     scenes.reset()
     import bpy
-    from prt_relight.addon import storage
+    from prt_relight.addon.blender import storage
 
     cases = [(m.stem, lambda m=m: scenes.add_obj(m)) for m in args.mesh]
     cases += [(f"Suzanne subdiv {lv}", lambda lv=lv: scenes.add_suzanne(subdiv=lv))

@@ -6,7 +6,7 @@
     python bench/bench_sun_seeds.py [--seeds 12] [--spp 1024] [--size 128 96]
                                     [--methods REFERENCE,SH,...] [--out out/bench_sun_seeds]
 
-The error against converged Cycles is ``core.report.rel_l2_converged`` (the per-seed
+The error against converged Cycles is ``core.report.metrics.rel_l2_converged`` (the per-seed
 variance subtracted), printed with the raw figure and the mean's own noise.  Cycles frames are kept and reused (per seed, size and spp).
 """
 
@@ -19,7 +19,7 @@ import sys
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import bench_lights  # noqa: E402
 import scenes  # noqa: E402
-from prt_relight.core.report import rel_l2_converged  # noqa: E402  (scenes registers it)
+from prt_relight.core.report.metrics import rel_l2_converged  # noqa: E402  (scenes registers it)
 
 
 def main():

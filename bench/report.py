@@ -91,8 +91,7 @@ def main(argv=None):
     w, h = (int(v) for v in args.resolution.lower().split("x"))
     import bpy
     scenes.load_addon()
-    from prt_relight.addon import report as addon_report
-    from prt_relight.core import report as core_report
+    from prt_relight.addon.benchmark import sweep
 
     summary = []
     for name in args.scenes:
@@ -102,7 +101,7 @@ def main(argv=None):
         scene.render.resolution_percentage = 100
         scene.prt.auto_error_target = args.target
         t0 = time.perf_counter()
-        run = addon_report.ReportRun(scene, args.out / name, repeats=args.repeats,
+        run = sweep.ReportRun(scene, args.out / name, repeats=args.repeats,
                                      include_cycles=args.cycles,
                                      cycles_samples=args.cycles_samples,
                                      stability=args.stability and name == args.scenes[0],

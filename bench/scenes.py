@@ -178,7 +178,7 @@ def add_bsdf_material(ob, name: str, node_type: str = "ShaderNodeBsdfGlossy", **
         add_bsdf_material(ob, "Glossy", "ShaderNodeBsdfGlossy", distribution="BECKMANN",
                           Roughness=0.25)
     """
-    from prt_relight.addon.scene_build import bsdf_material
+    from prt_relight.addon.blender.scene_build import bsdf_material
     mat = bsdf_material(name, node_type, **inputs)
     ob.data.materials.clear()
     ob.data.materials.append(mat)
@@ -263,7 +263,7 @@ def precompute(resolution: int = 32, threads=None, method: str = "REFERENCE") ->
     Keys: export, build_bvh, rays, storage, ray_count, rays_per_second, points, total.
     """
     import bpy
-    from prt_relight.addon import precompute as pc
+    from prt_relight.addon.blender import precompute as pc
     scene = bpy.context.scene
     scene.prt.method = method          # derive/store run for the active method only
     scene.prt.resolution = str(resolution)

@@ -1,6 +1,6 @@
 /* Microfacet BRDF pieces shared by the per-pixel passes (sharp_lobe_frag.glsl,
  * lights_frag.glsl): Cycles' Beckmann/GGX NDFs and Smith Lambda, the Fresnel kinds of
- * core.brdf.sharp_lobes, NDF sampling and a tangent frame.  GLSL twin of core/brdf.py. */
+ * core.shading.brdf.sharp_lobes, NDF sampling and a tangent frame.  GLSL twin of core/shading/brdf.py. */
 
 #define PI 3.14159265358979
 

@@ -1,5 +1,5 @@
-/* Compact light sources per pixel (addon/lights.py): the environment's extracted sources
- * (core/lights.py) and Blender's sun lamps, each a disc of uniform radiance seen from
+/* Compact light sources per pixel (addon/gpu/lights.py): the environment's extracted sources
+ * (core/sphere/sources.py) and Blender's sun lamps, each a disc of uniform radiance seen from
  * every point in the same direction, added to the frame.
  *
  *   L_o = sum_sources V(x) * integral over the disc of  f(i, o) max(0, n.i) L  di
@@ -17,15 +17,15 @@
  *
  * paramTex (one material slot), row 0: 0 (albedo / pi, has diffuse), 1 (alpha,
  * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
- * weight, eta, -), (f0, -), (B, -) (core.brdf.sharp_lobes), 8 eye (w = 1 perspective),
- * 9 (core.mesh.closed_side of the object, -, -, -), 11 (roughness nodes n, alpha floor),
+ * weight, eta, -), (f0, -), (B, -) (core.shading.brdf.sharp_lobes), 8 eye (w = 1 perspective),
+ * 9 (core.scene.mesh.closed_side of the object, -, -, -), 11 (roughness nodes n, alpha floor),
  * 12-15 a textured Roughness (texture_lib.glsl's info, mapping rows, mix colour);
  * 16 a normal or bump map (kind 0 none / 1 Normal Map / 2 Bump, strength, distance, -),
  * 17-20 its image (info, mapping rows, mix colour: texture_lib.glsl mapped_normal);
  * row 1: the Lambert base's view weight at mu = i / (TABLE - 1) (Principled layering),
- * rows 2, 3: each lobe's multiscatter factor at mu (core.brdf.multiscatter_factor);
+ * rows 2, 3: each lobe's multiscatter factor at mu (core.shading.brdf.multiscatter_factor);
  * with a textured Roughness rows 4k + 4 .. 4k + 7 the same four rows at roughness node
- * k / (n - 1), interpolated at the pixel's roughness (addon/lights.py slot_texels).
+ * k / (n - 1), interpolated at the pixel's roughness (addon/gpu/lights.py slot_texels).
  * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, kind:
  * 0 a disc, 1 point-like (radiance is then its irradiance)), 2..5 world-to-shadow-clip
  * columns, 6 (atlas tile origin x, y and size in texels, depth range in world units),
@@ -36,7 +36,7 @@
  * rectangle, 5 an ellipse): 0 (centre, radius of a disc of its area), 1 (radiance), 2 (the
  * way it faces), 4, 5 (its half axes), and its cube shadow map as a local lamp's.
  *
- * Features are compiled in only where a draw has them (addon/lights.py _shader: GLOSSY,
+ * Features are compiled in only where a draw has them (addon/gpu/lights.py _shader: GLOSSY,
  * ROUGH_TEX, NORMAL_MAP, ALBEDO_TEX per slot, LOCAL_LAMPS, AREA_LAMPS per frame): a branch
  * no fragment takes still costs registers on a GPU and its whole body on llvmpipe, which
  * runs both sides of a branch under a mask. */
@@ -44,7 +44,7 @@
 #define NL 8
 #define NB 8
 #define TABLE 32
-/* most shadow-map taps per source and sample (addon/lights.py defines fewer filter taps
+/* most shadow-map taps per source and sample (addon/gpu/lights.py defines fewer filter taps
  * when each pixel has several samples) */
 #ifndef BLOCKER_TAPS
 #define BLOCKER_TAPS 16
@@ -529,7 +529,7 @@ void main()
       float d2 = max(dot(to_lamp, to_lamp), 1e-12);
       c = to_lamp * inversesqrt(d2);
       float e = 1.0 / (4.0 * PI * d2);              /* Cycles: Phi / (4 pi d^2) at normal */
-      if (kind > 2.5) {                             /* spot cone (core.sg_lighting) */
+      if (kind > 2.5) {                             /* spot cone (core.sg.lighting) */
         vec4 spot = source(s, 2);
         float smooth_w = source(s, 3).x;
         float t = dot(-c, spot.xyz);

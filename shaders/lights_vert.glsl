@@ -1,4 +1,4 @@
-/* Compact light sources per pixel (addon/lights.py): per-corner position and normal, and
+/* Compact light sources per pixel (addon/gpu/lights.py): per-corner position and normal, and
  * the UVs or colour attribute of a textured colour input, the tangent and bitangent sign of
  * a normal map. */
 void main()

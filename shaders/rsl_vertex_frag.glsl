@@ -98,7 +98,7 @@ float visibility(int base, vec2 p, float h)
     float D = (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
     return clamp((h + D) / (2.0 * h), 0.0, 1.0);
   }
-  /* SAT: the average over the part of the square inside the table (as core.rsl) */
+  /* SAT: the average over the part of the square inside the table (as core.methods.rsl.shading) */
   float area = clipped_area(p, h);
   return area > 1e-12 ? box(true, origin, visRes, p, h) / area : 1.0;
 }
@@ -114,7 +114,7 @@ void main()
   int rows = (pointCount + width - 1) / width;
   vec3 n = texelFetch(pointData, pix, 0).xyz;
   vec3 v = texelFetch(pointData, pix + ivec2(0, rows), 0).xyz;
-  /* Duff et al. 2017 frame, as core.directions.orthonormal_frame */
+  /* Duff et al. 2017 frame, as core.sphere.directions.orthonormal_frame */
   float s = n.z >= 0.0 ? 1.0 : -1.0;
   float a = -1.0 / (s + n.z);
   float bb = n.x * n.y * a;

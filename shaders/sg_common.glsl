@@ -1,8 +1,8 @@
 /* Spherical-Gaussian helpers of Wang et al. 2009: functions only, no main.
  *
- * GLSL twin of core/sg.py (product eq. 5, inner product eq. 4 in the stable form),
- * core/sg_brdf.py (specular_lobes: NDF lobe -> spherical warp eq. 17-21 -> M_o at the
- * lobe centre eq. 22, Fresnel eq. 14) and core/sg_lighting.py
+ * GLSL twin of core/sg/algebra.py (product eq. 5, inner product eq. 4 in the stable form),
+ * core/sg/brdf.py (specular_lobes: NDF lobe -> spherical warp eq. 17-21 -> M_o at the
+ * lobe centre eq. 22, Fresnel eq. 14) and core/sg/lighting.py
  * (PrefilteredEnvironment.lookup, eq. 34-35).  Every lobe is mu * exp(lam (dot(i, axis) - 1)).
  * tests/test_sg_brdf.py::test_glsl_matches_numpy renders these functions offscreen and
  * compares with numpy.
@@ -11,11 +11,11 @@
  *   sgm0 = (model, fresnel, roughness a, ior)   model: 0 COOK_TORRANCE, 1 BLINN_PHONG, 2 WARD,
  *                                               3 WARD_ANISO, 4 ASHIKHMIN_SHIRLEY;
  *                                               fresnel: 0 NONE, 1 SCHLICK, 2 DIELECTRIC,
- *                                               3 PRINCIPLED  (core.sg_brdf.MODEL_INDEX/FRESNEL_INDEX)
+ *                                               3 PRINCIPLED  (core.sg.brdf.MODEL_INDEX/FRESNEL_INDEX)
  *   sgm1 = (ks.rgb, metallic)
  *   sgm2 = (base.rgb, unused)                   base = SGMaterial.diffuse (PRINCIPLED metal F0)
  *   ndf_lobes[k] = (axis in the local frame (t, b, n), lam), ndf_mu[k] = mu, k < n_ndf:
- *                                               the anisotropic fit of core.sg_brdf.ndf_lobes
+ *                                               the anisotropic fit of core.sg.brdf.ndf_lobes
  *                                               (unused by the isotropic models: n_ndf = 0).
  * Prefiltered environment: one RGBA32F 2D texture (PrefilteredEnvironment.atlas()),
  * N texels wide, row (level * 6 + face) * N + row; read with texelFetch, bilinear within
@@ -29,11 +29,11 @@
 #define SG_COS_VIEW_MIN 1e-4
 #define SG_COS_MIN_SINGULAR 0.05
 #define SG_LAMBDA_MAX 1e5
-/* eq. 40's clamped-cosine SG (core.sg.clamped_cosine_sg) */
+/* eq. 40's clamped-cosine SG (core.sg.algebra.clamped_cosine_sg) */
 #define SG_COSINE_LAMBDA 2.133
 #define SG_COSINE_MU 1.17
 
-/* NDF correction tables c_lam, c_mu on a = 0, 0.05, ..., 1 (core.sg_brdf.ISO_NDF_TABLE). */
+/* NDF correction tables c_lam, c_mu on a = 0, 0.05, ..., 1 (core.sg.brdf.ISO_NDF_TABLE). */
 const float SG_CT_CLAM[21] = float[21](0.9999875, 0.998759, 0.9951434, 0.9894735, 0.9822715, 0.9742365, 0.9661932, 0.9590131, 0.9535198, 0.9504024, 0.9501555, 0.9530325, 0.9589624, 0.9674702, 0.9777121, 0.9886328, 0.9991382, 1.008208, 1.014945, 1.018575, 1.018442);
 const float SG_CT_CMU[21] = float[21](1.000009, 1.000942, 1.003824, 1.00881, 1.016176, 1.0263, 1.039642, 1.056713, 1.078028, 1.104056, 1.135187, 1.171698, 1.213695, 1.261066, 1.313499, 1.370577, 1.431874, 1.497024, 1.56574, 1.637814, 1.713104);
 const float SG_BP_CLAM[21] = float[21](0.9999875, 0.9987504, 0.9950063, 0.9887823, 0.9801036, 0.9690081, 0.9555488, 0.9397978, 0.9218516, 0.9018378, 0.8799089, 0.8561223, 0.830001, 0.7998931, 0.7626473, 0.7136991, 0.6471314, 0.5553527, 0.4281937, 0.250977, 3.368977e-05);
@@ -41,7 +41,7 @@ const float SG_BP_CMU[21] = float[21](1.000003, 1.000313, 1.001261, 1.002869, 1.
 const float SG_WARD_CLAM[21] = float[21](1.000038, 1.003747, 1.014944, 1.033472, 1.059136, 1.091688, 1.130836, 1.176271, 1.227673, 1.284734, 1.347164, 1.414696, 1.487091, 1.564131, 1.645614, 1.731344, 1.821123, 1.914752, 2.012031, 2.11276, 2.216747);
 const float SG_WARD_CMU[21] = float[21](1.000009, 1.000934, 1.003699, 1.008185, 1.014223, 1.0216, 1.03008, 1.039424, 1.049401, 1.059803, 1.070449, 1.081186, 1.091891, 1.102468, 1.112836, 1.122934, 1.132709, 1.142121, 1.151137, 1.159735, 1.167898);
 
-/* ---------------------------------------------------------------- SG algebra (core/sg.py) */
+/* ---------------------------------------------------------------- SG algebra (core/sg/algebra.py) */
 
 /* G(v; p, lam, 1) with v.p - 1 = -|v - p|^2 / 2 (accurate next to the axis). */
 float sg_eval(vec3 v, vec3 p, float lam)
@@ -99,7 +99,7 @@ float sg_product(vec3 p1, float l1, vec3 p2, float l2, out vec3 axis, out float 
   return exp(-defect);
 }
 
-/* ---------------------------------------------------------------- BRDF (core/sg_brdf.py) */
+/* ---------------------------------------------------------------- BRDF (core/sg/brdf.py) */
 
 float sg_table(float table[21], float a)
 {
@@ -109,7 +109,7 @@ float sg_table(float table[21], float a)
   return (1.0 - t) * table[i] + t * table[i + 1];
 }
 
-/* Single-lobe SG of an isotropic NDF (core.sg_brdf.iso_ndf_sg). */
+/* Single-lobe SG of an isotropic NDF (core.sg.brdf.iso_ndf_sg). */
 void sg_iso_ndf(int model, float roughness, out float lam, out float mu)
 {
   float a = max(roughness, SG_ALPHA_MIN);
@@ -144,7 +144,7 @@ float sg_fresnel_eq14(float c, float eta)
   return 0.5 * a * a * (1.0 + b * b);
 }
 
-/* ks F(c) = A + B_d F_eq14(c, eta) + B_s (1 - c)^5 (core.sg_brdf.fresnel_coefficients). */
+/* ks F(c) = A + B_d F_eq14(c, eta) + B_s (1 - c)^5 (core.sg.brdf.fresnel_coefficients). */
 vec3 sg_fresnel(int mode, float c, float eta, vec3 ks, float metallic, vec3 base)
 {
   c = clamp(c, 0.0, 1.0);
@@ -168,7 +168,7 @@ vec3 sg_fresnel(int mode, float c, float eta, vec3 ks, float metallic, vec3 base
   return max(A + Bd * fd + Bs * s5, vec3(0.0));
 }
 
-/* Cycles' rational Beckmann Smith Lambda (core.brdf.smith_lambda), a2 = alpha^2. */
+/* Cycles' rational Beckmann Smith Lambda (core.shading.brdf.smith_lambda), a2 = alpha^2. */
 float sg_beckmann_lambda(float a2, float c)
 {
   c = clamp(c, 1e-12, 1.0);
@@ -180,7 +180,7 @@ float sg_beckmann_lambda(float a2, float c)
   return ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a);
 }
 
-/* M_o(i) without Fresnel (core.sg_brdf._m_factor). */
+/* M_o(i) without Fresnel (core.sg.brdf._m_factor). */
 float sg_m_factor(int model, float roughness, float cos_i, float cos_o, float h_dot_i)
 {
   if (model <= 1) {
@@ -201,7 +201,7 @@ float sg_m_factor(int model, float roughness, float cos_i, float cos_o, float h_
 }
 
 /* Tangent frame: t made orthogonal to n, or the branchless Duff et al. frame
- * (core.directions.orthonormal_frame) when t is degenerate. */
+ * (core.sphere.directions.orthonormal_frame) when t is degenerate. */
 void sg_frame(vec3 n, vec3 t_in, out vec3 t, out vec3 b)
 {
   vec3 t0 = t_in - dot(t_in, n) * n;
@@ -218,7 +218,7 @@ void sg_frame(vec3 n, vec3 t_in, out vec3 t, out vec3 b)
   b = cross(n, t);
 }
 
-/* The view slice ks rho_s(o, i) as SG lobes (core.sg_brdf.specular_lobes), without the
+/* The view slice ks rho_s(o, i) as SG lobes (core.sg.brdf.specular_lobes), without the
  * cosine; models 0-4 (GGX, 5, is drawn by ssdf_sg_frag.glsl's ggx_specular).  n, o unit; t a tangent (any vector; vec3(0) for the default frame).
  * Returns the lobe count K (<= SG_MAX_LOBES); lobes k < K are in axes/lams/mus. */
 int specular_lobes(vec4 sgm0, vec4 sgm1, vec4 sgm2, vec3 n, vec3 o, vec3 t_in,
@@ -273,7 +273,7 @@ int specular_lobes(vec4 sgm0, vec4 sgm1, vec4 sgm2, vec3 n, vec3 o, vec3 t_in,
 
 /* ---------------------------------------------------------------- prefiltered environment */
 
-/* Cube face and (s, t) in [-1, 1] (core.directions convention). */
+/* Cube face and (s, t) in [-1, 1] (core.sphere.directions convention). */
 void sg_face_coordinates(vec3 d, out int face, out float s, out float t)
 {
   vec3 a = abs(d);

@@ -14,7 +14,7 @@
  * 1 (alpha, distribution 0 Beckmann / 1 GGX, lobe count, samples K), 2 (W0, H0, levels
  * below level 0, strength), 3 (cube N, visibility texels per point), then per lobe
  * (kind, weight, eta, -), (f0 rgb, -), (B rgb, -); kinds: 0 F = f0, 1 Schlick,
- * 2 Principled dielectric, 3 F82-tint (core.brdf.sharp_lobes). */
+ * 2 Principled dielectric, 3 F82-tint (core.shading.brdf.sharp_lobes). */
 
 #define COS_VIEW_MIN 1e-4
 #define LOD_BIAS -2.0
@@ -27,7 +27,7 @@ vec4 param(int i)
 
 /* ---------------------------------------------------------------- environment */
 
-/* level l (>= 1) of the mip atlas: its size and first row (core.envmap.equirect_mip_sizes) */
+/* level l (>= 1) of the mip atlas: its size and first row (core.sphere.envmap.equirect_mip_sizes) */
 void level_size(int l, out int w, out int h, out int row)
 {
   w = int(param(2).x);
@@ -90,7 +90,7 @@ vec3 env_filtered(vec3 d, float omega)
 
 /* ---------------------------------------------------------------- stored visibility */
 
-/* bit of cubemap texel k of shading point p (core.visibility: np.packbits, 3 bytes per
+/* bit of cubemap texel k of shading point p (core.scene.visibility: np.packbits, 3 bytes per
  * float, 4 floats per texel) */
 float visible_bit(float p, int k)
 {
@@ -104,8 +104,8 @@ float visible_bit(float p, int k)
   return float((octet >> (7 - (k & 7))) & 1);
 }
 
-/* core.directions.texel_of_components; `centre`: the texel's centre direction
- * (core.directions.cubemap: a + s U + t V at the texel's centre s, t) */
+/* core.sphere.directions.texel_of_components; `centre`: the texel's centre direction
+ * (core.sphere.directions.cubemap: a + s U + t V at the texel's centre s, t) */
 int cube_texel(vec3 d, int n, out vec3 centre)
 {
   vec3 a = abs(d);
@@ -148,7 +148,7 @@ int cube_texel(vec3 d, int n, out vec3 centre)
 }
 
 /* The shading points' visibility at d, mixed barycentrically over the corners that
- * traced d's texel: a point stores only its normal's hemisphere (core.visibility, 0
+ * traced d's texel: a point stores only its normal's hemisphere (core.scene.visibility, 0
  * elsewhere), and on a smooth-shaded rim a corner's normal can face away from light the
  * pixel does see (a cylinder's bottom ring, tilted down, "shadowed" the softboxes on its
  * side's upper part: highlights 24 % dark) -- untraced is unknown, not blocked. */
@@ -156,7 +156,7 @@ float visibility(vec3 d)
 {
   vec3 centre;
   int k = cube_texel(d, int(param(3).x), centre);
-  /* core.visibility.hemisphere_mask: n . w > 0 at the texel's centre */
+  /* core.scene.visibility.hemisphere_mask: n . w > 0 at the texel's centre */
   vec3 w = vBary * vec3(dot(vTriN0, centre) > 0.0 ? 1.0 : 0.0,
                         dot(vTriN1, centre) > 0.0 ? 1.0 : 0.0,
                         dot(vTriN2, centre) > 0.0 ? 1.0 : 0.0);
@@ -181,7 +181,7 @@ void main()
   vec4 eye = param(0);
   vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
   float cos_o = dot(n, o);
-  if (cos_o < COS_VIEW_MIN) {          /* core.brdf._bend_views */
+  if (cos_o < COS_VIEW_MIN) {          /* core.shading.brdf._bend_views */
     o = normalize(o + (COS_VIEW_MIN - cos_o) * n);
     cos_o = COS_VIEW_MIN;
   }

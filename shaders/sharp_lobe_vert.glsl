@@ -1,4 +1,4 @@
-/* Per-pixel glossy lobes too narrow for the cubemap (addon/sharp.py): per-corner
+/* Per-pixel glossy lobes too narrow for the cubemap (addon/gpu/sharp.py): per-corner
  * position and normal, the triangle's three shading points with their normals and
  * barycentric weights, so the fragment can read each point's stored visibility at its
  * own directions (and know which directions a point traced). */

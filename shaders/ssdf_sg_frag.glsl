@@ -24,7 +24,7 @@ bool slot_input(sampler2D img, int k, out vec3 c)
   return true;
 }
 
-/* a scalar input's value: the colour as a float (core.textures.LUMINANCE), clamped */
+/* a scalar input's value: the colour as a float (core.scene.textures.LUMINANCE), clamped */
 float scalar_of(vec3 c) { return clamp(dot(c, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0); }
 
 vec4 table_texel(int i, int j, int k) { return texelFetch(paramTex, ivec2(i * ENTRY + k, 1 + j), 0); }
@@ -66,8 +66,8 @@ void ggx_inputs(float x, float y, int nr, int nl, float mw, vec3 cf)
 }
 
 /* a curve of the pixel's table entry at the 32 mu nodes from texel `first` (four a texel),
- * linear in mu between them: Cycles' GGX albedo E(r, mu) (as core.brdf_tables.ggx_E), or
- * the Lambert base's view ratio (core.sg_brdf.diffuse_view_ratio) */
+ * linear in mu between them: Cycles' GGX albedo E(r, mu) (as core.shading.brdf_tables.ggx_E), or
+ * the Lambert base's view ratio (core.sg.brdf.diffuse_view_ratio) */
 float entry_mu_curve(int first, float mu)
 {
   float x = clamp(mu, 0.0, 1.0) * 31.0;
@@ -78,7 +78,7 @@ float entry_mu_curve(int first, float mu)
   return mix(ti[i % 4], tj[j % 4], x - float(i));
 }
 
-/* Eq. 41 for the GGX model (core.sg_brdf.specular_lobes): the view slice as WARP_LOBES
+/* Eq. 41 for the GGX model (core.sg.brdf.specular_lobes): the view slice as WARP_LOBES
  * fitted lobes, scaled together so the slice has Cycles' albedo E(r, n.o) against the
  * cosine mixture it is shaded with, in the glossy frame (nl, gt, gb: the bump-corrected
  * normal's), each with the Fresnel at the half vector of its product with the cosine,
@@ -89,7 +89,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
   if (c <= 0.0) {
     return vec3(0.0);
   }
-  /* the fitted lobes (core.sg_ndf.ggx_warp_correct): the mirror direction tilted in the
+  /* the fitted lobes (core.sg.ndf.ggx_warp_correct): the mirror direction tilted in the
    * plane of nl and o, the plain warp's sharpness of the NDF's 2 / a^2 scaled, the shares
    * of the amplitude; the table's three texels a node linear between its 21 n.o nodes */
   float wx = clamp(c, 0.0, 1.0) * 20.0;
@@ -117,7 +117,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
   float E = entry_mu_curve(GGX_TEXEL + 1, max(c, SG_COS_VIEW_MIN));
   /* E against the cosine mixture the lobes are shaded with, each product weighted by the
    * visibility factor of the open hemisphere over nl (its elevation), as a flat open
-   * surface is drawn below (core.sg_brdf._ggx_normalisation) */
+   * surface is drawn below (core.sg.brdf._ggx_normalisation) */
   float asg = 0.0;
   for (int m = 0; m < cosLobes; m++) {
     vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
@@ -323,7 +323,7 @@ void main()
       color += cl.w * amp * mu * visible_lighting(p, lam, t, b, n, W) * envStrength;
     }
   }
-  /* a closed mesh's inner side (core.mesh.closed_side) sees only itself: black, as in
+  /* a closed mesh's inner side (core.scene.mesh.closed_side) sees only itself: black, as in
    * Cycles; SG products can ring slightly below zero: clamped */
   bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
   fragColor = vec4(inner ? vec3(0.0) : max(color, vec3(0.0)), 1.0);

@@ -1,8 +1,8 @@
-/* SSDF_SG per-pixel shading (Wang, Ren, Gong, Snyder, Guo 2009, paper 003):
+/* SSDF_SG per-pixel shading (Wang, Ren, Gong, Snyder, Guo 2009):
  *   radiance = kd R_d + R_s(o)
  *   R_d    = sum_j (C*(i; n) (x) L*_j) . V^d            eq. 39 (f_h of eq. 30, fit eq. 47-49)
  *   R_s(o) = sum   ((C* (x) rho*_s(i; o)) (x) V^d) . L   eq. 41 (eq. 31, Gamma_L of eq. 35)
- * GLSL twin of core/ssdf_sg.py (same formulas and the same texel arithmetic:
+ * GLSL twin of core/methods/ssdf_sg/shading.py (same formulas and the same texel arithmetic:
  * bilinear SSDF lookups by texelFetch in the Shirley-Chiu square, the prefiltered
  * pyramid's level/face interpolation of core/sg_lighting.PrefilteredEnvironment).
  *
@@ -27,13 +27,13 @@
  *                     mu a^2, eta, -), kd, A, B_d, B_s at the (metallic, base colour)
  *                     corners 00, 01, 10, 11. */
 
-const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg_gpu.py COSINE_TEXEL */
+const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg/gpu.py COSINE_TEXEL */
 const int ENTRY = 109;      /* ENTRY_TEXELS */
 const int LAYER_TEXEL = 101; /* LAYER_TEXEL: the Lambert base's view ratio at the 32 mu nodes */
-const int WARP_TEXEL = 38;  /* WARP_TEXEL: the GGX view slice's lobes (core.sg_ndf.ggx_warp_params)
+const int WARP_TEXEL = 38;  /* WARP_TEXEL: the GGX view slice's lobes (core.sg.ndf.ggx_warp_params)
                              * at 21 n.o nodes, three texels a node: the WARP_LOBES lobes'
                              * tilts, log-sharpness factors, shares */
-const int WARP_LOBES = 4;   /* WARP_LOBES_MAX (core.sg_ndf.GGX_WARP_LOBES, zero shares past it) */
+const int WARP_LOBES = 4;   /* WARP_LOBES_MAX (core.sg.ndf.GGX_WARP_LOBES, zero shares past it) */
 const float WARP_MU_MIN = 0.02;
 const int GGX_TEXEL = 17;   /* GGX: (-, -, E_avg, multiscatter), E(r, mu) at 32
                              * mu nodes (8 texels), then (metal part of A, F_ss main, F_ss metal)
@@ -85,20 +85,20 @@ void read_parameters()
 
 const float PI = 3.14159265358979;
 const float TWO_PI = 6.28318530717959;
-/* core.sg.FH_COEFFS */
+/* core.sg.algebra.FH_COEFFS */
 const vec3 FH_COEFFS = vec3(0.0046413591658328954, 1.4672958011923942, 3.6002488734472657);
 const vec3 FRAME_REF = vec3(0.2672612419124244, 0.5345224838248488, 0.8017837257372732);
 const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.5345224838248488);
 const float FRAME_SWITCH = 0.999;
 const float COS_MIN = 1e-4;
 const float LAMBDA_MAX = 1e5;
-/* core.ssdf_sg: SLOPE_STEP, SHIFT_MAX, SPREAD_MIN, Z_RANGE (visible_lobe) */
+/* core.methods.ssdf_sg.shading: SLOPE_STEP, SHIFT_MAX, SPREAD_MIN, Z_RANGE (visible_lobe) */
 const float SLOPE_STEP = 1e-3;
 const float SHIFT_MAX = 1.2;
 const float SPREAD_MIN = 0.02;
 const vec2 Z_RANGE = vec2(-4.0, 6.0);
 
-/* ------------------------------------------------------------ SG helpers (core/sg.py) */
+/* ------------------------------------------------------------ SG helpers (core/sg/algebra.py) */
 float one_minus_exp_neg_over(float lam, float x)   /* (1 - exp(-lam x)) / lam */
 {
   return lam > 1e-6 ? (1.0 - exp(-lam * x)) / lam : x;
@@ -106,7 +106,7 @@ float one_minus_exp_neg_over(float lam, float x)   /* (1 - exp(-lam x)) / lam */
 
 float sg_hemisphere_integral(float lam) { return TWO_PI * one_minus_exp_neg_over(lam, 1.0); }
 
-/* standard normal CDF (core.sg.normal_cdf: erfc of Abramowitz & Stegun 7.1.26) */
+/* standard normal CDF (core.sg.algebra.normal_cdf: erfc of Abramowitz & Stegun 7.1.26) */
 float normal_cdf(float z)
 {
   float x = abs(z) * 0.7071067811865476;
@@ -117,7 +117,7 @@ float normal_cdf(float z)
   return z >= 0.0 ? 1.0 - half_erfc : half_erfc;
 }
 
-/* eq. 47-48 refitted (core/sg.py): f_h(theta_d, lam) / f_h(pi/2, lam) ~ Phi(k theta_d)
+/* eq. 47-48 refitted (core/sg/algebra.py): f_h(theta_d, lam) / f_h(pi/2, lam) ~ Phi(k theta_d)
  * scaled to 0 and 1 at theta_d = -pi/2, pi/2; k^2 = lam + c0 - b lam / (lam + d) */
 float fh_slope(float lam)
 {
@@ -134,7 +134,7 @@ float fh_hat_slope(float theta_d, float k)
 
 float fh_hat(float theta_d, float lam) { return fh_hat_slope(theta_d, fh_slope(lam)); }
 
-/* ------------------------------------------------------------ SSDF (core/ssdf.py) */
+/* ------------------------------------------------------------ SSDF (core/methods/ssdf_sg/ssdf.py) */
 void ssdf_frame(vec3 n, out vec3 t, out vec3 b)
 {
   vec3 ref = abs(dot(n, FRAME_REF)) > FRAME_SWITCH ? FRAME_REF_ALT : FRAME_REF;
@@ -181,7 +181,7 @@ void ssdf_cell(vec2 uv, out ivec4 cell, out vec2 f, out vec2 slope)
   slope = vec2(raw.x == xy.x ? n : 0.0, raw.y == xy.y ? n : 0.0);
 }
 
-/* the SSDF's continuation below the horizon: the elevation under it (core.ssdf_sg) */
+/* the SSDF's continuation below the horizon: the elevation under it (core.methods.ssdf_sg.shading) */
 float ssdf_horizon(vec3 d) { return asin(clamp(-d.z, 0.0, 1.0)); }
 
 /* SSDF value (eq. 24 reconstruction) at a local direction: bilinear per eigen-image
@@ -203,7 +203,7 @@ float ssdf_value(vec3 local, vec4 W[16])
 }
 
 /* ssdf_value and its derivatives d1, d2 along the unit tangents e1, e2 at local
- * (core.ssdf_sg.theta_d_slopes): the bilinear cell's slope in the square, the map from
+ * (core.methods.ssdf_sg.shading.theta_d_slopes): the bilinear cell's slope in the square, the map from
  * directions to the square differenced over SLOPE_STEP. */
 float ssdf_value_slopes(vec3 local, vec3 e1, vec3 e2, vec4 W[16], out float d1, out float d2)
 {
@@ -275,7 +275,7 @@ vec3 env_lookup(vec3 world_dir, float lam)
 
 /* Eq. 41's term of one product lobe (p, lam) with unit amplitude, without the world's
  * strength: eq. 31's visible fraction times Gamma_L read at the lobe of the part the SSDF
- * leaves visible (core.ssdf_sg.visible_lobe: the truncated Gaussian's mean and spread). */
+ * leaves visible (core.methods.ssdf_sg.shading.visible_lobe: the truncated Gaussian's mean and spread). */
 vec3 visible_lighting(vec3 p, float lam, vec3 t, vec3 b, vec3 n, vec4 W[16])
 {
   vec3 local = vec3(dot(p, t), dot(p, b), dot(p, n));
@@ -295,9 +295,9 @@ vec3 visible_lighting(vec3 p, float lam, vec3 t, vec3 b, vec3 n, vec4 W[16])
   return fh_hat(theta, lam) * sg_integral(lam) * env_lookup(cw, 2.0 / (s * s + var));
 }
 
-/* ------------------------------------------------------------ BRDF view slice (core/sg_brdf.py) */
+/* ------------------------------------------------------------ BRDF view slice (core/sg/brdf.py) */
 /* M_o(i) of the slot's model (sg_common.glsl's sg_m_factor; brdfModel 0 CT/Blinn-Phong,
- * 1 Ward, 2 Ashikhmin-Shirley -> core.sg_brdf.MODEL_INDEX 0, 2, 4) */
+ * 1 Ward, 2 Ashikhmin-Shirley -> core.sg.brdf.MODEL_INDEX 0, 2, 4) */
 float m_factor(float cos_i, float cos_o, float h_dot_i)
 {
   return sg_m_factor(brdfModel == 0 ? 0 : (brdfModel == 1 ? 2 : 4), roughness, cos_i, cos_o,

@@ -1,4 +1,4 @@
-/* SSDF_SG (paper 003): per-corner position/normal, the triangle's three shading
+/* SSDF_SG (Wang et al. 2009): per-corner position/normal, the triangle's three shading
  * points (flat) and barycentric weights, so the fragment shader interpolates the
  * PCA coefficients (eq. 24) of the three points it lies between (section 7). */
 void main()

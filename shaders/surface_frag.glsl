@@ -1,4 +1,4 @@
-/* vRadiance.a is core.mesh.closed_side: 0 open, +1/-1 a closed mesh whose front faces
+/* vRadiance.a is core.scene.mesh.closed_side: 0 open, +1/-1 a closed mesh whose front faces
  * look outward/inward.  Its inner side sees only itself: no direct light, as in Cycles.
  * Radiance is clamped at zero where a basis rings below it. */
 bool inner_side(float side)

@@ -1,6 +1,6 @@
-/* Per-vertex radiance with a per-pixel colour (addon/drawing.py textured_batch): the
+/* Per-vertex radiance with a per-pixel colour (addon/gpu/drawing.py textured_batch): the
  * method's radiance split into what the slot's colour multiplies (vDiffuse, with
- * core.mesh.closed_side in w) and the rest (vSpecular); UVs or a colour attribute. */
+ * core.scene.mesh.closed_side in w) and the rest (vSpecular); UVs or a colour attribute. */
 void main()
 {
   vDiffuse = diffuse;

@@ -1,4 +1,4 @@
-/* Blender's Image Texture node per pixel (GLSL twin of core/textures.py sample): texel
+/* Blender's Image Texture node per pixel (GLSL twin of core/scene/textures.py sample): texel
  * centres at ((i + 0.5) / W, (j + 0.5) / H), row 0 at v = 0; interpolation 0 Closest,
  * 1 Linear, 2 Cubic (uniform B-spline); extension 0 Repeat, 1 Extend, 2 Clip, 3 Mirror.
  * texInfo = (interpolation, extension, source: -1 none / 0 image / 1 attribute, mix mode);
@@ -63,7 +63,7 @@ vec4 image_texture(sampler2D img, vec2 uv, vec4 info, vec3 map0, vec3 map1)
   return mix(a, b, f.y);
 }
 
-/* core.textures.ColorSource.combine: mode 0 none, 1 / 2 Mix / Multiply with the source as
+/* core.scene.textures.ColorSource.combine: mode 0 none, 1 / 2 Mix / Multiply with the source as
  * the node's first input, 3 / 4 the same with the source second */
 vec3 combine_colour(vec3 c, float mode_f, vec4 mixColor)
 {
@@ -86,12 +86,12 @@ vec3 input_colour(sampler2D img, vec2 uv, vec4 attr, vec4 info, vec3 map0, vec3 
   return max(combine_colour(c, info.w, mixColor), vec3(0.0));
 }
 
-/* core.textures.perturbed_normals: the Normal Map (kind 1, tangent space) or Bump (kind 2)
+/* core.scene.textures.perturbed_normals: the Normal Map (kind 1, tangent space) or Bump (kind 2)
  * node's normal at this pixel.  N, T: the interpolated (unnormalised) normal and tangent,
  * sgn the bitangent sign; nmap = (kind, strength, distance, -); info, map0/1, mixColor the
  * image's texture_lib parameters.  The bump's height derivative: central differences one
  * texel each way in UV; its surface gradient from the screen derivatives of P and uv (on a
- * triangle exactly core.textures.surface_gradient with its edges). */
+ * triangle exactly core.scene.textures.surface_gradient with its edges). */
 float bump_height(sampler2D img, vec2 uv, vec4 info, vec3 map0, vec3 map1, vec4 mixColor)
 {
   vec3 c = combine_colour(image_texture(img, uv, info, map0, map1).rgb, info.w, mixColor);
@@ -138,7 +138,7 @@ vec3 mapped_normal(sampler2D img, vec2 uv, vec3 P, vec3 N, vec3 T, float sgn, ve
   return dot(n, n) > 1e-30 ? normalize(n) : Nu;
 }
 
-/* core.textures.bump_shadowing: Cycles' terminator factor on a diffuse closure whose
+/* core.scene.textures.bump_shadowing: Cycles' terminator factor on a diffuse closure whose
  * normal n is not the smooth normal ns (Conty Estevez et al. 2019): GGX's Smith G1 at
  * |ns.i| with alpha^2 = min(tan^2 d / 8, 1), d the angle between ns and n */
 float bump_shadowing(vec3 ns, vec3 n, vec3 i)
@@ -161,7 +161,7 @@ float bump_shadowing(vec3 ns, vec3 n, vec3 i)
   return 2.0 / (1.0 + sqrt(1.0 + a2 * (1.0 / (cos_i * cos_i) - 1.0)));
 }
 
-/* core.textures.valid_reflection_normal: Cycles' bump map correction of a mapped normal n
+/* core.scene.textures.valid_reflection_normal: Cycles' bump map correction of a mapped normal n
  * (unit ng, view o) */
 vec3 valid_reflection_normal(vec3 ng, vec3 o, vec3 n)
 {

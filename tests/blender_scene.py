@@ -7,7 +7,7 @@ import math
 import bpy
 import numpy as np
 
-from prt_relight.addon import scene_build
+from prt_relight.addon.blender import scene_build
 
 try:
     import OpenImageIO as oiio
@@ -60,7 +60,7 @@ def float_image(name: str, pixels_top_first: np.ndarray):
 
 
 def bsdf_material(name: str, node_type: str, **inputs):
-    """A material whose surface is one BSDF node (``addon.scene_build.bsdf_material``)."""
+    """A material whose surface is one BSDF node (``addon.blender.scene_build.bsdf_material``)."""
     return scene_build.bsdf_material(name, node_type, **inputs)
 
 def add_ground(size=6.0, cuts=32):
@@ -157,7 +157,7 @@ class FakeViewEngine:
         self.stats = (a, b)
 
     def view_update(self, context, depsgraph):
-        from prt_relight.addon.engine import PRTRenderEngine
+        from prt_relight.addon.frame.engine import PRTRenderEngine
         PRTRenderEngine.view_update(self, context, depsgraph)
 
 
@@ -169,7 +169,7 @@ def view_draw(depsgraph, view_matrix, window_matrix, width, height, perspective=
     import types
 
     import gpu
-    from prt_relight.addon.engine import PRTRenderEngine
+    from prt_relight.addon.frame.engine import PRTRenderEngine
     rv3d = types.SimpleNamespace(view_matrix=view_matrix, window_matrix=window_matrix,
                                  is_perspective=perspective, view_perspective="CAMERA")
     ctx = types.SimpleNamespace(region=types.SimpleNamespace(width=width, height=height),

@@ -1,11 +1,11 @@
 """The test oracle of BLOCKS: Algorithm 1 of Inger et al. 2013 for one vertex, as
 readably as it can be stated (the per-block lighting of §4.3, ProjectBRDF of §4.1 with
-its sample-based selection rule, the four cases).  ``core/blocks.py`` evaluates the same
+its sample-based selection rule, the four cases).  ``core/methods/blocks/shading.py`` evaluates the same
 cases batched over many vertices; tests hold the two to each other.
 
 Selection rule of this per-vertex path (:func:`project_brdf`, used by
 :func:`integrate_vertex` for any sampled BRDF; generic and data driven -- the batched
-frame path uses the analytic Appendix-A-style rule ``core.blocks_lobe.glossy_levels``
+frame path uses the analytic Appendix-A-style rule ``core.methods.blocks.lobe.glossy_levels``
 instead, which needs no extra samples): the BRDF x cos is also sampled on a 5 x 5
 *check grid* (pixels 0, 4, 8, 12, 15 in each direction: corners, edges and centre,
 where a horizon kink or a lobe shows first).  The chosen representation is the
@@ -28,14 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prt_relight.core.blocks import (CASE_LIGHT_BRDF, CASE_LIGHT_VIS, CASE_NAMES,
-                                     CASE_TRIPLE)
-from prt_relight.core.blocks_encoding import (BLOCK_PIXELS, BRDF_LEVELS, CHECK_PIXELS, MIXED,
-                                              ONE, PIXEL, ZERO, DiffVisibility, block_count,
-                                              block_permutation, dct_basis, projection_system,
-                                              texel_to_block, to_blocks)
-from prt_relight.core.brdf import reflectance_cosine
-from prt_relight.core.directions import cubemap
+from prt_relight.core.methods.blocks.shading import CASE_LIGHT_BRDF, CASE_LIGHT_VIS, CASE_NAMES, CASE_TRIPLE
+from prt_relight.core.methods.blocks.encoding import BLOCK_PIXELS, BRDF_LEVELS, CHECK_PIXELS, MIXED, ONE, PIXEL, ZERO, DiffVisibility, block_count, block_permutation, dct_basis, projection_system, texel_to_block, to_blocks
+from prt_relight.core.shading.brdf import reflectance_cosine
+from prt_relight.core.sphere.directions import cubemap
 
 
 # --------------------------------------------------------------------------- lighting
@@ -119,7 +115,7 @@ def as_sampler(rho):
 
 
 def material_sampler(material, normal, view, resolution: int, directions=None):
-    """Sampler of :func:`core.brdf.reflectance_cosine` for one vertex at the texel
+    """Sampler of :func:`core.shading.brdf.reflectance_cosine` for one vertex at the texel
     directions (texel centres unless ``directions`` (D, 3) is given)."""
     dirs = cubemap(int(resolution)).directions if directions is None else np.asarray(directions)
     n = np.asarray(normal, dtype=np.float64).reshape(1, 3)

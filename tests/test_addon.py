@@ -6,8 +6,9 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import precompute, runtime, storage
-from prt_relight.core.visibility import Cancelled
+from prt_relight.addon.blender import precompute, storage
+from prt_relight.addon.frame import state as runtime
+from prt_relight.core.common.parallel import Cancelled
 
 from . import blender_scene as bs
 
@@ -188,7 +189,7 @@ def test_world_rotation_redraws_without_recompute(tmp_path):
 
 
 def test_materials_export():
-    from prt_relight.addon import scene_export
+    from prt_relight.addon.blender import scene_export
 
     warnings = []
     mat = bs.bsdf_material("glossy", "ShaderNodeBsdfGlossy", distribution="BECKMANN",
@@ -289,13 +290,13 @@ def test_view_draw_path_draws_the_same_frame_as_f12(method):
     headless: a fake region/view from the scene camera gives the F12 pixels.  SSDF_SG
     draws per pixel, and runs its ground's pair pass (an offscreen of its own) inside the
     viewport's bound framebuffer."""
-    from prt_relight.addon.engine import render_pixels
-    from prt_relight.addon.methods import ssdf_sg_gpu
+    from prt_relight.addon.frame.engine import render_pixels
+    from prt_relight.addon.methods.ssdf_sg import gpu as ssdf_sg_gpu
 
     _small_scene()
     bpy.context.scene.prt.method = method
     bpy.ops.prt.precompute()
-    ssdf_sg_gpu._PAIR_TABLES.clear()
+    ssdf_sg_gpu.PAIR_TABLES.clear()
     scene = bpy.context.scene
     scene.render.engine = "BLENDER_WORKBENCH"
     bpy.ops.render.render()                      # gives the gpu module a context in -b
@@ -310,7 +311,7 @@ def test_view_draw_path_draws_the_same_frame_as_f12(method):
                            scene.render.film_transparent, True)
     np.testing.assert_array_equal(shown, direct)
     assert np.isfinite(shown).all() and shown[..., :3].max() > 0.05
-    assert bool(ssdf_sg_gpu._PAIR_TABLES) == (method == "SSDF_SG")
+    assert bool(ssdf_sg_gpu.PAIR_TABLES) == (method == "SSDF_SG")
 
 
 def test_modal_precompute_esc_cancels_and_timer_finishes():
@@ -319,7 +320,7 @@ def test_modal_precompute_esc_cancels_and_timer_finishes():
     import threading
     import types
 
-    from prt_relight.addon import operators
+    from prt_relight.addon.ui import operators
 
     class Recorder:
         def __init__(self):
@@ -385,7 +386,7 @@ def test_viewport_shades_view_dependent_materials_off_the_main_thread():
     """REFERENCE with a glossy layer: after a camera move the viewport redraws at once
     with the previous radiance and a worker computes the new one; the next draw shows
     exactly what F12 computes for that view."""
-    from prt_relight.addon.engine import render_pixels
+    from prt_relight.addon.frame.engine import render_pixels
 
     _small_scene()                               # no materials: Principled, view dependent
     bpy.ops.prt.precompute()

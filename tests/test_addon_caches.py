@@ -1,4 +1,4 @@
-"""The add-on's caches: one helper (addon.keys.held), every cache listed with a bound,
+"""The add-on's caches: one helper (addon.frame.keys.held), every cache listed with a bound,
 all emptied by unregister."""
 
 import ast
@@ -8,21 +8,21 @@ import sys
 
 import numpy as np
 
-from prt_relight.core import cache as core_cache
+from prt_relight.core.common import cache as core_cache
 
 #: module-level dicts that are state, not caches (or outside this check)
 NOT_CACHES = {
     "addon.methods.REGISTRY",              # the registered methods
-    "addon.methods.blocks.LAST_STATS",     # statistics of the newest BLOCKS frame
+    "addon.methods.blocks.shading.LAST_STATS",     # statistics of the newest BLOCKS frame
 }
 
 
 def _all_modules():
     names = []
-    for pkg in ("prt_relight.core", "prt_relight.addon", "prt_relight.addon.methods"):
+    for pkg in ("prt_relight.core", "prt_relight.addon"):
         mod = importlib.import_module(pkg)
         names.append(pkg)
-        names += [f"{pkg}.{m.name}" for m in pkgutil.iter_modules(mod.__path__)]
+        names += [m.name for m in pkgutil.walk_packages(mod.__path__, pkg + ".")]
     return [importlib.import_module(n) for n in names]
 
 
@@ -41,7 +41,7 @@ def _empty_dicts(path):
 
 
 def test_every_module_level_cache_is_listed(repo_root):
-    """No module keeps a plain dict between calls: each is a core.cache.Cache (bounded,
+    """No module keeps a plain dict between calls: each is a core.common.cache.Cache (bounded,
     locked, listed) -- or named in NOT_CACHES with the reason."""
     plain = []
     for folder in ("core", "addon"):
@@ -60,7 +60,7 @@ def test_every_module_level_cache_is_listed(repo_root):
 
 
 def test_held_makes_once_per_refs():
-    from prt_relight.addon import keys
+    from prt_relight.addon.frame import keys
     c = keys.cache(2, name="test.held")
     a, b = np.zeros(3), np.zeros(3)
     calls = []
@@ -81,8 +81,8 @@ def test_held_makes_once_per_refs():
 def test_unregister_empties_every_cache(registered_addon):
     """Fill every listed cache (and draw a frame, which fills the memoised tables), then
     unregister: nothing is left, GPU or not."""
-    from prt_relight.addon import keys
-    from prt_relight.core import directions
+    from prt_relight.addon.frame import keys
+    from prt_relight.core.sphere import directions
     directions.cubemap(8)
     for c in core_cache.CACHES:
         if isinstance(c, core_cache.Cache):
@@ -95,4 +95,4 @@ def test_unregister_empties_every_cache(registered_addon):
     finally:
         registered_addon.register()       # the fixture unregisters at the end
     assert keys.free is not None
-    assert sys.modules["prt_relight.addon.keys"] is keys
+    assert sys.modules["prt_relight.addon.frame.keys"] is keys

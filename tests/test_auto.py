@@ -14,8 +14,12 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import runtime
-from prt_relight.addon.methods import REGISTRY, auto
+from prt_relight.addon.frame import state as runtime
+from prt_relight.addon.methods import REGISTRY
+from prt_relight.addon.methods.auto import shading as auto
+from prt_relight.addon.methods.auto import assign as auto_assign, measure as auto_measure
+from prt_relight.addon.methods.auto import measure
+from prt_relight.addon.methods.auto import store as auto_store
 
 from . import blender_scene as bs
 
@@ -83,9 +87,9 @@ def _area(objects):
 
 def _fewer_candidates(monkeypatch):
     """SH and WAVELET budgets only: the selection logic is the same, the test faster."""
-    every = auto.AutoMethod.candidates
-    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
-        lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")]))
+    every = measure.candidates
+    monkeypatch.setattr(auto_measure, "candidates",
+        lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")])
 
 
 def test_auto_meets_the_target_per_object_and_is_cached(monkeypatch):
@@ -93,11 +97,11 @@ def test_auto_meets_the_target_per_object_and_is_cached(monkeypatch):
     _scene()
     eye = np.array(bpy.context.scene.camera.matrix_world.translation)
     truth = _state("REFERENCE").shade(eye)
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     state = _state("AUTO", auto_error_target=0.02)
-    before = auto.SELECTIONS[0]
+    before = measure.SELECTIONS[0]
     got = state.shade(eye)
-    assert auto.SELECTIONS[0] - before == len(state.objects) == 2
+    assert measure.SELECTIONS[0] - before == len(state.objects) == 2
     choices = auto.LAST_CHOICES
     assert [c["object"] for c in choices] == [st.name for st in state.objects]
     areas = _area(state.objects)
@@ -111,11 +115,11 @@ def test_auto_meets_the_target_per_object_and_is_cached(monkeypatch):
     assert any("AUTO:" in w for w in state.warnings)
     # same lighting, same objects, same target: nothing is selected again
     state.shade(eye + 0.1)
-    assert auto.SELECTIONS[0] - before == 2
+    assert measure.SELECTIONS[0] - before == 2
     # a looser target: selected again, and never a slower choice than REFERENCE for all
     loose = _state("AUTO", auto_error_target=0.5)
     loose_out = loose.shade(eye)
-    assert auto.SELECTIONS[0] - before == 4
+    assert measure.SELECTIONS[0] - before == 4
     assert all(c["method"] in ("SH", "WAVELET") for c in auto.LAST_CHOICES), auto.LAST_CHOICES
     assert _rel(loose_out, truth, areas) <= 0.9 * 0.5
 
@@ -136,17 +140,17 @@ def test_budget_between_hooks():
     """RSL bisects light counts, WAVELET term counts (geometric); SH orders are
     consecutive and the default has nothing between."""
     rsl, wav, sh = REGISTRY["RSL"], REGISTRY["WAVELET"], REGISTRY["SH"]
-    assert rsl.budget_between(10, 30) == 20
-    assert rsl.budget_between(20, 30) == 25
-    assert rsl.budget_between(29, 30) is None
-    assert wav.budget_between(32, 128) == 64
-    assert wav.budget_between(128, 512) == 256
-    assert wav.budget_between(32, 33) is None
-    assert sh.budget_between(2, 3) is None
+    assert rsl.bench.budget_between(10, 30) == 20
+    assert rsl.bench.budget_between(20, 30) == 25
+    assert rsl.bench.budget_between(29, 30) is None
+    assert wav.bench.budget_between(32, 128) == 64
+    assert wav.bench.budget_between(128, 512) == 256
+    assert wav.bench.budget_between(32, 33) is None
+    assert sh.bench.budget_between(2, 3) is None
     for m in REGISTRY.values():
-        prop_values = m.budget[1] if m.budget else []
+        prop_values = m.bench.budget[1] if m.bench.budget else []
         for lo, hi in zip(prop_values, prop_values[1:]):
-            mid = m.budget_between(lo, hi)
+            mid = m.bench.budget_between(lo, hi)
             assert mid is None or lo < mid < hi, (m.id, lo, hi, mid)
 
 
@@ -154,9 +158,9 @@ def _virtual_clock(monkeypatch, costs):
     """AUTO's timings from a cost model (seconds per shaded point, per method, from the
     settings) instead of the wall clock: the choice then does not hang on timing noise."""
     clock = [0.0]
-    monkeypatch.setattr(auto, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    monkeypatch.setattr(auto_measure, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
     for mid, cost in costs.items():
-        cls = type(REGISTRY[mid])
+        cls = type(REGISTRY[mid].shading)
         real = cls.shade
 
         def shade(self, state, eye, view_dir, real=real, cost=cost):
@@ -170,21 +174,21 @@ def test_auto_sizes_the_light_count_between_the_listed_values(monkeypatch):
     (shadowed by Suzanne): AUTO bisects between the last listed count missing the target
     and the first meeting it, and takes a count that is not one of the listed ones, cheaper
     than the cheapest listed count that meets the target, and still meeting it."""
-    every = auto.AutoMethod.candidates
-    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
-        lambda: [c for c in every() if c[0].id == "RSL"]))
+    every = measure.candidates
+    monkeypatch.setattr(auto_measure, "candidates",
+        lambda: [c for c in every() if c[0].id == "RSL"])
     _virtual_clock(monkeypatch, {"REFERENCE": lambda s: 1e-2,
                                  "RSL": lambda s: 1e-5 * s["rsl_lights"]})
     _scene()
     eye = np.array(bpy.context.scene.camera.matrix_world.translation)
-    target, listed = 0.03, REGISTRY["RSL"].budget[1]
+    target, listed = 0.03, REGISTRY["RSL"].bench.budget[1]
 
     def ground(state):
         state.objects = [st for st in state.objects if st.name == "Grid"]
         return state
 
     truth = ground(_state("REFERENCE")).shade(eye)
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     state = ground(_state("AUTO", auto_error_target=target))
     got = state.shade(eye)
     (choice,) = auto.LAST_CHOICES
@@ -203,11 +207,12 @@ def test_auto_sizes_the_light_count_between_the_listed_values(monkeypatch):
 def _camera_frame(state, width=96, height=72):
     """Draw ``state`` through the scene camera (the engine's path; it gives AUTO the
     frame's camera): linear RGBA pixels."""
-    from prt_relight.addon.engine import render_pixels
-    from prt_relight.addon.report import _camera_matrices, ensure_gpu
+    from prt_relight.addon.frame.engine import render_pixels
+    from prt_relight.addon.gpu.drawing import ensure_gpu
+    from prt_relight.addon.benchmark.measuring import camera_matrices
     scene = bpy.context.scene
     ensure_gpu(scene)
-    view, projection, persp = _camera_matrices(scene, bpy.context.evaluated_depsgraph_get(),
+    view, projection, persp = camera_matrices(scene, bpy.context.evaluated_depsgraph_get(),
                                                width, height)
     return render_pixels(state, view, projection, width, height, True, persp, 1)
 
@@ -215,12 +220,12 @@ def _camera_frame(state, width=96, height=72):
 def test_auto_meets_the_target_in_the_camera_image(monkeypatch):
     """Drawn through a camera, AUTO weighs each point's error by the pixels it covers
     there: the image (not the surface) meets the target, and the reason says so."""
-    from prt_relight.core import report as core_report
+    from prt_relight.core.report import metrics as core_report
     _fewer_candidates(monkeypatch)
     _scene()
     target = 0.02
     truth = _camera_frame(_state("REFERENCE"))
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     state = _state("AUTO", auto_error_target=target)
     image = _camera_frame(state)
     assert np.isfinite(image).all()
@@ -232,12 +237,12 @@ def test_auto_meets_the_target_in_the_camera_image(monkeypatch):
 def test_auto_spends_nothing_on_objects_the_camera_does_not_see(monkeypatch):
     """An object outside the frame weighs nothing in the image: it takes its fastest
     measured option, however far off, while the visible one still meets the target."""
-    from prt_relight.addon.engine import frame_camera
+    from prt_relight.addon.frame.engine import frame_camera
     from mathutils import Matrix
     _fewer_candidates(monkeypatch)
-    monkeypatch.setattr(auto, "UNIFORM_TRIED", 0)      # the mix only: no timing decides
+    monkeypatch.setattr(auto_assign, "UNIFORM_TRIED", 0)      # the mix only: no timing decides
     _scene()
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     state = _state("AUTO", auto_error_target=0.02)
     # a camera above the grid's corner, looking straight down, Suzanne out of frame
     view = Matrix.Translation((-2.2, -2.2, -2.0))
@@ -248,7 +253,7 @@ def test_auto_spends_nothing_on_objects_the_camera_does_not_see(monkeypatch):
     state.shade(eye)
     chosen = {c["object"]: c for c in auto.LAST_CHOICES}
     measured = {m["object"]: m for m in (v[-1] if isinstance(v, tuple) else v
-                                         for v in auto._CHOICE_CACHE.values())}
+                                         for v in auto.CHOICE_CACHE.values())}
     hidden = next(n for n in chosen if n != "Grid")
     fastest = min((o for o in measured[hidden]["options"]
                    if np.isfinite(o[1]) and np.isfinite(o[2])), key=lambda o: o[1])
@@ -265,7 +270,7 @@ def _untimed(monkeypatch):
     nothing."""
     def read():
         raise AssertionError("AUTO timed a frame that has a stored choice")
-    monkeypatch.setattr(auto, "time", types.SimpleNamespace(perf_counter=read))
+    monkeypatch.setattr(auto_measure, "time", types.SimpleNamespace(perf_counter=read))
 
 
 def _stored():
@@ -293,7 +298,7 @@ class _Labels:
 
 def _panel(scene):
     layout = _Labels()
-    REGISTRY["AUTO"].draw_settings(layout, scene.prt)
+    REGISTRY["AUTO"].settings.draw(layout, scene.prt)
     return layout.texts
 
 
@@ -315,7 +320,7 @@ sys.modules["prt_relight"] = addon
 spec.loader.exec_module(addon)
 import bpy
 addon.register()
-from prt_relight.addon.methods import auto
+from prt_relight.addon.methods.auto import measure as auto
 reads = [0]
 def tick():
     reads[0] += 1
@@ -360,13 +365,13 @@ def test_the_stored_choice_holds_until_the_scene_or_the_target_changes(monkeypat
     assert [c["object"] for c in record["objects"]] == ["Grid", "Suzanne"]
     assert all(c["method"] in ("REFERENCE", "SH", "WAVELET") for c in record["objects"])
     eye = np.array(scene.camera.matrix_world.translation)
-    real_time = auto.time
+    real_time = auto_measure.time
     _untimed(monkeypatch)
     state = _state("AUTO")
     assert _drawn_with_stored(state, eye), state.warnings
     assert [(c["object"], c["choice"]) for c in auto.LAST_CHOICES] == \
         [(c["object"], c["choice"]) for c in record["objects"]]
-    assert auto.stored_status(scene.prt) == ""
+    assert auto_store.stored_status(scene.prt) == ""
     panel = _panel(scene)
     assert "Stored choice, current" in panel and "prt.auto_choose" in panel
     assert "Chosen for camera 'Camera' at 64×48" in panel
@@ -378,7 +383,7 @@ def test_the_stored_choice_holds_until_the_scene_or_the_target_changes(monkeypat
     assert _drawn_with_stored(_state("AUTO"), eye)
     stored = scene.prt.auto_choice
 
-    monkeypatch.setattr(auto, "time", real_time)
+    monkeypatch.setattr(auto_measure, "time", real_time)
     # a stored choice naming a method no longer registered is out of date
     scene.prt.auto_choice = json.dumps(dict(record, objects=[
         dict(c, method="GONE") for c in record["objects"]]))
@@ -399,7 +404,7 @@ def test_the_stored_choice_holds_until_the_scene_or_the_target_changes(monkeypat
                    for w in state.warnings), state.warnings
         assert any(w.startswith("AUTO:") for w in state.warnings)    # chosen live
         assert scene.prt.auto_choice == stored                         # and not written
-        assert part in auto.stored_status(scene.prt)
+        assert part in auto_store.stored_status(scene.prt)
         assert any(t.startswith("AUTO choice is out of date") and part in t
                    for t in _panel(scene))
         if part == "target":
@@ -431,7 +436,7 @@ def test_choose_stores_the_choice_for_the_scene_camera(monkeypatch):
     stores Suzanne's fastest measured option (it shows no pixel).  The camera is not part
     of the key: moving it keeps the stored choice until Choose is pressed again."""
     _fewer_candidates(monkeypatch)
-    monkeypatch.setattr(auto, "UNIFORM_TRIED", 0)      # the mix only: no timing decides
+    monkeypatch.setattr(auto_assign, "UNIFORM_TRIED", 0)      # the mix only: no timing decides
     _scene()
     scene = bpy.context.scene
     scene.prt.method = "AUTO"
@@ -440,13 +445,13 @@ def test_choose_stores_the_choice_for_the_scene_camera(monkeypatch):
     cam.data.type, cam.data.ortho_scale = "ORTHO", 1.2
     cam.location, cam.rotation_euler = (2.2, 2.2, 2.0), (0.0, 0.0, 0.0)
     bs.set_resolution(64, 64)
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     assert bpy.ops.prt.auto_choose() == {"FINISHED"}
     record = _stored()
     assert record["camera"] == cam.name and record["size"] == [64, 64]
     chosen = {c["object"]: c for c in record["objects"]}
     measured = {m["object"]: m for m in (v[-1] if isinstance(v, tuple) else v
-                                         for v in auto._CHOICE_CACHE.values())}
+                                         for v in auto.CHOICE_CACHE.values())}
     fastest = min((o for o in measured["Suzanne"]["options"]
                    if np.isfinite(o[1]) and np.isfinite(o[2])), key=lambda o: o[1])
     suzanne = chosen["Suzanne"]
@@ -462,35 +467,35 @@ def test_choose_stores_the_choice_for_the_scene_camera(monkeypatch):
 # ---------------------------------------------------------------- sampling (issue 20)
 
 def _measured():
-    return {m["object"]: m for m in (v[-1] for v in auto._CHOICE_CACHE.values())}
+    return {m["object"]: m for m in (v[-1] for v in auto.CHOICE_CACHE.values())}
 
 
 def test_the_points_and_probes_measured_are_capped(monkeypatch):
     """Every frame AUTO's measurement shades holds at most SAMPLE_POINTS points (the
     scene has more), at most PROBES probe views; the choice says what it measured."""
     _fewer_candidates(monkeypatch)
-    monkeypatch.setattr(auto, "SAMPLE_POINTS", 48)
-    monkeypatch.setattr(auto, "SLOPE_POINTS", 6)
+    monkeypatch.setattr(auto_measure, "SAMPLE_POINTS", 48)
+    monkeypatch.setattr(auto_measure, "SLOPE_POINTS", 6)
     _scene()
     shaded = []
     for mid in ("REFERENCE", "SH", "WAVELET"):
-        cls = type(REGISTRY[mid])
+        cls = type(REGISTRY[mid].shading)
         real = cls.shade
 
-        def shade(self, state, eye, view_dir, real=real):
-            shaded.append((self.id, [st.points.count for st in state.objects], eye))
+        def shade(self, state, eye, view_dir, real=real, mid=mid):
+            shaded.append((mid, [st.points.count for st in state.objects], eye))
             return real(self, state, eye, view_dir)
         monkeypatch.setattr(cls, "shade", shade)
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     state = _state("AUTO", auto_error_target=0.02)
     counts = {st.name: st.points.count for st in state.objects}
     assert all(n > 48 for n in counts.values()), counts
-    choices = auto.AutoMethod().choices(state)
+    choices = auto.AutoShading().choices(state)
     measured = [c for c in shaded]
     assert measured and all(max(n) <= 48 for _, n, _ in measured), measured
     # diffuse-only objects: one probe view per candidate (plus the timing frames' eye)
     eyes = {tuple(np.round(e, 6)) for _, _, e in measured}
-    assert len(eyes) <= 2 * auto.PROBES
+    assert len(eyes) <= 2 * measure.PROBES
     for c in choices:
         assert c["points"] == counts[c["object"]] and 0 < c["sampled"] <= 48
         assert f"measured on {c['sampled']} of {c['points']} points" in c["reason"]
@@ -502,15 +507,15 @@ def test_the_sampled_errors_are_within_their_stated_margin_of_the_full_ones(monk
     exact one."""
     _fewer_candidates(monkeypatch)
     _scene()
-    auto._CHOICE_CACHE.clear()
-    monkeypatch.setattr(auto, "SAMPLE_POINTS", 10 ** 6)
-    auto.AutoMethod().choices(_state("AUTO", auto_error_target=0.02))
+    auto.CHOICE_CACHE.clear()
+    monkeypatch.setattr(auto_measure, "SAMPLE_POINTS", 10 ** 6)
+    auto.AutoShading().choices(_state("AUTO", auto_error_target=0.02))
     exact = _measured()
     assert all(m["sample"].exact for m in exact.values())
-    auto._CHOICE_CACHE.clear()
-    monkeypatch.setattr(auto, "SAMPLE_POINTS", 64)
-    monkeypatch.setattr(auto, "SLOPE_POINTS", 8)
-    auto.AutoMethod().choices(_state("AUTO", auto_error_target=0.02))
+    auto.CHOICE_CACHE.clear()
+    monkeypatch.setattr(auto_measure, "SAMPLE_POINTS", 64)
+    monkeypatch.setattr(auto_measure, "SLOPE_POINTS", 8)
+    auto.AutoShading().choices(_state("AUTO", auto_error_target=0.02))
     sampled = _measured()
     compared = 0
     for name, s in sampled.items():
@@ -519,9 +524,9 @@ def test_the_sampled_errors_are_within_their_stated_margin_of_the_full_ones(monk
         for key, _, up, err2 in s["options"]:
             if key not in full or not np.isfinite(err2) or not np.isfinite(full[key][3]):
                 continue
-            truth = auto._rel(full[key][3], exact[name]["ref_norm2"])
-            est = auto._rel(err2, s["ref_norm2"])
-            margin = auto._rel(up, s["ref_norm2"]) - est
+            truth = measure.rel_error(full[key][3], exact[name]["ref_norm2"])
+            est = measure.rel_error(err2, s["ref_norm2"])
+            margin = measure.rel_error(up, s["ref_norm2"]) - est
             assert abs(est - truth) <= 1.5 * margin + 1e-9, (name, key, est, truth, margin)
             compared += 1
     assert compared >= 6
@@ -530,7 +535,7 @@ def test_the_sampled_errors_are_within_their_stated_margin_of_the_full_ones(monk
 def test_modal_choose_reports_progress_and_esc_writes_nothing(monkeypatch):
     """prt.auto_choose's modal steps (what one timer event runs): progress per measured
     candidate, ESC cancels with nothing stored; run to its end it stores the choice."""
-    from prt_relight.addon import operators
+    from prt_relight.addon.ui import operators
     _fewer_candidates(monkeypatch)
     _scene()
     scene = bpy.context.scene
@@ -545,7 +550,7 @@ def test_modal_choose_reports_progress_and_esc_writes_nothing(monkeypatch):
     class Op:
         def __init__(self):
             self.reports, self.ended, self._timer = [], 0, None
-            self._steps = REGISTRY["AUTO"].choice_steps(
+            self._steps = REGISTRY["AUTO"].shading.choice_steps(
                 scene, bpy.context.evaluated_depsgraph_get())
 
         def report(self, kind, message):
@@ -555,7 +560,7 @@ def test_modal_choose_reports_progress_and_esc_writes_nothing(monkeypatch):
             self.ended += 1
 
     timer, esc = types.SimpleNamespace(type="TIMER"), types.SimpleNamespace(type="ESC")
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     op = Op()
     assert operators.choice_step(op, ctx, types.SimpleNamespace(type="MOUSEMOVE")) == \
         {"PASS_THROUGH"}
@@ -564,18 +569,18 @@ def test_modal_choose_reports_progress_and_esc_writes_nothing(monkeypatch):
     assert operators.choice_step(op, ctx, esc) == {"CANCELLED"}
     assert op.ended == 1 and any("cancelled" in r for r in op.reports)
     assert scene.prt.auto_choice == ""
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     progress.clear()
     op = Op()
     steps = 0
     while (result := operators.choice_step(op, ctx, timer)) == {"RUNNING_MODAL"}:
         steps += 1
     assert result == {"FINISHED"} and op.ended == 1
-    assert steps >= 2 * len(auto.AutoMethod.candidates())     # one candidate per event
+    assert steps >= 2 * len(measure.candidates())     # one candidate per event
     assert progress == sorted(progress) and 0 <= progress[0] and progress[-1] <= 100
     record = _stored()
     assert [c["object"] for c in record["objects"]] == ["Grid", "Suzanne"]
-    assert record["sample"]["points"] == auto.SAMPLE_POINTS
+    assert record["sample"]["points"] == measure.SAMPLE_POINTS
 
 
 def test_modal_precompute_writes_in_steps_and_esc_stops_only_the_choice(monkeypatch):
@@ -584,7 +589,8 @@ def test_modal_precompute_writes_in_steps_and_esc_stops_only_the_choice(monkeypa
     is stored, no choice is); without ESC the choice is stored."""
     import threading
 
-    from prt_relight.addon import operators, precompute
+    from prt_relight.addon.ui import operators
+    from prt_relight.addon.blender import precompute
     _fewer_candidates(monkeypatch)
     _scene()
     scene = bpy.context.scene
@@ -611,7 +617,7 @@ def test_modal_precompute_writes_in_steps_and_esc_stops_only_the_choice(monkeypa
             pass
 
     timer = types.SimpleNamespace(type="TIMER")
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     run_before = scene.prt.precompute_id
     op = Op()
     modal = operators.PRT_OT_precompute.modal

@@ -1,4 +1,4 @@
-"""core.auto_choice (no Blender): AUTO's assignment against brute-force enumeration, its
+"""core.methods.auto.choice (no Blender): AUTO's assignment against brute-force enumeration, its
 area sample, the sampled estimates and their stated error, its time model."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import itertools
 import numpy as np
 import pytest
 
-from prt_relight.core import auto_choice as ac
+from prt_relight.core.methods.auto import choice as ac
 
 
 # ------------------------------------------------------------------ assignment

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from prt_relight.core import blocks_encoding as E
-from prt_relight.core.directions import cubemap
+from prt_relight.core.methods.blocks import encoding as E
+from prt_relight.core.sphere.directions import cubemap
 
 from . import blocks_oracle as O
 
@@ -259,7 +259,8 @@ def test_integrate_vertex_all_cases_exact_for_blockwise_bandlimited_brdf():
 
 
 def test_integrate_vertex_material_adaptive_close_to_reference():
-    from prt_relight.core.brdf import Material, reflectance_cosine
+    from prt_relight.core.shading.brdf import reflectance_cosine
+    from prt_relight.core.shading.materials import Material
     n, rng = 32, np.random.default_rng(12)
     L, v, bits, _ = _random_scene(n, rng)
     light = O.block_lighting(L, n)

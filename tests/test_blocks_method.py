@@ -6,13 +6,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from prt_relight.core import blocks as B
-from prt_relight.core import blocks_encoding as E
-from prt_relight.core import blocks_lobe as Lobe
-from prt_relight.core import brdf, reference
-from prt_relight.core.directions import cubemap
-from prt_relight.core.envmap import CubeLighting
-from prt_relight.core.visibility import unpack_visibility
+from prt_relight.core.methods.blocks import shading as B
+from prt_relight.core.methods.blocks import light_tables
+from prt_relight.core.methods.blocks import encoding as E
+from prt_relight.core.methods.blocks import lobe as Lobe
+from prt_relight.core.shading import brdf
+from prt_relight.core.shading import materials
+from prt_relight.core.methods.reference import shading as reference
+from prt_relight.core.sphere.directions import cubemap
+from prt_relight.core.sphere.envmap import CubeLighting
+from prt_relight.core.scene.visibility import unpack_visibility
 
 from . import blocks_oracle as O
 
@@ -37,11 +40,11 @@ def _scene(n, rng, P=40):
 
 
 MATERIALS = {
-    "glossy beckmann": brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 0.9, 0.8),
+    "glossy beckmann": materials.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 0.9, 0.8),
                                      roughness=0.25, distribution="BECKMANN"),
-    "principled": brdf.principled_material(base_color=(0.7, 0.3, 0.2), roughness=0.3),
-    "diffuse": brdf.Material(diffuse_albedo=(0.8, 0.6, 0.4), specular_color=(0.0, 0.0, 0.0)),
-    "metal f82": brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(0.9, 0.6, 0.3),
+    "principled": materials.principled_material(base_color=(0.7, 0.3, 0.2), roughness=0.3),
+    "diffuse": materials.Material(diffuse_albedo=(0.8, 0.6, 0.4), specular_color=(0.0, 0.0, 0.0)),
+    "metal f82": materials.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(0.9, 0.6, 0.3),
                                roughness=0.35, distribution="MULTI_GGX", fresnel="F82",
                                f82_tint=(0.8, 0.9, 1.0)),
 }
@@ -57,14 +60,14 @@ def test_pixel_basis_equals_reference(name):
     cube = cubemap(n)
     ref = reference.shade_points(bits, pos, nrm, np.zeros(len(pos), int), mats, eye, cube, light)
     dv = E.encode_visibility(bits, n)
-    pairs = B.active_pairs(dv)
-    tables = B.light_tables(light, n)
+    pairs = light_tables.active_pairs(dv)
+    tables = light_tables.light_tables(light, n)
     ours = B.shade_points(pairs, None, tables, pos, nrm, np.zeros(len(pos), int), mats, eye,
                           mode="pixel")
     np.testing.assert_allclose(ours, ref, rtol=2e-5, atol=1e-6 * float(ref.max()))
     # the adaptive rule with the exact Lambert layer stays close
-    lv = B.light_vis_sums(pairs, tables)
-    np.testing.assert_allclose(B.lambert_irradiance(lv, nrm),
+    lv = light_tables.light_vis_sums(pairs, tables)
+    np.testing.assert_allclose(light_tables.lambert_irradiance(lv, nrm),
                                reference.diffuse_irradiance(bits, nrm, cube, light), rtol=2e-3)
     errors = []
     for thresholds in (Lobe.DEFAULT_LEVEL_THRESHOLDS, (1e-4, 1e-5, 1e-6, 1e-12)):
@@ -88,9 +91,9 @@ def test_batched_equals_per_vertex_integrator(mode, material):
     mat = MATERIALS[material]
     views = reference.view_directions(pos, np.array([0.0, -3.0, 1.5]))
     dv = E.encode_visibility(bits, n)
-    pairs = B.active_pairs(dv)
-    tables = B.light_tables(light, n)
-    lv = B.light_vis_sums(pairs, tables)
+    pairs = light_tables.active_pairs(dv)
+    tables = light_tables.light_tables(light, n)
+    lv = light_tables.light_vis_sums(pairs, tables)
     lobe = Lobe.GlossyLobe(mat, np.float64).prepare(nrm, views)
     st = B.BlocksStats()
     batched = B.glossy_blocks(pairs, lv, tables, lobe, np.arange(len(pos)), mode=mode, stats=st)
@@ -131,7 +134,7 @@ def test_fused_beckmann_lobe_equals_the_general_formula(roughness):
     d = rng.normal(size=(D, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     d[:P // 4] = -views[:P // 4]                              # wi = -wo for a few vertices
-    mat = brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 0.9, 0.8),
+    mat = materials.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 0.9, 0.8),
                         roughness=roughness, distribution="BECKMANN")
     fast = Lobe.GlossyLobe(mat).prepare(nrm, views)
     assert fast._fused is not None
@@ -160,13 +163,13 @@ def test_pairs_off_the_horizon_have_every_direction_above_the_cut(n):
     P = 300
     nrm = rng.normal(size=(P, 3))
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-    mat = brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 1.0, 1.0),
+    mat = materials.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=(1.0, 1.0, 1.0),
                         roughness=0.25, distribution="BECKMANN")
     lobe = Lobe.GlossyLobe(mat).prepare(nrm, nrm)
     cube = cubemap(n)
     light = CubeLighting(np.ones((cube.size, 3), np.float32),
                          cube.directions * rng.uniform(0.9, 1.0, (cube.size, 1)))
-    tables = B.light_tables(light, n)
+    tables = light_tables.light_tables(light, n)
     geometry = E.block_geometry(n)
     nb = geometry.centre.shape[0]
     p = np.repeat(np.arange(P), nb)
@@ -183,11 +186,11 @@ def test_cached_decoded_blocks_equal_the_differential_decode():
     n = 32
     pos, nrm, bits, light = _scene(n, rng)
     dv = E.encode_visibility(bits, n)
-    pairs = B.active_pairs(dv)
+    pairs = light_tables.active_pairs(dv)
     sel = np.arange(pairs.count)[::-1]
-    fresh = B._decompress(pairs, sel, np.float32, cached=False)
+    fresh = light_tables.decompress(pairs, sel, np.float32, cached=False)
     assert (~pairs.one).any() and pairs.decoded_bits()[0].shape[1] == 32
-    np.testing.assert_array_equal(B._decompress(pairs, sel, np.float32), fresh)
+    np.testing.assert_array_equal(light_tables.decompress(pairs, sel, np.float32), fresh)
     dense = E.to_blocks(unpack_visibility(bits, 6 * n * n).T, n)       # (blocks, 256, P)
     np.testing.assert_array_equal(fresh, dense[pairs.b[sel], :, pairs.p[sel]])
 
@@ -252,12 +255,12 @@ def _psnr(a, ref):
 @pytest.mark.usefixtures("registered_addon")
 def test_addon_blocks_f12_matches_reference_and_survives_reload(tmp_path):
     import bpy
-    from prt_relight.addon import runtime
-    from prt_relight.addon.methods import blocks as method
+    from prt_relight.addon.frame import state as runtime
+    from prt_relight.addon.methods.blocks import shading as method
     from . import blender_scene as bs
     scene = _blocks_scene(64)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
-    from prt_relight.addon import storage
+    from prt_relight.addon.blender import storage
     assert storage.has(bpy.data.objects["Suzanne"], method.BLOB)
     ours = bs.render_exr(tmp_path / "blocks.exr")
     assert method.LAST_STATS["sources"] == ["stored", "stored"]
@@ -288,7 +291,7 @@ def test_addon_blocks_f12_matches_reference_and_survives_reload(tmp_path):
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     scene = bpy.context.scene
     scene.prt.method = "BLOCKS"
-    method._STORED.clear()
+    method.STORED.clear()
     again = bs.render_exr(tmp_path / "blocks2.exr")
     assert method.LAST_STATS["sources"] == ["stored", "stored"]
     np.testing.assert_allclose(again, ours, rtol=1e-5, atol=1e-6)
@@ -297,7 +300,7 @@ def test_addon_blocks_f12_matches_reference_and_survives_reload(tmp_path):
 @pytest.mark.usefixtures("registered_addon")
 def test_addon_blocks_at_32_notes_and_draws(tmp_path):
     import bpy
-    from prt_relight.addon import runtime
+    from prt_relight.addon.frame import state as runtime
     from . import blender_scene as bs
     scene = _blocks_scene(32)
     scene.prt.method = "REFERENCE"                  # no BLOCKS stream: encoded from the bits
@@ -305,7 +308,7 @@ def test_addon_blocks_at_32_notes_and_draws(tmp_path):
     ref = bs.render_exr(tmp_path / "ref.exr")
     scene.prt.method = "BLOCKS"
     ours = bs.render_exr(tmp_path / "blocks.exr")
-    from prt_relight.addon.methods import blocks as method
+    from prt_relight.addon.methods.blocks import shading as method
     assert method.LAST_STATS["sources"] == ["encoded", "encoded"]
     assert any("6x64x64" in m for m in runtime.LAST_MESSAGES), runtime.LAST_MESSAGES
     psnr, err = _psnr(ours, ref), bs.rel_l2(ours, ref)

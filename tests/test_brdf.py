@@ -1,10 +1,11 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Numerical checks of core/brdf.py (quadrature on the sphere / hemisphere)."""
+"""Numerical checks of core/shading/brdf.py (quadrature on the sphere / hemisphere)."""
 
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf, brdf_tables
+from prt_relight.core.shading import brdf, brdf_tables
+from prt_relight.core.shading import materials
 
 DISTS = ("BECKMANN", "GGX")
 N_UP = np.array([[0.0, 0.0, 1.0]])
@@ -89,7 +90,7 @@ def test_lambert_hemisphere_integral_is_albedo():
     dirs = fibonacci_sphere(400_000)
     w = np.full(dirs.shape[0], 4.0 * np.pi / dirs.shape[0])
     albedo = (0.8, 0.5, 0.2)
-    mat = brdf.Material(diffuse_albedo=albedo)
+    mat = materials.Material(diffuse_albedo=albedo)
     assert mat.is_diffuse_only and mat.has_diffuse
     views = np.concatenate([view_at(0), view_at(60, 30), view_at(89.9)])
     got = lobe_integral(mat, views, dirs, w)
@@ -98,7 +99,7 @@ def test_lambert_hemisphere_integral_is_albedo():
 
 def test_lambert_ignores_view_side():
     # Cycles' diffuse closure only tests the light side.
-    mat = brdf.Material(diffuse_albedo=(1.0, 1.0, 1.0))
+    mat = materials.Material(diffuse_albedo=(1.0, 1.0, 1.0))
     dirs = np.array([[0.0, 0.6, 0.8]])
     a = brdf.reflectance_cosine(mat, N_UP, view_at(10), dirs)
     b = brdf.reflectance_cosine(mat, N_UP, -view_at(10), dirs)
@@ -159,7 +160,7 @@ def test_matches_cycles_transcription(dist):
     dirs = rng.normal(size=(200, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     for r in (0.2, 0.45, 0.8, 1.0):
-        mat = brdf.Material(specular_color=(1, 1, 1), roughness=r, distribution=dist)
+        mat = materials.Material(specular_color=(1, 1, 1), roughness=r, distribution=dist)
         got = brdf.specular_cosine(mat, normals, views, dirs)
         ref = np.array([[_cycles_eval_reference(dist, r * r, n, v, l) for l in dirs]
                         for n, v in zip(normals, views)])
@@ -182,7 +183,7 @@ def test_reciprocity(dist, fresnel):
         return v / np.linalg.norm(v, axis=1, keepdims=True)
 
     a, b = upper(40), upper(50)
-    mat = brdf.Material(diffuse_albedo=(0.3, 0.2, 0.1), specular_color=(0.9, 0.5, 0.04),
+    mat = materials.Material(diffuse_albedo=(0.3, 0.2, 0.1), specular_color=(0.9, 0.5, 0.04),
                         roughness=0.4, distribution=dist, fresnel=fresnel)
     # f(wi = b_d, wo = a_p) and f(wi = a_p, wo = b_d)
     f_ab = brdf.reflectance_cosine(mat, np.repeat(N_UP, 40, 0), a, b) / b[None, :, 2, None]
@@ -201,7 +202,7 @@ VIEW_ANGLES = (0.0, 30.0, 60.0, 80.0, 89.0)
 @pytest.mark.parametrize("alpha", [0.1, 0.3, 0.6, 1.0])
 def test_glossy_directional_albedo_at_most_one(dist, alpha):
     dirs, w = hemisphere_grid(alpha, 600, 720)
-    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
+    mat = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
                         roughness=np.sqrt(alpha), distribution=dist)
     views = np.concatenate([view_at(t, 17.0) for t in VIEW_ANGLES])
     E = lobe_integral(mat, views, dirs, w)[:, 0]
@@ -233,7 +234,7 @@ def test_ggx_albedo_matches_cycles_table():
     for (row, col), ref in CYCLES_TABLE_GGX_E.items():
         mu, r = row / 31.0, col / 31.0
         dirs, w = hemisphere_grid(r * r, 600, 720)
-        mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
+        mat = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
                             roughness=r, distribution="GGX")
         v = np.array([[np.sqrt(1.0 - mu * mu), 0.0, mu]])
         E = lobe_integral(mat, v, dirs, w)[0, 0]
@@ -296,7 +297,7 @@ def test_finite_everywhere(dist, fresnel, roughness):
         [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0, 1, 0]],
         views * np.array([-1.0, -1.0, 1.0]),   # mirror directions
     ])
-    mat = brdf.Material(diffuse_albedo=(0.5, 0.5, 0.5), specular_color=(1.0, 0.5, 0.2),
+    mat = materials.Material(diffuse_albedo=(0.5, 0.5, 0.5), specular_color=(1.0, 0.5, 0.2),
                         roughness=roughness, distribution=dist, fresnel=fresnel)
     s = brdf.specular_cosine(mat, normals, views, dirs)
     r = brdf.reflectance_cosine(mat, normals, views, dirs)
@@ -314,7 +315,7 @@ def test_finite_everywhere(dist, fresnel, roughness):
 
 def test_grazing_view_is_continuous():
     # n.wo = 1e-6, 0 and slightly negative views give (nearly) the same lobe
-    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
+    mat = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
                         roughness=0.5, distribution="GGX")
     views = _nasty_views()[2:5]
     dirs = fibonacci_sphere(5000)
@@ -330,20 +331,20 @@ def test_schlick_and_colour_conventions():
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     views = np.concatenate([view_at(20), view_at(70, 50)])
     normals = np.repeat(N_UP, 2, 0)
-    plain = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.5, 0.25, 1.0),
+    plain = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.5, 0.25, 1.0),
                           roughness=0.3, distribution="GGX")
     s = brdf.specular_cosine(plain, normals, views, dirs)
     r = brdf.reflectance_cosine(plain, normals, views, dirs)
     np.testing.assert_allclose(r, s[..., None] * np.array([0.5, 0.25, 1.0], np.float32), rtol=1e-6)
     # Schlick with F0 = 1 is the uncoloured lobe; with F0 < 1 it is >= F0 * lobe
-    one = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
+    one = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
                         roughness=0.3, distribution="GGX", fresnel="SCHLICK")
     s1 = brdf.specular_cosine(one, normals, views, dirs)
-    s_plain1 = brdf.specular_cosine(brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
+    s_plain1 = brdf.specular_cosine(materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1),
                                                   roughness=0.3, distribution="GGX"),
                                     normals, views, dirs)
     np.testing.assert_allclose(s1, np.repeat(s_plain1[..., None], 3, axis=-1), rtol=1e-6)
-    low = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.04, 0.04, 0.04),
+    low = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.04, 0.04, 0.04),
                         roughness=0.3, distribution="GGX", fresnel="SCHLICK")
     s04 = brdf.specular_cosine(low, normals, views, dirs)
     assert np.all(s04[..., 0] >= 0.04 * s_plain1 * (1 - 1e-5))
@@ -356,21 +357,21 @@ def test_schlick_and_colour_conventions():
     F = F0 + (1.0 - F0) * (1.0 - h_wi) ** 5
     np.testing.assert_allclose(s04[..., 1], F * s_plain1, rtol=1e-5, atol=1e-9)
     # zero specular colour switches the lobe off in both modes
-    off = brdf.Material(specular_color=(0, 0, 0), fresnel="SCHLICK")
+    off = materials.Material(specular_color=(0, 0, 0), fresnel="SCHLICK")
     assert off.is_diffuse_only
     assert not np.any(brdf.specular_cosine(off, normals, views, dirs))
 
 
 def test_material_validation_and_alpha():
-    assert brdf.Material(roughness=0.5).alpha == pytest.approx(0.25)
-    assert brdf.Material(roughness=0.0).alpha == brdf.ALPHA_MIN
-    assert brdf.Material(roughness=3.0).alpha == 1.0
-    assert brdf.Material(distribution="ggx").distribution == "GGX"
-    assert not brdf.Material(diffuse_albedo=(0, 0, 0)).has_diffuse
+    assert materials.Material(roughness=0.5).alpha == pytest.approx(0.25)
+    assert materials.Material(roughness=0.0).alpha == brdf.ALPHA_MIN
+    assert materials.Material(roughness=3.0).alpha == 1.0
+    assert materials.Material(distribution="ggx").distribution == "GGX"
+    assert not materials.Material(diffuse_albedo=(0, 0, 0)).has_diffuse
     with pytest.raises(ValueError):
-        brdf.Material(distribution="PHONG")
+        materials.Material(distribution="PHONG")
     with pytest.raises(ValueError):
-        brdf.Material(fresnel="CONDUCTOR")
+        materials.Material(fresnel="CONDUCTOR")
 
 
 # --------------------------------------------------------------------------- #
@@ -433,12 +434,12 @@ def _albedo(mat, theta, n_theta=600, n_phi=720):
 def test_multiscatter_glossy_white_furnace(col, row):
     # A white Multiscatter GGX lobe reflects all light: E * (1 + (1 - E) / E) = 1.
     r, mu = col / 31.0, row / 31.0
-    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=r,
+    mat = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=r,
                         distribution="MULTI_GGX")
     got = _albedo(mat, np.degrees(np.arccos(mu)))
     np.testing.assert_allclose(got, 1.0, atol=1.5e-3)
     # single-scatter GGX loses exactly 1 - E
-    ss = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=r,
+    ss = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=r,
                        distribution="GGX")
     assert _albedo(ss, np.degrees(np.arccos(mu)))[0] == pytest.approx(
         brdf_tables.ggx_E_table_column(col)[row], abs=1e-3)
@@ -448,7 +449,7 @@ def test_multiscatter_glossy_colour_saturates():
     # Coloured multiscatter lobes gain less than 1/E (Fms < 1): the Kulla-Conty
     # factor 1 + Fms (1 - E) / E, per channel.
     r, mu = 1.0, 0.5
-    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.5, 0.2), roughness=r,
+    mat = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.5, 0.2), roughness=r,
                         distribution="MULTI_GGX")
     k = brdf.multiscatter_factor(mat, [mu])[0]
     E, Ea = brdf.ggx_E(r, mu)[()], brdf.ggx_E_avg(r)
@@ -467,13 +468,13 @@ PRINCIPLED_ROUGH = (0.0, 0.05, 0.3, 0.5, 0.8, 1.0)
 def test_principled_energy_conservation(rough):
     # white base: Lambert weight + specular albedo <= 1 at every view, and the
     # layering weight is Cycles' 1 - (albedo estimate of the specular layer).
-    mat = brdf.principled_material(base_color=(1, 1, 1), roughness=rough)
+    mat = materials.principled_material(base_color=(1, 1, 1), roughness=rough)
     for theta in (0.0, 40.0, 66.0, 80.0, 88.0):
         v = view_at(theta, 10.0)
         spec = np.zeros(3)
         quad_ok = rough >= 0.3      # hemisphere_grid resolves off-normal lobes for alpha >~ 0.1
         if quad_ok:
-            spec = _albedo(brdf.Material(**{**mat.__dict__, "diffuse_albedo": (0, 0, 0)}), theta)
+            spec = _albedo(materials.Material(**{**mat.__dict__, "diffuse_albedo": (0, 0, 0)}), theta)
         wd = brdf.diffuse_view_weight(mat, N_UP, v)[0]
         est = brdf.specular_albedo_estimate(mat, [np.cos(np.radians(theta))])[0]
         np.testing.assert_allclose(wd, 1.0 - est.max(), rtol=1e-6)
@@ -486,7 +487,7 @@ def test_principled_energy_conservation(rough):
 
 
 def test_principled_default_darkens_base_at_grazing_views():
-    mat = brdf.principled_material()          # Cycles' default surface
+    mat = materials.principled_material()          # Cycles' default surface
     assert mat.fresnel == "DIELECTRIC" and mat.distribution == "MULTI_GGX"
     assert mat.specular_color == pytest.approx((0.04, 0.04, 0.04))
     w = [brdf.diffuse_view_weight(mat, N_UP, view_at(t))[0, 0] for t in (0, 30, 66, 85)]
@@ -494,14 +495,14 @@ def test_principled_default_darkens_base_at_grazing_views():
     assert w[0] == pytest.approx(0.9626, abs=2e-3)
     assert w[2] == pytest.approx(0.9144, abs=2e-3)
     # a plain Diffuse BSDF has no layering
-    lam = brdf.Material(diffuse_albedo=(0.8, 0.8, 0.8))
+    lam = materials.Material(diffuse_albedo=(0.8, 0.8, 0.8))
     np.testing.assert_array_equal(brdf.diffuse_view_weight(lam, N_UP, view_at(66)), 1.0)
 
 
 def test_principled_fresnel_is_remapped_real_fresnel():
     # F = mix(f0 * tint, 1, (F_diel(h.wi) - F0) / (1 - F0)); with tint 1 that is F_diel.
-    mat = brdf.principled_material(roughness=0.4, distribution="GGX")
-    plain = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.4,
+    mat = materials.principled_material(roughness=0.4, distribution="GGX")
+    plain = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.4,
                           distribution="GGX")
     rng = np.random.default_rng(5)
     dirs = rng.normal(size=(200, 3))
@@ -515,7 +516,7 @@ def test_principled_fresnel_is_remapped_real_fresnel():
     F = brdf.fresnel_dielectric(np.einsum("pdk,pk->pd", h, views), 1.5)
     np.testing.assert_allclose(s[..., 0], F * lobe, rtol=1e-5, atol=1e-9)
     # specular tint scales f0 only; metallic blends in the F82 metal lobe
-    tinted = brdf.principled_material(roughness=0.4, distribution="GGX", specular_tint=(1, 0.5, 0))
+    tinted = materials.principled_material(roughness=0.4, distribution="GGX", specular_tint=(1, 0.5, 0))
     assert tinted.specular_color == pytest.approx((0.04, 0.02, 0.0))
     st = brdf.specular_cosine(tinted, normals, views, dirs)
     assert np.all(st[..., 2] <= st[..., 1] + 1e-9) and np.all(st[..., 1] <= st[..., 0] + 1e-9)
@@ -532,27 +533,27 @@ def test_principled_fresnel_is_remapped_real_fresnel():
 
 def test_principled_mapping_details():
     # Specular IOR Level 0 switches the layer off (eta = 1), 1 doubles F0.
-    off = brdf.principled_material(specular_ior_level=0.0)
+    off = materials.principled_material(specular_ior_level=0.0)
     assert off.ior == 1.0 and off.is_diffuse_only and off.has_diffuse
     np.testing.assert_array_equal(brdf.diffuse_view_weight(off, N_UP, view_at(80)), 1.0)
-    hi = brdf.principled_material(specular_ior_level=1.0)
+    hi = materials.principled_material(specular_ior_level=1.0)
     assert brdf.F0_from_ior(hi.ior) == pytest.approx(0.08, rel=1e-6)
     assert hi.specular_color == pytest.approx((0.08,) * 3)
     # metallic 1: no base, no dielectric lobe, an F82 lobe with F0 = base colour
-    metal = brdf.principled_material(base_color=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3,
+    metal = materials.principled_material(base_color=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3,
                                      distribution="GGX")
     assert not metal.has_diffuse and not metal.is_diffuse_only
     np.testing.assert_array_equal(brdf.diffuse_view_weight(metal, N_UP, view_at(30)), 0.0)
-    conductor = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.9, 0.6, 0.3),
+    conductor = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.9, 0.6, 0.3),
                               roughness=0.3, distribution="GGX", fresnel="F82")
     dirs = fibonacci_sphere(500)
     a = brdf.reflectance_cosine(metal, N_UP, view_at(50), dirs)
     b = brdf.reflectance_cosine(conductor, N_UP, view_at(50), dirs)
     np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-9)
     # half metallic: half of each
-    half = brdf.principled_material(base_color=(0.9, 0.6, 0.3), metallic=0.5, roughness=0.3,
+    half = materials.principled_material(base_color=(0.9, 0.6, 0.3), metallic=0.5, roughness=0.3,
                                     distribution="GGX")
-    diel = brdf.principled_material(base_color=(0.9, 0.6, 0.3), metallic=0.0, roughness=0.3,
+    diel = materials.principled_material(base_color=(0.9, 0.6, 0.3), metallic=0.0, roughness=0.3,
                                     distribution="GGX")
     c = brdf.reflectance_cosine(half, N_UP, view_at(50), dirs)
     d = brdf.reflectance_cosine(diel, N_UP, view_at(50), dirs)
@@ -570,7 +571,7 @@ def test_f82_tint():
     np.testing.assert_allclose(brdf.fresnel_f82(np.array([1.0]), f0, B)[0], f0)
     np.testing.assert_allclose(brdf.fresnel_f82(np.array([0.0]), f0, B)[0], 1.0)
     # clamped at 0 for dark, untinted metals (the clamped path is used)
-    m = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.02, 0.02, 0.02), roughness=0.5,
+    m = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.02, 0.02, 0.02), roughness=0.5,
                       distribution="GGX", fresnel="F82", f82_tint=(0, 0, 0))
     r = brdf.reflectance_cosine(m, N_UP, view_at(45), fibonacci_sphere(2000))
     assert np.all(r >= 0.0) and np.all(np.isfinite(r))
@@ -586,7 +587,7 @@ def test_new_modes_finite_everywhere(fresnel, dist, roughness):
     dirs = np.concatenate([fibonacci_sphere(1000), views, -views,
                            [[0, 0, 1], [0, 0, -1], [1, 0, 0]],
                            views * np.array([-1.0, -1.0, 1.0])])
-    mat = brdf.Material(diffuse_albedo=(0.5, 0.5, 0.5), specular_color=(0.9, 0.5, 0.04),
+    mat = materials.Material(diffuse_albedo=(0.5, 0.5, 0.5), specular_color=(0.9, 0.5, 0.04),
                         roughness=roughness, distribution=dist, fresnel=fresnel,
                         f82_tint=(0.3, 0.8, 1.0), metallic=0.3 if fresnel == "DIELECTRIC" else 0.0)
     s = brdf.specular_cosine(mat, normals, views, dirs)
@@ -615,7 +616,7 @@ def test_principled_single_scatter_is_reciprocal():
         return v / np.linalg.norm(v, axis=1, keepdims=True)
 
     a, b = upper(30), upper(40)
-    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.04, 0.03, 0.02), roughness=0.4,
+    mat = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.04, 0.03, 0.02), roughness=0.4,
                         distribution="GGX", fresnel="DIELECTRIC", ior=1.45)
     f_ab = brdf.specular_cosine(mat, np.repeat(N_UP, 30, 0), a, b) / b[None, :, 2, None]
     f_ba = brdf.specular_cosine(mat, np.repeat(N_UP, 40, 0), b, a) / a[None, :, 2, None]
@@ -623,9 +624,9 @@ def test_principled_single_scatter_is_reciprocal():
 
 
 def test_specular_terms_sum_to_specular_cosine():
-    mats = [brdf.principled_material(base_color=(0.7, 0.5, 0.2), metallic=0.4, roughness=0.35,
+    mats = [materials.principled_material(base_color=(0.7, 0.5, 0.2), metallic=0.4, roughness=0.35,
                                      specular_tint=(1.0, 0.7, 0.4)),
-            brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.6, 0.1), roughness=0.4,
+            materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.6, 0.1), roughness=0.4,
                           distribution="MULTI_GGX")]
     views = np.concatenate([view_at(20), view_at(70, 50)])
     normals = np.repeat(N_UP, 2, 0)
@@ -640,7 +641,7 @@ def test_specular_terms_sum_to_specular_cosine():
 def test_lambda_of_t2_is_smith_lambda_in_the_dtype_given():
     """One Lambda for REFERENCE (float64) and BLOCKS' float32 evaluator: the same values,
     float32 in stays float32; Beckmann is 0 below t2 = 0.39 (a > 1.6)."""
-    from prt_relight.core import microfacet
+    from prt_relight.core.shading import microfacet
     c = np.linspace(0.05, 1.0, 40)
     for dist, alpha in (("GGX", 0.3), ("BECKMANN", 0.3), ("BECKMANN", 0.05)):
         t2 = alpha ** 2 * (1.0 / (c * c) - 1.0)

@@ -1,12 +1,12 @@
-"""core.cache: the one cache policy (bounded LRU, thread-safe, listed) -- no Blender."""
+"""core.common.cache: the one cache policy (bounded LRU, thread-safe, listed) -- no Blender."""
 
 import threading
 
 import numpy as np
 import pytest
 
-from prt_relight.core import cache as core_cache
-from prt_relight.core.cache import Cache, memo
+from prt_relight.core.common import cache as core_cache
+from prt_relight.core.common.cache import Cache, memo
 
 
 def test_bound_and_least_recently_used_goes():

@@ -1,4 +1,4 @@
-"""core.codec: the versioned blob every stored result goes through (no Blender)."""
+"""core.common.codec: the versioned blob every stored result goes through (no Blender)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import zlib
 import numpy as np
 import pytest
 
-from prt_relight.core import codec, directions, visibility
+from prt_relight.core.common import codec
+from prt_relight.core.sphere import directions
+from prt_relight.core.scene import visibility
 
 
 def _ground_and_ball_visibility(n=32, cuts=24):

@@ -10,8 +10,8 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import scene_export, storage
-from prt_relight.core import envmap
+from prt_relight.addon.blender import scene_export, storage
+from prt_relight.core.sphere import envmap
 
 from . import blender_scene as bs
 

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Checks of core/directions.py and core/envmap.py against analytic values.
+"""Checks of core/sphere/directions.py and core/sphere/envmap.py against analytic values.
 
 Pure numpy (+ OpenImageIO for the EXR round trip); no bpy.
 """
@@ -7,7 +7,7 @@ Pure numpy (+ OpenImageIO for the EXR round trip); no bpy.
 import numpy as np
 import pytest
 
-from prt_relight.core import directions, envmap
+from prt_relight.core.sphere import directions, envmap
 
 RESOLUTIONS = (32, 64, 128)
 
@@ -323,7 +323,7 @@ def test_resample_constant_image_gives_constant_radiance(h, w, n, angles):
 def test_image_sums_kept_every_few_rows_give_the_same_texels():
     """Past their memory budget the per-column sums are kept every ``stride`` rows; the
     rows up to the next kept one are added per lookup, to the same result."""
-    from prt_relight.core import resample
+    from prt_relight.core.sphere import resample
     rng = np.random.default_rng(0)
     img = rng.uniform(0.0, 3.0, (101, 202, 3)).astype(np.float32)
     R = envmap.euler_xyz_matrix(0.4, -0.7, 2.5)
@@ -631,9 +631,9 @@ def test_disk_area_of_boxes_is_exact():
         h = np.sqrt(np.clip(1 - xs * xs, 0, None)) * (np.abs(xs) <= 1)
         length = np.clip(np.minimum(y1, h) - np.maximum(y0, -h), 0, None)
         ref = length.sum() * (x1 - x0) / 400000
-        got = float(directions._disk_strip_area(np.array(x0), np.array(x1),
+        got = float(directions.disk_strip_area(np.array(x0), np.array(x1),
                                                 np.array(y0), np.array(y1)))
         assert got == pytest.approx(ref, abs=2e-6)
-    assert float(directions._disk_strip_area(np.array(-1.0), np.array(1.0),
+    assert float(directions.disk_strip_area(np.array(-1.0), np.array(1.0),
                                              np.array(-1.0), np.array(1.0))) == \
         pytest.approx(np.pi, rel=1e-12)

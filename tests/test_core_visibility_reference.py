@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Checks of core/visibility.py, core/reference.py and core/mesh.py.
+"""Checks of core/scene/visibility.py, core/methods/reference/shading.py and core/scene/mesh.py.
 
 Visibility is checked against analytic occluders (ground plane, half-space
 wall, closed box) and a brute-force numpy ray/triangle test; the reference
@@ -9,7 +9,12 @@ triple product against explicit python loops over texels.  No bpy.
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf, directions, envmap, mesh, reference, visibility
+from prt_relight.core.shading import brdf
+from prt_relight.core.shading import materials
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.scene import mesh, visibility
+from prt_relight.core.common import parallel
+from prt_relight.core.methods.reference import shading as reference
 
 
 N = 32
@@ -48,7 +53,7 @@ def white_world(n=N):
     return envmap.WorldLighting(None, color=(1.0, 1.0, 1.0)).to_cubemap(n)
 
 
-LAMBERT = brdf.Material(diffuse_albedo=(0.8, 0.5, 0.2))
+LAMBERT = materials.Material(diffuse_albedo=(0.8, 0.5, 0.2))
 
 
 def shade(bits, pts, nrm, lighting, material, n=N, eye=(0.0, 0.0, 10.0)):
@@ -132,7 +137,7 @@ def test_enclosed_point_is_fully_blocked():
     bits, vis = trace(box_triangles(), pts, nrm)
     assert not vis.any()
     assert not bits.any()
-    glossy = brdf.Material(diffuse_albedo=(0.5, 0.5, 0.5), specular_color=(1, 1, 1), roughness=0.3)
+    glossy = materials.Material(diffuse_albedo=(0.5, 0.5, 0.5), specular_color=(1, 1, 1), roughness=0.3)
     for mat in (LAMBERT, glossy):
         out = shade(bits, pts, nrm, white_world(), mat)
         np.testing.assert_array_equal(out, 0.0)
@@ -333,7 +338,7 @@ def test_cancel_raises(threads):
     scene = visibility.build_occluder_scene(wall_triangles())
     pts = np.zeros((50, 3))
     nrm = np.tile([0, 0, 1.0], (50, 1))
-    with pytest.raises(visibility.Cancelled):
+    with pytest.raises(parallel.Cancelled):
         visibility.trace_visibility(scene, pts, nrm, cube, OFFSET, chunk_points=5,
                                     threads=threads, cancel=lambda: True)
     # cancel after the first chunk
@@ -343,7 +348,7 @@ def test_cancel_raises(threads):
         calls.append(1)
         return len(calls) > 1
 
-    with pytest.raises(visibility.Cancelled):
+    with pytest.raises(parallel.Cancelled):
         visibility.trace_visibility(scene, pts, nrm, cube, OFFSET, chunk_points=5,
                                     threads=threads, cancel=cancel)
 
@@ -427,9 +432,9 @@ def test_reference_matches_brute_force_loops():
     img = rng.uniform(0.0, 3.0, size=(32, 64, 3)).astype(np.float32)
     img[5, 20] = 500.0                                              # a bright spot
     light = envmap.WorldLighting(img, strength=0.8).to_cubemap(n)
-    mat = brdf.Material(diffuse_albedo=(0.6, 0.3, 0.1), specular_color=(0.9, 0.7, 0.5),
+    mat = materials.Material(diffuse_albedo=(0.6, 0.3, 0.1), specular_color=(0.9, 0.7, 0.5),
                         roughness=0.3, distribution="BECKMANN")
-    spec_only = brdf.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=mat.specular_color,
+    spec_only = materials.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=mat.specular_color,
                               roughness=0.3, distribution="BECKMANN")
     eye = np.array([1.5, -2.0, 3.0])
     got = reference.shade_points(bits, pts, nrm, np.zeros(len(pts), np.int64), [mat], eye, cube,
@@ -463,8 +468,8 @@ def test_reference_material_slots_and_view_dirs():
     nrm = np.tile([0, 0, 1.0], (4, 1))
     bits, _ = trace(np.zeros((0, 3, 3)), pts, nrm)
     light = white_world()
-    m0 = brdf.Material(diffuse_albedo=(0.2, 0.2, 0.2))
-    m1 = brdf.Material(diffuse_albedo=(0.9, 0.1, 0.4))
+    m0 = materials.Material(diffuse_albedo=(0.2, 0.2, 0.2))
+    m1 = materials.Material(diffuse_albedo=(0.9, 0.1, 0.4))
     out = reference.shade_points(bits, pts, nrm, np.array([0, 1, 0, 7]), [m0, m1],
                                  np.array([0, 0, 5.0]), cube, light)
     np.testing.assert_allclose(out[0], m0.diffuse_albedo, atol=1e-3)
@@ -472,7 +477,7 @@ def test_reference_material_slots_and_view_dirs():
     # a slot past the table is the last one (Cycles clamps the material index)
     np.testing.assert_allclose(out[3], m1.diffuse_albedo, atol=1e-3)
     # view_dirs overrides eye
-    glossy = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.5)
+    glossy = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.5)
     vd = np.tile([0.0, 0.0, 1.0], (4, 1))
     a = reference.shade_points(bits, pts, nrm, np.zeros(4, np.int64), [glossy],
                                np.array([100.0, 0, 0.01]), cube, light, view_dirs=vd)
@@ -483,7 +488,7 @@ def test_reference_material_slots_and_view_dirs():
     # with a fine equal-area hemisphere quadrature (independent directions)
     hd, hw = directions.hemisphere_uniform(512)
     for rough, view in [(0.5, [0.0, 0.0, 1.0]), (0.7, [0.6, 0.0, 0.8]), (0.7, [0.0, -0.96, 0.28])]:
-        g = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=rough)
+        g = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=rough)
         albedo = (brdf.specular_cosine(g, nrm[:1], np.array([view]), hd)[0].astype(np.float64)
                   * hw).sum()
         got = reference.shade_points(bits, pts, nrm, np.zeros(4, np.int64), [g], None, cube,

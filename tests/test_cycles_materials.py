@@ -117,7 +117,7 @@ def test_glossy_multiscatter_sphere(tmp_path):
 
 
 def test_exported_materials_follow_cycles_nodes():
-    from prt_relight.addon import scene_export
+    from prt_relight.addon.blender import scene_export
 
     default = scene_export.DEFAULT_MATERIAL
     assert default.fresnel == "DIELECTRIC" and default.distribution == "MULTI_GGX"

@@ -1,4 +1,4 @@
-"""Dynamic objects (shadow fields, addon/dynamic.py): an object marked dynamic moves,
+"""Dynamic objects (shadow fields, addon/frame/dynamic.py): an object marked dynamic moves,
 turns and scales uniformly after its precompute and its shadows follow it -- checked
 against a full precompute of the scene at the new pose (exact ray casting), and against
 Cycles (slow)."""
@@ -9,7 +9,8 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import dynamic, runtime, storage
+from prt_relight.addon.frame import state as runtime
+from prt_relight.addon.blender import storage
 
 from . import blender_scene as bs
 
@@ -65,7 +66,7 @@ def test_moved_and_turned_object_shades_as_a_precompute_at_its_new_pose():
     data of the old pose are far off."""
     scene, cube = _scene()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
-    assert storage.has(cube, dynamic.FIELD)
+    assert storage.has(cube, storage.SHADOW_FIELD)
     _move(cube, (0.9, 0.4, 0.75), (0.3, 0.2, 1.3))
     state, moved = _shade()
     assert {st.name: st.status for st in state.objects} == {"Cube": "posed", "Grid": "posed"}
@@ -157,7 +158,7 @@ def test_marking_or_unmarking_dynamic_after_the_precompute_is_stale():
     state, _ = _shade()
     assert any("unmarked dynamic" in w for w in state.warnings), state.warnings
     assert bpy.ops.prt.clear() == {"FINISHED"}
-    assert not storage.has(cube, dynamic.FIELD)
+    assert not storage.has(cube, storage.SHADOW_FIELD)
 
 
 @pytest.mark.slow

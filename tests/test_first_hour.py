@@ -8,7 +8,8 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import precompute, runtime, storage
+from prt_relight.addon.blender import precompute, storage
+from prt_relight.addon.frame import state as runtime
 
 from . import blender_scene as bs
 
@@ -45,7 +46,7 @@ def _sync():
 def test_orthographic_camera_renders_every_method_in_f12_and_the_viewport(tmp_path):
     """An orthographic camera (and Blender's numpad views) crashed every method in
     ``_eye``; the viewport path draws exactly the F12 pixels of the same view."""
-    from prt_relight.addon.engine import in_render, render_pixels
+    from prt_relight.addon.frame.engine import in_render, render_pixels
 
     cam = _ball_scene()
     _ortho(cam)

@@ -1,11 +1,11 @@
-"""core.fitting: the non-negative least-squares solver against brute force."""
+"""core.common.fitting: the non-negative least-squares solver against brute force."""
 
 import itertools
 
 import numpy as np
 import pytest
 
-from prt_relight.core.fitting import nonnegative_least_squares
+from prt_relight.core.common.fitting import nonnegative_least_squares
 
 
 def _brute_force_nnls(A, b):

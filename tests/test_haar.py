@@ -5,8 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from prt_relight.core import haar
-from prt_relight.core.directions import cubemap
+from prt_relight.core.methods.wavelet import haar
+from prt_relight.core.sphere.directions import cubemap
 
 
 def _basis_on_pixels(n):

@@ -1,4 +1,4 @@
-"""Compact sources split off the environment (core/lights.py): the split itself, without
+"""Compact sources split off the environment (core/sphere/sources.py): the split itself, without
 Blender.  The per-pixel pass is tested in test_lights_addon.py."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from prt_relight.core import envmap, lights
+from prt_relight.core.sphere import envmap, sources as lights
 
 
 def _sky(h=128, w=256):
@@ -115,7 +115,7 @@ def test_components_join_diagonals_and_wrap():
     mask[1, 1] = mask[2, 2] = True           # diagonal neighbours
     mask[3, 0] = mask[3, 7] = True           # across the seam
     mask[0, 5] = True                        # alone
-    labels = lights._components(mask)
+    labels = lights.mask_components(mask)
     assert labels[1, 1] == labels[2, 2] != 0
     assert labels[3, 0] == labels[3, 7] != 0
     assert len({labels[1, 1], labels[3, 0], labels[0, 5]}) == 3

@@ -1,4 +1,4 @@
-"""Compact sources drawn per pixel (addon/lights.py): shadows against analytic penumbrae
+"""Compact sources drawn per pixel (addon/gpu/lights.py): shadows against analytic penumbrae
 and Cycles, the split's effect on frames, sun lamps through the same path."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import runtime
+from prt_relight.addon.frame import state as runtime
 
 from . import blender_scene as bs
 
@@ -175,7 +175,7 @@ def _dim_sky_with_sun(h=256, w=512, direction=(0.5, -0.6, 0.6), sun=2e4, sun_pix
     d = np.asarray(direction, float) / np.linalg.norm(direction)
     u = (0.5 - math.atan2(d[1], d[0]) / (2 * math.pi)) % 1.0
     v = math.acos(d[2]) / math.pi
-    dirs, _ = __import__("prt_relight.core.envmap", fromlist=["x"]).equirect_directions(h, w, 1)
+    dirs, _ = __import__("prt_relight.core.sphere.envmap", fromlist=["x"]).equirect_directions(h, w, 1)
     if sun_pixels == 1:
         img[min(int(v * h), h - 1), min(int(u * w), w - 1)] = sun
     else:                     # a disc of sun_pixels degrees radius

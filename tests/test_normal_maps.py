@@ -1,4 +1,4 @@
-"""Normal Map and Bump nodes (core/textures.py NormalSource): the perturbed normal against
+"""Normal Map and Bump nodes (core/scene/textures.py NormalSource): the perturbed normal against
 brute force (the geometric normal of the displaced surface by finite differences, a rotated
 tangent frame)."""
 
@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from prt_relight.core import textures
+from prt_relight.core.scene import textures
 
 
 def _frame(seed=0):
@@ -299,7 +299,7 @@ def _evaluated(ob):
 
 @pytest.mark.usefixtures("registered_addon")
 def test_export_reads_both_nodes_tangents_and_warns_other_links():
-    from prt_relight.addon import texture_export
+    from prt_relight.addon.blender import texture_export
     from . import blender_scene as bs
     bs.reset()
     plane = _mapped_plane("NORMAL_MAP", Strength=0.7)

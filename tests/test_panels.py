@@ -8,7 +8,8 @@ import types
 import bpy
 import pytest
 
-from prt_relight.addon import methods, panels, sg_material
+from prt_relight.addon import methods
+from prt_relight.addon.ui import panels, sg_material
 
 from . import blender_scene as bs
 
@@ -63,7 +64,7 @@ def test_settings_panel_draws_for_every_method():
         panels.draw_settings(FakeLayout(log), FakeContext(scene))
         shown = {name for kind, name in log if kind == "prop"}
         assert "method" in shown
-        budget = methods.REGISTRY[method_id].budget
+        budget = methods.REGISTRY[method_id].bench.budget
         if budget:
             assert budget[0] in shown, (method_id, shown)
         assert ("operator", "prt.precompute") in log
@@ -84,7 +85,7 @@ def test_material_panel_draws_every_model(model):
 def test_settings_panel_lists_the_compact_sources_it_draws():
     import numpy as np
 
-    from prt_relight.addon import runtime
+    from prt_relight.addon.frame import state as runtime
     bs.reset()
     img = np.full((64, 128, 3), 0.05, np.float32)
     img[10, 30] = 2e4

@@ -1,11 +1,11 @@
-"""core.pixel_filter: the supersampled frame's resolve with Cycles' Blackman-Harris filter."""
+"""core.shading.pixel_filter: the supersampled frame's resolve with Cycles' Blackman-Harris filter."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from prt_relight.core import pixel_filter as pf
+from prt_relight.core.shading import pixel_filter as pf
 
 
 def test_blackman_harris_shape():

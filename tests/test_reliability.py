@@ -11,7 +11,8 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import runtime, storage
+from prt_relight.addon.frame import state as runtime
+from prt_relight.addon.blender import storage
 
 from . import blender_scene as bs
 
@@ -306,7 +307,7 @@ def test_16k_world_is_drawn_from_a_halved_texture(tmp_path, monkeypatch):
     from halvings that keep the energy; the lighting is still resampled from the full
     image.  Checked with the limit at 64 on a 256-wide sky (the 16k image itself: by
     hand, docs/reliability.md)."""
-    from prt_relight.core import envmap
+    from prt_relight.core.sphere import envmap
     rng = np.random.default_rng(1)
     sky = rng.uniform(0.1, 1.0, (128, 256, 3)).astype(np.float32)
     halved = envmap.halve_equirect(sky, rows=7)             # in bands of rows, as for 16k
@@ -357,17 +358,18 @@ def test_no_camera_precomputes_refuses_f12_and_auto_chooses_at_its_probes(monkey
     """Without a camera the precompute runs, F12 is refused by Blender's own message,
     and AUTO chooses at its probe views.  In -b its GPU passes first needed a Workbench
     render, which failed with "Cannot render, no camera": the choice was never made."""
-    from prt_relight.addon import drawing
-    from prt_relight.addon.methods import auto
+    from prt_relight.addon.gpu import drawing
+    from prt_relight.addon.methods.auto import measure as auto_measure
+    from prt_relight.addon.methods.auto import measure
     scene = _scene()
     bpy.data.objects.remove(bpy.data.objects["Camera"])
     assert scene.camera is None
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     with pytest.raises(RuntimeError, match="no camera"):
         bpy.ops.render.render()
-    every = auto.AutoMethod.candidates
-    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
-        lambda: [c for c in every() if c[0].id in ("SH",)]))
+    every = measure.candidates
+    monkeypatch.setattr(auto_measure, "candidates",
+        lambda: [c for c in every() if c[0].id in ("SH",)])
     monkeypatch.setattr(drawing, "_GPU_READY", False)       # as in a fresh `blender -b`
     scene.prt.method = "AUTO"
     counts = _data_counts()
@@ -395,7 +397,7 @@ def test_every_method_draws_after_a_reference_precompute(tmp_path):
 
 
 def test_directions_changed_after_the_precompute_are_named_in_the_panel(tmp_path):
-    from prt_relight.addon import panels
+    from prt_relight.addon.ui import panels
 
     from .test_panels import FakeContext, FakeLayout
     scene = _scene()
@@ -415,7 +417,7 @@ def test_directions_changed_after_the_precompute_are_named_in_the_panel(tmp_path
 @pytest.mark.parametrize("where", ["disk full", "not a folder"])
 def test_report_that_cannot_be_written_says_why_and_leaves_everything(tmp_path, monkeypatch,
                                                                       where):
-    from prt_relight.core import report as core_report
+    from prt_relight.core.report import metrics as core_report
     scene = _scene()
     bpy.ops.prt.precompute()
     scene.prt.method = "SH"

@@ -11,8 +11,10 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon.engine import PRTRenderEngine
-from prt_relight.addon.methods import auto
+from prt_relight.addon.frame.engine import PRTRenderEngine
+from prt_relight.addon.methods.auto import shading as auto
+from prt_relight.addon.methods.auto import measure as auto_measure
+from prt_relight.addon.methods.auto import measure
 
 from . import blender_scene as bs
 
@@ -57,7 +59,7 @@ class FakeRenderEngine:
 
 def _scene(method):
     """Glossy Suzanne (subdivided once: several blocks of points) on a grid, precomputed."""
-    from prt_relight.addon.report import ensure_gpu
+    from prt_relight.addon.gpu.drawing import ensure_gpu
     bs.reset()
     bs.add_world(path=bs.hdri_path("city"))
     bs.add_ground(size=6.0, cuts=16)
@@ -110,33 +112,33 @@ def test_esc_stops_f12_at_once_and_draws_nothing(method):
 def test_esc_stops_auto_live_choice_and_keeps_nothing(monkeypatch):
     """AUTO without a stored choice chooses live inside F12: ESC between its measured
     candidates stops the frame; nothing is stored or kept half-measured."""
-    every = auto.AutoMethod.candidates
-    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
-        lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")]))
+    every = measure.candidates
+    monkeypatch.setattr(auto_measure, "candidates",
+        lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")])
     scene = _scene("AUTO")
     assert scene.prt.auto_choice == ""
-    auto._CHOICE_CACHE.clear()
-    before = auto.SELECTIONS[0]
+    auto.CHOICE_CACHE.clear()
+    before = measure.SELECTIONS[0]
     engine = _render(FakeRenderEngine(break_after=6))
     assert engine.breaks == 6 and engine.pixels is None
-    assert auto.SELECTIONS[0] > before             # it had started measuring
-    assert not auto._CHOICE_CACHE                  # an object half-measured is not kept
+    assert measure.SELECTIONS[0] > before             # it had started measuring
+    assert not auto.CHOICE_CACHE                  # an object half-measured is not kept
     assert scene.prt.auto_choice == ""
     # the same frame without ESC chooses live, reports progress to the end and draws
     engine = _render(FakeRenderEngine())
     assert engine.pixels is not None and engine.progress[-1] == 1.0
     assert all(a < b for a, b in zip(engine.progress, engine.progress[1:]))
-    assert len(auto._CHOICE_CACHE) == 2
+    assert len(auto.CHOICE_CACHE) == 2
 
 
 def test_viewport_measures_auto_off_the_main_thread(monkeypatch):
     """The viewport with AUTO and no stored choice: the first draw returns at once (the
     geometry unlit) while a worker measures; the next draw after it shows the frame."""
-    every = auto.AutoMethod.candidates
-    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
-        lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")]))
+    every = measure.candidates
+    monkeypatch.setattr(auto_measure, "candidates",
+        lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")])
     scene = _scene("AUTO")
-    auto._CHOICE_CACHE.clear()
+    auto.CHOICE_CACHE.clear()
     depsgraph = bpy.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(depsgraph)
     w, h = 32, 24
@@ -144,9 +146,9 @@ def test_viewport_measures_auto_off_the_main_thread(monkeypatch):
     view = cam.matrix_world.inverted()
     engine = bs.FakeViewEngine()
     _, first = bs.view_draw(depsgraph, view, window, w, h, engine=engine)
-    assert len(engine.workers) == 1 and not auto._CHOICE_CACHE     # measuring meanwhile
+    assert len(engine.workers) == 1 and not auto.CHOICE_CACHE     # measuring meanwhile
     engine.workers[0].join(300)
-    assert len(auto._CHOICE_CACHE) == 2
+    assert len(auto.CHOICE_CACHE) == 2
     _, second = bs.view_draw(depsgraph, view, window, w, h, engine=engine)
     assert len(engine.workers) == 1
     drawn = second[..., 3] > 0.5

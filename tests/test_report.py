@@ -11,8 +11,10 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import methods, storage
-from prt_relight.core import report as core_report
+from prt_relight.addon import methods
+from prt_relight.addon.benchmark import measuring, sweep
+from prt_relight.addon.blender import storage
+from prt_relight.core.report import metrics as core_report
 
 from . import blender_scene as bs
 
@@ -93,17 +95,16 @@ def _read_png(path) -> np.ndarray:
 def test_png_round_trip_and_heatmap_ramp(tmp_path, channels):
     """The PNG written (OpenImageIO, and Blender's image API where it is missing) holds the
     pixels given, alpha unpremultiplied."""
-    from prt_relight.addon import report
     rng = np.random.default_rng(3)
     rgb = rng.integers(0, 256, (5, 11, channels), dtype=np.uint8)
     core_report.write_png(tmp_path / "a.png", rgb)
     np.testing.assert_array_equal(_read_png(tmp_path / "a.png"), rgb)
-    saved = core_report._oiio
+    saved = core_report.oiio
     try:
-        core_report._oiio = None
-        report.write_png(tmp_path / "b.png", rgb)
+        core_report.oiio = None
+        measuring.write_png(tmp_path / "b.png", rgb)
     finally:
-        core_report._oiio = saved
+        core_report.oiio = saved
     np.testing.assert_array_equal(_read_png(tmp_path / "b.png"), rgb)
     heat = core_report.heatmap_rgb(np.array([[0.0, 0.1, 0.2, 5.0, np.nan]]), 0.2)
     assert tuple(heat[0, 0]) == (0, 0, 5)                        # ramp start
@@ -146,12 +147,11 @@ def _tiny_scene():
 
 @pytest.mark.usefixtures("registered_addon")
 def test_sweep_covers_every_registered_method_and_budget():
-    from prt_relight.addon import report
-    rows = report.sweep()
+    rows = measuring.sweep()
     assert rows[0][0].id == "REFERENCE"
     for m in methods.REGISTRY.values():
         values = [v for mm, _, v in rows if mm is m]
-        assert values == (list(m.budget[1]) if m.budget else [None]), m.id
+        assert values == (list(m.bench.budget[1]) if m.bench.budget else [None]), m.id
 
 
 # Methods run in the Blender tests (the full sweep of every method is bench/report.py's
@@ -161,29 +161,28 @@ FAST = {"REFERENCE", "SH", "WAVELET", "AUTO"}
 
 @pytest.fixture
 def fast_auto(monkeypatch):
-    from prt_relight.addon.methods import auto
-    every = auto.AutoMethod.candidates
-    monkeypatch.setattr(auto.AutoMethod, "candidates", staticmethod(
-        lambda: [c for c in every() if c[0].id in FAST]))
+    from prt_relight.addon.methods.auto import measure as auto_measure
+    every = auto_measure.candidates
+    monkeypatch.setattr(auto_measure, "candidates",
+        lambda: [c for c in every() if c[0].id in FAST])
 
 
 @pytest.mark.usefixtures("registered_addon", "fast_auto")
 def test_report_measures_each_method_and_restores_the_scene(tmp_path):
-    from prt_relight.addon import report
     _tiny_scene()
     scene = bpy.context.scene
     scene.prt.method = "SH"
     scene.prt.sh_order = 3
     out = tmp_path / "rep"
     images = sorted(i.name for i in bpy.data.images if i.type != "RENDER_RESULT")
-    run = report.ReportRun(scene, out, repeats=1, method_ids=FAST)
+    run = sweep.ReportRun(scene, out, repeats=1, method_ids=FAST)
     index = run.run()
     # nothing any method stored during the sweep is left behind
     assert sorted(i.name for i in bpy.data.images if i.type != "RENDER_RESULT") == images
     assert index == out / "index.html" and index.is_file()
     text = index.read_text()
     chosen = [m for m in methods.REGISTRY.values() if m.id in FAST]
-    expected_rows = sum(len(m.budget[1]) if m.budget else 1 for m in chosen)
+    expected_rows = sum(len(m.bench.budget[1]) if m.bench.budget else 1 for m in chosen)
     assert len(run.rows) == expected_rows
     for m in chosen:
         assert f">{m.id}<" in text                               # in the plot's legend
@@ -225,7 +224,6 @@ def test_report_measures_each_method_and_restores_the_scene(tmp_path):
 
 @pytest.mark.usefixtures("registered_addon")
 def test_report_cancel_leaves_no_half_report(tmp_path):
-    from prt_relight.addon import report
     _tiny_scene()
     scene = bpy.context.scene
     assert bpy.ops.prt.precompute() == {"FINISHED"}
@@ -233,7 +231,7 @@ def test_report_cancel_leaves_no_half_report(tmp_path):
     scene.prt.method = "SH"
     scene.prt.sh_order = 2
     out = tmp_path / "rep"
-    run = report.ReportRun(scene, out, repeats=1, method_ids=FAST)
+    run = sweep.ReportRun(scene, out, repeats=1, method_ids=FAST)
     steps = run.steps()
     next(steps)
     next(steps)
@@ -262,11 +260,10 @@ def test_report_operator_in_background(tmp_path):
 @pytest.mark.slow
 @pytest.mark.usefixtures("registered_addon")
 def test_report_against_cycles(tmp_path):
-    from prt_relight.addon import report
     _tiny_scene()
     engine = bpy.context.scene.render.engine
     out = tmp_path / "cy"
-    run = report.ReportRun(bpy.context.scene, out, repeats=1, include_cycles=True,
+    run = sweep.ReportRun(bpy.context.scene, out, repeats=1, include_cycles=True,
                            cycles_samples=32, method_ids={"REFERENCE", "SH"})
     run.run()
     assert (out / "cycles.png").is_file() and (out / "cycles.exr").is_file()
@@ -284,7 +281,7 @@ def test_report_modal_steps_and_esc(tmp_path):
     ESC between steps cancels with nothing written and the settings restored."""
     import types
 
-    from prt_relight.addon import report
+    from prt_relight.addon.benchmark import operator as report
 
     class Recorder:
         def __init__(self):
@@ -305,7 +302,7 @@ def test_report_modal_steps_and_esc(tmp_path):
 
     def start(out):
         op = Recorder()
-        op._run = report.ReportRun(scene, out, repeats=1, method_ids={"REFERENCE", "SH"})
+        op._run = sweep.ReportRun(scene, out, repeats=1, method_ids={"REFERENCE", "SH"})
         op._gen = op._run.steps()
         op._end = lambda c: report.PRT_OT_report._end(op, c)
         return op

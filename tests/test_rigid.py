@@ -1,9 +1,10 @@
-"""core.rigid (no Blender): a stored pose, a rigid motion told from an edit, and the stored
+"""core.scene.rigid (no Blender): a stored pose, a rigid motion told from an edit, and the stored
 row of every shading point after a turn -- against the motions that made them."""
 
 import numpy as np
 
-from prt_relight.core import envmap, mesh, rigid
+from prt_relight.core.sphere import envmap
+from prt_relight.core.scene import mesh, rigid
 
 
 def _matrix(rotation, translation, scale=(1.0, 1.0, 1.0)):

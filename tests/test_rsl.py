@@ -1,4 +1,4 @@
-"""Rotatable square lights (core/rsl.py, Xu et al. 2006) against brute force and REFERENCE."""
+"""Rotatable square lights (core/methods/rsl/shading.py, Xu et al. 2006) against brute force and REFERENCE."""
 
 from __future__ import annotations
 
@@ -7,7 +7,14 @@ import time
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf, cpca, directions, envmap, mesh, reference, rsl, visibility
+from prt_relight.core.shading import brdf
+from prt_relight.core.shading import materials
+from prt_relight.core.methods.rsl import cpca, shading as rsl
+from prt_relight.core.scene import distance_tables
+from prt_relight.core.methods.rsl import square_lights
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.scene import mesh, visibility
+from prt_relight.core.methods.reference import shading as reference
 
 CUBE = directions.cubemap(32)
 
@@ -25,7 +32,7 @@ def test_decomposition_preserves_energy_and_partitions_the_sphere():
     lighting = envmap.WorldLighting(image=img).to_cubemap(32)
     total = (lighting.radiance.astype(np.float64) * CUBE.solid_angles[:, None]).sum(0)
     for K in (10, 30, 100):
-        lights = rsl.decompose(lighting, CUBE, K)
+        lights = square_lights.decompose(lighting, CUBE, K)
         assert lights.count == K
         np.testing.assert_allclose(lights.energy.sum(0), total, rtol=1e-10)
         assert lights.solid_angles.sum() == pytest.approx(4 * np.pi, rel=1e-12)
@@ -38,8 +45,8 @@ def test_decomposition_preserves_energy_and_partitions_the_sphere():
 
 def test_subregions_are_connected():
     lighting = envmap.WorldLighting(image=_sky_with_sun()).to_cubemap(32)
-    lights = rsl.decompose(lighting, CUBE, 30)
-    pairs = rsl._texel_neighbours(CUBE)
+    lights = square_lights.decompose(lighting, CUBE, 30)
+    pairs = square_lights.texel_neighbours(CUBE)
     for k in range(lights.count):
         members = np.nonzero(lights.labels == k)[0]
         inside = np.zeros(CUBE.size, bool)
@@ -69,7 +76,7 @@ def test_one_pixel_sun_becomes_one_tiny_light():
     assert np.count_nonzero(envmap.WorldLighting(image=sun_only).to_cubemap(32).radiance[:, 0]) == 1
     img = _sky_with_sun(h, w, sun=(row, col), sun_value=5.0e5)
     lighting = envmap.WorldLighting(image=img).to_cubemap(32)
-    lights = rsl.decompose(lighting, CUBE, 30)
+    lights = square_lights.decompose(lighting, CUBE, 30)
     brightest = int(np.argmax(lights.intensity @ envmap.LUMINANCE))
     assert np.count_nonzero(lights.labels == brightest) == 1
     assert lights.solid_angles[brightest] < 1.5 * 4 * np.pi / CUBE.size
@@ -84,20 +91,20 @@ def test_one_pixel_sun_becomes_one_tiny_light():
 
 def test_error_budget_mode_stops_at_the_budget():
     lighting = envmap.WorldLighting(image=_sky_with_sun()).to_cubemap(32)
-    f30 = rsl.decompose(lighting, CUBE, 30).fit_error
-    loose = rsl.decompose(lighting, CUBE, None, error_budget=f30)
-    tight = rsl.decompose(lighting, CUBE, None, error_budget=f30 / 4)
+    f30 = square_lights.decompose(lighting, CUBE, 30).fit_error
+    loose = square_lights.decompose(lighting, CUBE, None, error_budget=f30)
+    tight = square_lights.decompose(lighting, CUBE, None, error_budget=f30 / 4)
     assert loose.fit_error <= f30 and tight.fit_error <= f30 / 4
     assert tight.count > loose.count >= 1
     assert loose.count <= 30
-    assert rsl.decompose(lighting, CUBE, 10, error_budget=1e9).count == 10
+    assert square_lights.decompose(lighting, CUBE, 10, error_budget=1e9).count == 10
 
 
 def test_decomposition_is_fast():
     """6x32² -> 30 lights; the bench prints the time, here only a generous bound."""
     lighting = envmap.WorldLighting(image=_sky_with_sun()).to_cubemap(32)
     t0 = time.perf_counter()
-    rsl.decompose(lighting, CUBE, 30)
+    square_lights.decompose(lighting, CUBE, 30)
     assert time.perf_counter() - t0 < 10.0
 
 
@@ -113,18 +120,18 @@ def _brute_box(values, x0, x1, y0, y1):
 def test_sat_box_integrals_equal_brute_force_sums():
     rng = np.random.default_rng(1)
     vals = rng.random((16, 16))                              # per-texel integrals
-    S = rsl.summed_area(vals)
+    S = distance_tables.summed_area(vals)
     for _ in range(200):
         px, py = rng.uniform(-1.2, 1.2, 2)
         half = rng.uniform(0.01, 0.6)
-        got = rsl.box_integral(S, np.array(px), np.array(py), np.array(half))
+        got = distance_tables.box_integral(S, np.array(px), np.array(py), np.array(half))
         want = _brute_box(vals, px - half, px + half, py - half, py + half)
         assert got == pytest.approx(want, abs=1e-12)
 
 
 @pytest.mark.parametrize("material", [
-    brdf.Material(specular_color=(1, 1, 1), roughness=0.4, distribution="GGX"),
-    brdf.principled_material(roughness=0.5),
+    materials.Material(specular_color=(1, 1, 1), roughness=0.4, distribution="GGX"),
+    materials.principled_material(roughness=0.5),
 ])
 def test_brdf_sat_matches_quadrature(material):
     """Square averages of the SAT equal a fine quadrature of BRDF x cosine (eq. 8)."""
@@ -161,16 +168,16 @@ def test_vdt_equals_box_integral_for_straight_boundaries():
         maps = np.zeros((2, n, n), np.float32)
         maps[0, :, edge:] = 1.0                               # visible for x > x_b
         maps[1, :edge, :] = 1.0                               # visible for y < y_b (rows)
-        vdt = rsl.visibility_distance_table(maps)
+        vdt = distance_tables.visibility_distance_table(maps)
         for _ in range(50):
             half = rng.uniform(0.02, 0.3)
             px, py = rng.uniform(-1 + half, 1 - half, 2)      # inside the domain
             want0 = np.clip((px + half - x_b) / (2 * half), 0, 1)
             want1 = np.clip((x_b - (py - half)) / (2 * half), 0, 1)
-            got = rsl.vdt_box(vdt, np.array([px, px]), np.array([py, py]), half,
+            got = distance_tables.vdt_box(vdt, np.array([px, px]), np.array([py, py]), half,
                               lead=np.arange(2))
             np.testing.assert_allclose(got, [want0, want1], atol=1e-6)
-            sat = rsl.visibility_sat(maps)
+            sat = distance_tables.visibility_sat(maps)
             got_sat = rsl.visible_fraction("SAT", sat, np.array([[px], [px]]),
                                            np.array([[py], [py]]), half)[:, 0]
             np.testing.assert_allclose(got_sat, [want0, want1], atol=1e-5)
@@ -183,7 +190,7 @@ def test_sat_visibility_averages_the_part_of_the_square_inside_the_table():
     n = 32
     maps = np.zeros((1, n, n), np.float32)
     maps[0, :, 24:] = 1.0                                 # visible for x > -1 + 24·2/n = 0.5
-    sat = rsl.visibility_sat(maps)
+    sat = distance_tables.visibility_sat(maps)
     rng = np.random.default_rng(11)
     for _ in range(40):
         half = rng.uniform(0.1, 0.4)
@@ -202,7 +209,7 @@ def test_vdt_is_the_signed_distance():
     maps = np.zeros((1, n, n), np.float32)
     yy, xx = np.mgrid[0:n, 0:n]
     maps[0][(xx - 15.5) ** 2 + (yy - 15.5) ** 2 < 8 ** 2] = 1.0  # a disc of radius ~8 texels
-    vdt = rsl.visibility_distance_table(maps)[0]
+    vdt = distance_tables.visibility_distance_table(maps)[0]
     h = 2.0 / n
     r = np.hypot(xx - 15.5, yy - 15.5) * h
     # true signed distance to the circle, up to the texel staircase (< one texel)
@@ -220,7 +227,7 @@ def test_vdt_equals_brute_force_distances():
     maps = maps.astype(np.float32)
     maps[4] = 1.0
     maps[5] = 0.0
-    got = rsl.visibility_distance_table(maps, chunk=4)      # chunks of fewer maps too
+    got = distance_tables.visibility_distance_table(maps, chunk=4)      # chunks of fewer maps too
     yy, xx = np.mgrid[0:n, 0:n]
     for m, table in zip(maps, got):
         vis = m >= 0.5
@@ -239,12 +246,12 @@ def test_visibility_tables_equal_the_maps_pipeline():
     """The fused, threaded derivation (blocks of a few points on 2 threads) gives the
     VDT / SAT of the maps, in the requested type; a progress callback that raises stops it."""
     pos, nrm, bits = _scene(6)
-    maps = rsl.visibility_maps(bits, nrm, CUBE, 32)
-    vdt = rsl.visibility_tables(bits, nrm, CUBE, "VDT", threads=2, block=5)
-    np.testing.assert_array_equal(vdt, rsl.visibility_distance_table(maps))
-    sat = rsl.visibility_tables(bits, nrm, CUBE, "SAT", threads=2, block=5)
-    np.testing.assert_allclose(sat, rsl.visibility_sat(maps), atol=1e-6)
-    half = rsl.visibility_tables(bits, nrm, CUBE, "VDT", dtype=np.float16, threads=1, block=7)
+    maps = distance_tables.visibility_maps(bits, nrm, CUBE, 32)
+    vdt = distance_tables.visibility_tables(bits, nrm, CUBE, "VDT", threads=2, block=5)
+    np.testing.assert_array_equal(vdt, distance_tables.visibility_distance_table(maps))
+    sat = distance_tables.visibility_tables(bits, nrm, CUBE, "SAT", threads=2, block=5)
+    np.testing.assert_allclose(sat, distance_tables.visibility_sat(maps), atol=1e-6)
+    half = distance_tables.visibility_tables(bits, nrm, CUBE, "VDT", dtype=np.float16, threads=1, block=7)
     assert half.dtype == np.float16
     np.testing.assert_allclose(half, vdt, atol=2e-3)
     seen = []
@@ -253,7 +260,7 @@ def test_visibility_tables_equal_the_maps_pipeline():
         seen.append(fraction)
         raise KeyboardInterrupt
     with pytest.raises(KeyboardInterrupt):
-        rsl.visibility_tables(bits, nrm, CUBE, "VDT", threads=2, block=5, progress=stop)
+        distance_tables.visibility_tables(bits, nrm, CUBE, "VDT", threads=2, block=5, progress=stop)
     assert seen == [5 / len(nrm)]
 
 
@@ -280,16 +287,16 @@ def test_visibility_maps_are_the_hemisphere_visibility():
     nrm = directions.fibonacci_sphere(20)
     open_bits = np.packbits(visibility.hemisphere_mask(nrm, CUBE), axis=1)
     for sub in (1, 2):
-        assert np.all(rsl.visibility_maps(open_bits, nrm, CUBE, 32, sub) == 1.0)  # no rim
-    maps = rsl.visibility_maps(open_bits, nrm, CUBE, 32)
-    vdt = rsl.visibility_distance_table(maps)
+        assert np.all(distance_tables.visibility_maps(open_bits, nrm, CUBE, 32, sub) == 1.0)  # no rim
+    maps = distance_tables.visibility_maps(open_bits, nrm, CUBE, 32)
+    vdt = distance_tables.visibility_distance_table(maps)
     assert np.all(vdt > 0)
     # an occluder covering the half space w . a < 0 (a great circle through the horizon)
     a = np.array([0.3, -0.8, 0.52])
     a /= np.linalg.norm(a)
     lit = (CUBE.directions @ a > 0)[None, :] & visibility.hemisphere_mask(nrm, CUBE)
-    maps = rsl.visibility_maps(np.packbits(lit, axis=1), nrm, CUBE, 32, sub=1)
-    px, py, _, _ = rsl.disk_texel_samples(32, 1)
+    maps = distance_tables.visibility_maps(np.packbits(lit, axis=1), nrm, CUBE, 32, sub=1)
+    px, py, _, _ = distance_tables.disk_texel_samples(32, 1)
     r = np.hypot(px, py)
     z0 = 2.0 / CUBE.resolution
     scale = np.minimum(1.0, np.sqrt(1.0 - z0) / r)            # outside: read at height z0
@@ -315,13 +322,13 @@ def test_horizon_is_cut_once(graded):
     if graded:                                              # bright towards the nadir
         img *= (0.2 + np.linspace(0.0, 1.0, 64) ** 2)[:, None, None].astype(np.float32)
     lighting = envmap.WorldLighting(image=img).to_cubemap(32)
-    mat = brdf.Material()
+    mat = materials.Material()
     ref = reference.shade_points(bits, np.zeros_like(nrm), nrm, np.zeros(len(nrm), int), [mat],
                                  None, CUBE, lighting)
-    table = rsl.visibility_distance_table(rsl.visibility_maps(bits, nrm, CUBE, 32))
+    table = distance_tables.visibility_distance_table(distance_tables.visibility_maps(bits, nrm, CUBE, 32))
     tables = rsl.brdf_tables(mat)
     for K, bound in ((30, 0.01), (100, 0.004)):
-        ev = rsl.Evaluator(rsl.decompose(lighting, CUBE, K))
+        ev = rsl.Evaluator(square_lights.decompose(lighting, CUBE, K))
         V, C = ev.diffuse_factors(nrm, "VDT", table, tables)
         out = ev.shade(mat, tables, nrm, None, V, C)
         assert np.linalg.norm(out - ref) / np.linalg.norm(ref) < bound
@@ -338,13 +345,13 @@ def test_merges_follow_fig5():
     Y = np.maximum(lighting.radiance.astype(np.float64) @ envmap.LUMINANCE, 0.0)
     dw = cube.solid_angles.astype(np.float64)
     regions = [{i} for i in range(cube.size)]
-    texel_pairs = rsl._texel_neighbours(cube)
+    texel_pairs = square_lights.texel_neighbours(cube)
 
     def cost(members):
         m = np.array(sorted(members))
         A = dw[m].sum()
         M = (cube.mean_directions[m] * dw[m, None]).sum(0)
-        return rsl._fit_error(A, (Y[m] * dw[m]).sum(), (Y[m] ** 2 * dw[m]).sum(), M) * A
+        return square_lights.square_fit_error(A, (Y[m] * dw[m]).sum(), (Y[m] ** 2 * dw[m]).sum(), M) * A
 
     while len(regions) > 12:
         owner = np.empty(cube.size, int)
@@ -353,7 +360,7 @@ def test_merges_follow_fig5():
         pairs = {tuple(sorted(p)) for p in owner[texel_pairs] if p[0] != p[1]}
         i, j = min(pairs, key=lambda p: cost(regions[p[0]] | regions[p[1]]))
         regions[i] |= regions.pop(j)
-    lights = rsl.decompose(lighting, cube, 12)
+    lights = square_lights.decompose(lighting, cube, 12)
     got = sorted(sorted(np.nonzero(lights.labels == k)[0].tolist()) for k in range(12))
     assert got == sorted(sorted(reg) for reg in regions)
 
@@ -365,17 +372,17 @@ def test_rsl_converges_to_reference(kind):
     pos, nrm, bits = _scene()
     img = envmap.load_equirect(str(_hdri("forest"))) if _hdri("forest") else _sky_with_sun()
     lighting = envmap.WorldLighting(image=img).to_cubemap(32)
-    mat = brdf.principled_material(roughness=0.5)
+    mat = materials.principled_material(roughness=0.5)
     eye = np.array([3.0, -4.0, 2.5])
     ref = reference.shade_points(bits, pos, nrm, np.zeros(len(nrm), int), [mat], eye, CUBE,
                                  lighting)
-    maps = rsl.visibility_maps(bits, nrm, CUBE, 32)
-    table = rsl.visibility_distance_table(maps) if kind == "VDT" else rsl.visibility_sat(maps)
+    maps = distance_tables.visibility_maps(bits, nrm, CUBE, 32)
+    table = distance_tables.visibility_distance_table(maps) if kind == "VDT" else distance_tables.visibility_sat(maps)
     tables = rsl.brdf_tables(mat)
     views = reference.view_directions(pos, eye)
     errs = []
     for K in (10, 100, CUBE.size):
-        ev = rsl.Evaluator(rsl.decompose(lighting, CUBE, K))
+        ev = rsl.Evaluator(square_lights.decompose(lighting, CUBE, K))
         V, C = ev.diffuse_factors(nrm, kind, table, tables)
         out = ev.shade(mat, tables, nrm, views, V, C)
         errs.append(np.linalg.norm(out - ref) / np.linalg.norm(ref))
@@ -391,10 +398,10 @@ def test_world_rotation_rotates_the_lights():
     pos, nrm, bits = _scene(8)
     img = _sky_with_sun()
     R = envmap.euler_xyz_matrix(0.3, -0.2, 1.1)
-    mat = brdf.Material()
-    lights = rsl.decompose(envmap.WorldLighting(image=img).to_cubemap(32), CUBE, 100)
-    maps = rsl.visibility_maps(bits, nrm, CUBE, 32)
-    sat = rsl.visibility_sat(maps)
+    mat = materials.Material()
+    lights = square_lights.decompose(envmap.WorldLighting(image=img).to_cubemap(32), CUBE, 100)
+    maps = distance_tables.visibility_maps(bits, nrm, CUBE, 32)
+    sat = distance_tables.visibility_sat(maps)
     tables = rsl.brdf_tables(mat)
     ref = reference.shade_points(bits, pos, nrm, np.zeros(len(nrm), int), [mat], None, CUBE,
                                  envmap.WorldLighting(image=img, rotation=R).to_cubemap(32))
@@ -460,18 +467,18 @@ def test_offset_sat_keeps_float32_precision():
     n = 32
     cell = (2.0 / n) ** 2
     integ = (50.0 + rng.random((n, n))) * cell
-    exact = rsl.summed_area(integ)
+    exact = distance_tables.summed_area(integ)
     plain = exact.astype(np.float32)
-    offset_sat, mean = rsl._offset_sat(integ, cell)
+    offset_sat, mean = rsl.offset_sat(integ, cell)
     offset_sat = offset_sat.astype(np.float32)
     err_plain, err_offset = [], []
     for _ in range(300):
         half = rng.uniform(0.005, 0.03)
         px, py = rng.uniform(0.3, 0.9, 2)                 # far corner: large SAT values
-        want = rsl.box_integral(exact, px, py, half)
-        got_plain = rsl.box_integral(plain.astype(np.float64), px, py, half)
-        got_offset = (rsl.box_integral(offset_sat.astype(np.float64), px, py, half)
-                      + mean * rsl._clipped_area(px, py, half))
+        want = distance_tables.box_integral(exact, px, py, half)
+        got_plain = distance_tables.box_integral(plain.astype(np.float64), px, py, half)
+        got_offset = (distance_tables.box_integral(offset_sat.astype(np.float64), px, py, half)
+                      + mean * rsl.clipped_area(px, py, half))
         err_plain.append(abs(got_plain - want) / want)
         err_offset.append(abs(got_offset - want) / want)
     assert np.max(err_offset) < 1e-4

@@ -10,7 +10,11 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from prt_relight.core import brdf, directions, envmap, rsl  # noqa: E402
+from prt_relight.core.shading import materials
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.methods.rsl import shading as rsl
+from prt_relight.core.scene import distance_tables
+from prt_relight.core.methods.rsl import square_lights  # noqa: E402
 
 from .test_rsl import _scene, _sky_with_sun  # noqa: E402
 
@@ -31,29 +35,29 @@ def _gpu_context():
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["VDT", "SAT"])
 def test_glsl_pass_equals_numpy(registered_addon, kind):
-    from prt_relight.addon.methods import rsl as method
+    from prt_relight.addon.methods.rsl import shading as method
     _gpu_context()
     pos, nrm, bits = _scene(8)
-    maps = rsl.visibility_maps(bits, nrm, CUBE, 32)
-    table = rsl.visibility_distance_table(maps) if kind == "VDT" else rsl.visibility_sat(maps)
-    table = table.astype(method._held_dtype(kind))      # as drawn: a VDT in half floats
+    maps = distance_tables.visibility_maps(bits, nrm, CUBE, 32)
+    table = distance_tables.visibility_distance_table(maps) if kind == "VDT" else distance_tables.visibility_sat(maps)
+    table = table.astype(method.held_dtype(kind))      # as drawn: a VDT in half floats
     lighting = envmap.WorldLighting(image=_sky_with_sun()).to_cubemap(32)
     R = envmap.euler_xyz_matrix(0.1, 0.2, 0.7)
-    ev = rsl.Evaluator(rsl.decompose(lighting, CUBE, 40), R)
+    ev = rsl.Evaluator(square_lights.decompose(lighting, CUBE, 40), R)
     eye = np.array([2.0, -3.0, 2.0])
     views = eye[None, :] - pos
     views /= np.linalg.norm(views, axis=1, keepdims=True)
-    from prt_relight.addon.engine import in_render
+    from prt_relight.addon.frame.engine import in_render
     sel = np.arange(1, len(nrm), 2)                      # a subset: tables by index
-    mats = (brdf.Material(), brdf.principled_material(metallic=0.3, roughness=0.4),
-            brdf.Material(specular_color=(0.9, 0.5, 0.2), roughness=0.3,
+    mats = (materials.Material(), materials.principled_material(metallic=0.3, roughness=0.4),
+            materials.Material(specular_color=(0.9, 0.5, 0.2), roughness=0.3,
                           distribution="BECKMANN", fresnel="SCHLICK"))
 
     def passes(_depsgraph):
         """The GLSL pass of every material, inside a render (the gpu module's context in
         -b: drawing outside one may corrupt it for later passes)."""
         # textures of 7 points each: several batches, a table's texels cross rows
-        batches = method._vis_textures(table, batch=7)
+        batches = method.vis_textures(table, batch=7)
         assert len(batches) == -(-len(nrm) // 7)
         out = []
         for mat in mats:
@@ -79,7 +83,7 @@ def test_glsl_pass_equals_numpy(registered_addon, kind):
 
 @pytest.mark.slow
 def test_method_renders_and_follows_world_rotation(registered_addon):
-    from prt_relight.addon.runtime import FrameState
+    from prt_relight.addon.frame.state import FrameState
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=12, y_subdivisions=12, size=4)
@@ -109,7 +113,7 @@ def test_method_renders_and_follows_world_rotation(registered_addon):
     scene.prt.method = "RSL"
     scene.prt.rsl_lights = 30
     # RSL shades the whole world here: the sun is not split off as a compact source drawn
-    # per pixel (addon/lights.py), so turning the world turns RSL's own lights
+    # per pixel (addon/gpu/lights.py), so turning the world turns RSL's own lights
     scene.prt.light_sources = 0
     bpy.ops.prt.precompute()
     scene.render.engine = "BLENDER_WORKBENCH"
@@ -124,7 +128,7 @@ def test_method_renders_and_follows_world_rotation(registered_addon):
 
     a = shaded()
     # the precompute stored the CPCA-compressed VDT; sync reconstructs it
-    from prt_relight.addon.methods import rsl as method
+    from prt_relight.addon.methods.rsl import shading as method
     state = FrameState()
     state.sync(bpy.context.evaluated_depsgraph_get())
     for st in state.objects:
@@ -139,10 +143,10 @@ def test_method_renders_and_follows_world_rotation(registered_addon):
     scene.prt.method = "RSL"
     assert np.isfinite(a).all()
     assert np.linalg.norm(a - ref) / np.linalg.norm(ref) < 0.1
-    decompositions = len(method._LIGHTS)
+    decompositions = len(method.LIGHTS)
     mapping.inputs["Rotation"].default_value = (0.0, 0.0, 1.3)
     b = shaded()
-    assert len(method._LIGHTS) == decompositions      # no new decomposition
+    assert len(method.LIGHTS) == decompositions      # no new decomposition
     scene.prt.method = "REFERENCE"
     ref_b = shaded()
     assert np.linalg.norm(b - a) / np.linalg.norm(a) > 0.05
@@ -154,7 +158,7 @@ def test_turning_an_object_turns_its_self_shadowing_without_recompute(registered
     """The VDTs live in vertex frames: after a rigid turn (and move) of the object the
     stored data, read in the object's precompute orientation with the points matched
     to their stored rows, shades like a fresh precompute."""
-    from prt_relight.addon.runtime import FrameState
+    from prt_relight.addon.frame.state import FrameState
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     bpy.ops.mesh.primitive_monkey_add()

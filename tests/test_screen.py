@@ -1,4 +1,4 @@
-"""core.screen: the pixels each corner stands for in a camera's image (AUTO weighs its
+"""core.methods.auto.screen: the pixels each corner stands for in a camera's image (AUTO weighs its
 per-vertex errors by them), against analytic projected areas."""
 
 from __future__ import annotations
@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from prt_relight.core import mesh, screen, visibility
+from prt_relight.core.scene import mesh, visibility
+from prt_relight.core.methods.auto import screen
 
 pytestmark = pytest.mark.skipif(not visibility.have_embree(), reason="needs embreex")
 

@@ -1,12 +1,12 @@
-"""Spherical Gaussians (core/sg.py, Wang et al. 2009) against numerical quadrature."""
+"""Spherical Gaussians (core/sg/algebra.py, Wang et al. 2009) against numerical quadrature."""
 
 import math
 
 import numpy as np
 import pytest
 
-from prt_relight.core import sg
-from prt_relight.core.directions import fibonacci_sphere, orthonormal_frame
+from prt_relight.core.sg import algebra as sg
+from prt_relight.core.sphere.directions import fibonacci_sphere, orthonormal_frame
 
 LAMBDAS = (1e-3, 0.1, 1.0, 10.0, 100.0, 1e4, 1e5)
 RNG_SEED = 20090531

@@ -1,12 +1,17 @@
-"""SG reflectance (core/sg_brdf.py, Wang et al. 2009, §4) against quadrature of analytic BRDFs."""
+"""SG reflectance (core/sg/brdf.py, Wang et al. 2009, §4) against quadrature of analytic BRDFs."""
 
 import math
 
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf, sg, sg_brdf, sg_ndf
-from prt_relight.core.directions import fibonacci_sphere, orthonormal_frame
+from prt_relight.core.shading import brdf
+from prt_relight.core.shading import materials
+from prt_relight.core.sg import algebra as sg, brdf as sg_brdf, ndf as sg_ndf
+from prt_relight.core.sg import albedo
+from prt_relight.core.sg import reflectance
+from prt_relight.core.sg import ggx_warp
+from prt_relight.core.sphere.directions import fibonacci_sphere, orthonormal_frame
 
 _FIB = fibonacci_sphere(120_000)
 _FIB_W = 4.0 * math.pi / len(_FIB)
@@ -87,7 +92,7 @@ def _ndf_rel_error_fib(material):
     ("ASHIKHMIN_SHIRLEY", dict(nu=75.0, nv=1200.0), 0.05),
 ])
 def test_ndf_fit_error_by_independent_quadrature(model, params, max_err):
-    mat = sg_brdf.SGMaterial(model=model, **params)
+    mat = reflectance.SGMaterial(model=model, **params)
     err, fit = _ndf_rel_error_fib(mat)
     print(f"NDF fit {model} {params}: {len(fit.lam)} lobes, rel L2 {err:.4f} "
           f"(module's own estimate {fit.rel_error:.4f})")
@@ -119,7 +124,7 @@ def test_specular_brdf_is_cycles_glossy_beckmann():
     t, _ = orthonormal_frame(n)
     v = n * 0.6 + t * 0.8
     dirs = fibonacci_sphere(500)
-    cm = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.7, 0.5, 0.2), roughness=0.4,
+    cm = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.7, 0.5, 0.2), roughness=0.4,
                        distribution="BECKMANN")
     ref = brdf.reflectance_cosine(cm, n, v, dirs)
     ours = sg_brdf.specular_brdf(sg_brdf.sg_material_from_brdf(cm), n, v, dirs)
@@ -134,12 +139,12 @@ def test_fresnel_eq14_matches_cycles_dielectric():
 
 
 def test_principled_fresnel_coefficients_reproduce_cycles_remap():
-    m = brdf.principled_material(base_color=(0.8, 0.3, 0.1), metallic=0.4, roughness=0.3, ior=1.45)
+    m = materials.principled_material(base_color=(0.8, 0.3, 0.1), metallic=0.4, roughness=0.3, ior=1.45)
     s = sg_brdf.sg_material_from_brdf(m)
     c = np.linspace(0.01, 1.0, 50)
-    got = sg_brdf._fresnel(s, c)
+    got = sg_brdf.ks_fresnel(s, c)
     f0 = np.asarray(m.specular_color)
-    diel = f0 + (1 - f0) * brdf._dielectric_s(c, m.ior)[:, None]
+    diel = f0 + (1 - f0) * brdf.dielectric_s(c, m.ior)[:, None]
     metal = brdf.fresnel_f82(c, np.clip(m.diffuse_albedo, 0, 1), np.zeros(3))
     ref = (1 - m.metallic) * diel + m.metallic * metal
     assert np.allclose(got, ref, atol=1e-9)
@@ -161,7 +166,7 @@ MODEL_CASES = [
 def test_specular_lobes_integrate_like_the_brdf(model, params, max_err):
     """int rho_s cos L by quadrature: SG view slice (eq. 22) vs the analytic BRDF,
     views 0-70 deg, two azimuths (anisotropic models see the tangent)."""
-    mat = sg_brdf.SGMaterial(model=model, specular=(1.0, 0.8, 0.5), **params)
+    mat = reflectance.SGMaterial(model=model, specular=(1.0, 0.8, 0.5), **params)
     views = np.vstack([_views([0, 20, 40, 60, 70]), _views([30, 60], azimuth=1.0)])
     tangents = np.tile([math.cos(0.3), math.sin(0.3), 0.0], (len(views), 1))
     got, ref = _integrals(mat, views, tangents)
@@ -174,7 +179,7 @@ def test_specular_lobes_integrate_like_the_brdf(model, params, max_err):
 def test_grazing_views_stay_finite_and_bounded():
     views = _views([80, 85, 89, 89.99, 90.0, 95.0])
     for model, params, _ in MODEL_CASES:
-        mat = sg_brdf.SGMaterial(model=model, **params)
+        mat = reflectance.SGMaterial(model=model, **params)
         n = np.tile([0.0, 0.0, 1.0], (len(views), 1))
         ax, lam, mu = sg_brdf.specular_lobes(mat, n, views)
         assert np.all(np.isfinite(ax)) and np.all(np.isfinite(lam)) and np.all(np.isfinite(mu))
@@ -189,9 +194,9 @@ def test_grazing_views_stay_finite_and_bounded():
 
 def test_cycles_glossy_beckmann_03_within_6_percent():
     """The target: Cycles' Glossy BSDF (Beckmann, roughness 0.3) through
-    sg_material_from_brdf, against core.brdf (Cycles' evaluation) by quadrature,
+    sg_material_from_brdf, against core.shading.brdf (Cycles' evaluation) by quadrature,
     views 0-80 deg, the SG clamped cosine of eq. 40 NOT used (exact cosine)."""
-    cm = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.8, 0.8), roughness=0.3,
+    cm = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.8, 0.8), roughness=0.3,
                        distribution="BECKMANN")
     views = _views([0, 15, 30, 45, 60, 70, 80])
     n = np.tile([0.0, 0.0, 1.0], (len(views), 1))
@@ -207,7 +212,7 @@ def test_cycles_glossy_beckmann_03_within_6_percent():
 def test_principled_default_surface_error():
     """Cycles' default surface (Principled, Multiscatter GGX, r = 0.5) mapped to the GGX
     lobes: total (diffuse + specular) error by quadrature."""
-    cm = brdf.principled_material()
+    cm = materials.principled_material()
     sm = sg_brdf.sg_material_from_brdf(cm)
     views = _views([0, 30, 60, 75])
     n = np.tile([0.0, 0.0, 1.0], (len(views), 1))
@@ -216,7 +221,7 @@ def test_principled_default_surface_error():
     ref = np.einsum("pdc,d->pc", brdf.reflectance_cosine(cm, n, views, _FIB), L) * _FIB_W
     ax, lam, mu = sg_brdf.specular_lobes(sm, n, views)
     spec = np.einsum("pdc,d->pc", _lobe_sum(ax, lam, mu, _FIB), cos * L) * _FIB_W
-    diff = sg_brdf.diffuse_albedo(sm)[None, :] / math.pi * np.sum(cos * L) * _FIB_W
+    diff = albedo.diffuse_albedo(sm)[None, :] / math.pi * np.sum(cos * L) * _FIB_W
     err = _rel_l2(spec + diff, ref)
     print(f"Principled default: rel L2 {err:.4f}")
     # measured 0.062 (0.093 with the Beckmann lobe of the same alpha, no multiscatter)
@@ -228,11 +233,11 @@ def test_textured_parameters_match_per_point_materials():
     ks = np.array([[1, 0, 0], [0, 1, 0], [0.2, 0.3, 0.4]], float)
     n = np.tile([0.0, 0.0, 1.0], (3, 1))
     v = _views([10, 40, 70])
-    tex = sg_brdf.SGMaterial(model="COOK_TORRANCE", roughness=rough, specular=ks,
+    tex = reflectance.SGMaterial(model="COOK_TORRANCE", roughness=rough, specular=ks,
                              fresnel="DIELECTRIC", ior=np.array([1.3, 1.5, 2.0]))
     ax, lam, mu = sg_brdf.specular_lobes(tex, n, v)
     for p in range(3):
-        one = sg_brdf.SGMaterial(model="COOK_TORRANCE", roughness=rough[p], specular=ks[p],
+        one = reflectance.SGMaterial(model="COOK_TORRANCE", roughness=rough[p], specular=ks[p],
                                  fresnel="DIELECTRIC", ior=[1.3, 1.5, 2.0][p])
         a1, l1, m1 = sg_brdf.specular_lobes(one, n[p:p + 1], v[p:p + 1])
         assert np.allclose(ax[p], a1[0]) and np.allclose(lam[p], l1[0]) and np.allclose(mu[p], m1[0])
@@ -240,30 +245,30 @@ def test_textured_parameters_match_per_point_materials():
 
 def test_bad_input_is_reported():
     with pytest.raises(ValueError):
-        sg_brdf.SGMaterial(roughness=float("nan"))
+        reflectance.SGMaterial(roughness=float("nan"))
     with pytest.raises(ValueError):
-        sg_brdf.SGMaterial(model="PHONG")
+        reflectance.SGMaterial(model="PHONG")
     with pytest.raises(ValueError):
-        sg_brdf.specular_lobes(sg_brdf.SGMaterial(), [[0, 0, 1]], [[np.inf, 0, 1]])
+        sg_brdf.specular_lobes(reflectance.SGMaterial(), [[0, 0, 1]], [[np.inf, 0, 1]])
 
 
 def test_diffuse_albedo_split():
-    m = sg_brdf.SGMaterial(diffuse=(0.5, 0.4, 0.3))
-    assert np.allclose(sg_brdf.diffuse_albedo(m), (0.5, 0.4, 0.3))
-    cm = brdf.principled_material(base_color=(0.8, 0.8, 0.8), metallic=0.25)
+    m = reflectance.SGMaterial(diffuse=(0.5, 0.4, 0.3))
+    assert np.allclose(albedo.diffuse_albedo(m), (0.5, 0.4, 0.3))
+    cm = materials.principled_material(base_color=(0.8, 0.8, 0.8), metallic=0.25)
     sm = sg_brdf.sg_material_from_brdf(cm)
     n = np.tile([0.0, 0.0, 1.0], (64, 1))
     mu = (np.arange(64) + 0.5) / 64
     v = np.stack([np.sqrt(1 - mu * mu), 0 * mu, mu], 1)
     w = brdf.diffuse_view_weight(cm, n, v)[:, 0]
     mean = 2.0 * np.sum(w * mu) / 64          # cosine-weighted mean over views
-    assert np.allclose(sg_brdf.diffuse_albedo(sm), 0.8 * mean, rtol=5e-3)
+    assert np.allclose(albedo.diffuse_albedo(sm), 0.8 * mean, rtol=5e-3)
     # kd times the view ratio is Cycles' layered base at each view (the Lambert radiance of
-    # core.brdf, per view), also when the lobes are drawn elsewhere
+    # core.shading.brdf, per view), also when the lobes are drawn elsewhere
     for m in (sm, sg_brdf.without_glossy(sm)):
-        got = sg_brdf.diffuse_albedo(m)[0] * sg_brdf.diffuse_view_ratio(m, mu)
+        got = albedo.diffuse_albedo(m)[0] * albedo.diffuse_view_ratio(m, mu)
         np.testing.assert_allclose(got, 0.8 * w, rtol=1e-5)
-    assert np.all(sg_brdf.diffuse_view_ratio(sg_brdf.SGMaterial(), mu) == 1.0)
+    assert np.all(albedo.diffuse_view_ratio(reflectance.SGMaterial(), mu) == 1.0)
 
 
 # --------------------------------------------------------------------------- GLSL twin
@@ -336,7 +341,7 @@ _FETCH = "  vec4 in{j} = texelFetch(inp, ivec2({j}, idx), 0);\n"
 
 @pytest.mark.slow
 def test_glsl_sg_algebra_matches_numpy():
-    """sg_inner_product / sg_product / sg_integral in float32 GLSL vs core.sg (float64),
+    """sg_inner_product / sg_product / sg_integral in float32 GLSL vs core.sg.algebra (float64),
     for lam in 1e-3 .. 1e5, aligned, random and antipodal lobes."""
     rng = np.random.default_rng(9)
     lams = np.array([1e-3, 0.1, 2.0, 50.0, 1e3, 1e4, 1e5])
@@ -440,15 +445,15 @@ def test_glsl_specular_lobes_match_numpy():
     v = n * cosv[:, None] + tt * np.sqrt(1 - cosv ** 2)[:, None]
     n, v, t = n.astype(np.float32).astype(float), v.astype(np.float32).astype(float), t.astype(np.float32).astype(float)
     cases = [
-        sg_brdf.SGMaterial(model="COOK_TORRANCE", roughness=0.09, specular=(0.8, 0.7, 0.6)),
-        sg_brdf.SGMaterial(model="COOK_TORRANCE", roughness=0.45, fresnel="DIELECTRIC", ior=1.45),
-        sg_brdf.SGMaterial(model="BLINN_PHONG", roughness=0.2, fresnel="SCHLICK"),
-        sg_brdf.SGMaterial(model="WARD", roughness=0.15),
-        sg_brdf.SGMaterial(model="WARD_ANISO", alpha_x=0.3, alpha_y=0.1),
-        sg_brdf.SGMaterial(model="ASHIKHMIN_SHIRLEY", nu=75, nv=1200, fresnel="SCHLICK", specular=(0.05, 0.05, 0.05)),
+        reflectance.SGMaterial(model="COOK_TORRANCE", roughness=0.09, specular=(0.8, 0.7, 0.6)),
+        reflectance.SGMaterial(model="COOK_TORRANCE", roughness=0.45, fresnel="DIELECTRIC", ior=1.45),
+        reflectance.SGMaterial(model="BLINN_PHONG", roughness=0.2, fresnel="SCHLICK"),
+        reflectance.SGMaterial(model="WARD", roughness=0.15),
+        reflectance.SGMaterial(model="WARD_ANISO", alpha_x=0.3, alpha_y=0.1),
+        reflectance.SGMaterial(model="ASHIKHMIN_SHIRLEY", nu=75, nv=1200, fresnel="SCHLICK", specular=(0.05, 0.05, 0.05)),
         # the twin's models are 0-4: the Principled layering on a Beckmann lobe (GGX is drawn
         # by ssdf_sg_frag.glsl: tests/test_textures.py's sphere against Cycles)
-        sg_brdf.sg_material_from_brdf(brdf.principled_material(base_color=(0.8, 0.4, 0.2), metallic=0.3, roughness=0.4), ggx=False),
+        sg_brdf.sg_material_from_brdf(materials.principled_material(base_color=(0.8, 0.4, 0.2), metallic=0.3, roughness=0.4), ggx=False),
     ]
     for mat in cases:
         ax, lam, mu = sg_brdf.specular_lobes(mat, n, v, t)
@@ -469,13 +474,13 @@ def test_glsl_specular_lobes_match_numpy():
 def test_glsl_prefiltered_lookup_matches_numpy():
     import gpu
 
-    from prt_relight.core import sg_lighting
-    from prt_relight.core.directions import cubemap
+    from prt_relight.core.sg import prefilter
+    from prt_relight.core.sphere.directions import cubemap
 
     cube = cubemap(8)
     rng = np.random.default_rng(1)
     L = rng.random((cube.size, 3)) + sg.evaluate(cube.directions, [0, 0, 1.0], 5.0, 3.0)[:, None]
-    pe = sg_lighting.PrefilteredEnvironment(L, cube)
+    pe = prefilter.PrefilteredEnvironment(L, cube)
     P = 256
     d = rng.normal(size=(P, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -502,7 +507,7 @@ def test_glsl_prefiltered_lookup_matches_numpy():
 def test_blender_material_export_and_the_reflectance_panel():
     import bpy
 
-    from prt_relight.addon import sg_material
+    from prt_relight.addon.ui import sg_material
 
     from . import blender_scene as bs
 
@@ -550,7 +555,7 @@ def test_sharp_lobes_lambda_1e4_to_1e5_by_cap_quadrature(alpha):
     """Near-mirror Cook-Torrance (NDF sharpness 2/a^2 = 8e4 .. 2e3; warped lobes up to
     the 1e5 cap at grazing): SG view slice vs the analytic BRDF, both integrated
     against the smooth lighting by quadrature on a cap around the mirror direction."""
-    mat = sg_brdf.SGMaterial(model="COOK_TORRANCE", roughness=alpha, specular=(1.0, 1.0, 1.0))
+    mat = reflectance.SGMaterial(model="COOK_TORRANCE", roughness=alpha, specular=(1.0, 1.0, 1.0))
     n = np.array([[0.0, 0.0, 1.0]])
     for deg in (0.0, 45.0, 70.0, 88.0):
         o = _views([deg])
@@ -581,16 +586,16 @@ def test_ggx_table_is_the_coaxial_least_squares_fit():
     np.testing.assert_allclose(c_mu, t_mu, rtol=1e-4, atol=1e-6)
     for a in (0.09, 0.49):
         one = sg_ndf.fit_coaxial_ndf("GGX", a, 1)[2]
-        two = sg_brdf.ndf_lobes(sg_brdf.SGMaterial(model="GGX", roughness=a)).rel_error
+        two = sg_brdf.ndf_lobes(reflectance.SGMaterial(model="GGX", roughness=a)).rel_error
         assert two < 0.05 < 0.14 < one, (a, one, two)
 
 
 def _forest_metal_sphere_errors(r, ggx, fitted_warp=False, metallic=1.0, cosine=None):
     """rel-L2 and mean ratio of the SG slice (lobes times the exact cosine) against the
-    quadrature of Cycles' Multiscatter GGX metal (core.brdf) under 'forest' (128 rows), at
+    quadrature of Cycles' Multiscatter GGX metal (core.shading.brdf) under 'forest' (128 rows), at
     the pixels of tests/test_textures.py's sphere seen from (0, -4, 1), one in four."""
     bpy = pytest.importorskip("bpy")
-    from prt_relight.core import envmap
+    from prt_relight.core.sphere import envmap
     path = bpy.utils.system_resource("DATAFILES", path="studiolights/world") + "/forest.exr"
     img = envmap.as_rgb(envmap.load_equirect(path))
     while img.shape[0] > 128:
@@ -608,7 +613,7 @@ def _forest_metal_sphere_errors(r, ggx, fitted_warp=False, metallic=1.0, cosine=
     n = n - np.sqrt(np.maximum(1.0 - np.sum(n * n, 1), 0.0))[:, None] * look   # facing the camera
     o = cam - n
     o /= np.linalg.norm(o, axis=1, keepdims=True)
-    m = brdf.principled_material(base_color=(0.9, 0.7, 0.5), metallic=metallic, roughness=r)
+    m = materials.principled_material(base_color=(0.9, 0.7, 0.5), metallic=metallic, roughness=r)
     truth = np.einsum("pdc,dc->pc", brdf.specular_cosine(m, n, o, dirs).astype(np.float64),
                       radiance)
     axes, lam, mu = sg_brdf.specular_lobes(sg_brdf.sg_material_from_brdf(m, ggx=ggx), n, o,
@@ -640,25 +645,25 @@ def test_ggx_warp_table_is_the_least_squares_fit():
     better than the plain warp of eq. 17-21 at oblique views (relative L2 over the
     hemisphere of i, independent of any environment); and half-way between nodes the
     bilinear table fits about as well as at them (the lobes continue from node to node)."""
-    from prt_relight.core.sg_warp_table import GGX_WARP_TABLE as tb
-    K = sg_ndf.GGX_WARP_LOBES
-    assert tb.shape == (len(sg_ndf.WARP_R), len(sg_ndf.WARP_MU), 3 * K)
+    from prt_relight.core.sg.warp_table import GGX_WARP_TABLE as tb
+    K = ggx_warp.GGX_WARP_LOBES
+    assert tb.shape == (len(ggx_warp.WARP_R), len(ggx_warp.WARP_MU), 3 * K)
     # measured fitted / plain: 0.45 / 13.8, 15.7 / 43.6, 15.6 / 33.2, 3.6 / 17.6 %
     for ir, j, gain in ((10, 20, 0.05), (10, 6, 0.4), (6, 10, 0.5), (16, 12, 0.25)):
-        nb = sg_ndf.ggx_warp_neighbours(tb, ir, j)
-        x, fit, plain = sg_ndf.fit_ggx_warp(sg_ndf.WARP_R[ir], sg_ndf.WARP_MU[j],
+        nb = ggx_warp.ggx_warp_neighbours(tb, ir, j)
+        x, fit, plain = ggx_warp.fit_ggx_warp(ggx_warp.WARP_R[ir], ggx_warp.WARP_MU[j],
                                             nb[0][2] if nb else None, K, nb)
         # the stored node is the fit's optimum: refitted (on this machine's BLAS, which can
         # end a continued fit in another, as good, minimum) it is no better than stored
-        stored = sg_ndf.ggx_warp_error(sg_ndf.WARP_R[ir], sg_ndf.WARP_MU[j], tb[ir, j])
-        refit = sg_ndf.ggx_warp_error(sg_ndf.WARP_R[ir], sg_ndf.WARP_MU[j], x)
+        stored = ggx_warp.ggx_warp_error(ggx_warp.WARP_R[ir], ggx_warp.WARP_MU[j], tb[ir, j])
+        refit = ggx_warp.ggx_warp_error(ggx_warp.WARP_R[ir], ggx_warp.WARP_MU[j], x)
         assert stored < refit + 0.005, (ir, j, stored, refit)
         assert fit < gain * plain and stored < gain * plain, (ir, j, fit, stored, plain)
     # cells of r 0.3-0.7, n.o 0.1-0.9: the centre within 3 points of its worst corner
     for r in (0.325, 0.425, 0.525, 0.625):
         for mu in (0.125, 0.325, 0.525, 0.725, 0.875):
-            centre = sg_ndf.ggx_warp_error(r, mu, sg_ndf.ggx_warp_params(r, mu))
-            corners = max(sg_ndf.ggx_warp_error(rr, mm, sg_ndf.ggx_warp_params(rr, mm))
+            centre = ggx_warp.ggx_warp_error(r, mu, ggx_warp.ggx_warp_params(r, mu))
+            corners = max(ggx_warp.ggx_warp_error(rr, mm, ggx_warp.ggx_warp_params(rr, mm))
                           for rr in (r - 0.025, r + 0.025) for mm in (mu - 0.025, mu + 0.025))
             assert centre < corners + 0.03, (r, mu, centre, corners)
 
@@ -673,7 +678,7 @@ def test_fitted_warp_against_quadrature(r, metallic, plain_min, fitted_max):
     plain warp (measured 12.4 -> 6.6, 17.9 -> 3.3, 19.8 -> 2.7 % metal, 36.7 -> 22.5,
     37.9 -> 6.5, 44.8 -> 4.8 % dielectric at r 0.3 / 0.5 / 0.7; two fitted lobes were
     11.0, 15.4, 5.2 / 26.6, 25.6, 10.9 %; docs/measurements.md "Four fitted lobes")."""
-    from prt_relight.core.ssdf_sg import COSINE_SG7
+    from prt_relight.core.methods.ssdf_sg.shading import COSINE_SG7
     plain, _ = _forest_metal_sphere_errors(r, True, False, metallic, COSINE_SG7)
     fitted, ratio = _forest_metal_sphere_errors(r, True, True, metallic, COSINE_SG7)
     print(f"r {r} metallic {metallic}: plain {plain:.4f} fitted {fitted:.4f} mean {ratio}")
@@ -682,7 +687,7 @@ def test_fitted_warp_against_quadrature(r, metallic, plain_min, fitted_max):
 
 
 class _OpenHemisphere:
-    """An SSDF field of open points: the elevation over the horizon (core.ssdf)."""
+    """An SSDF field of open points: the elevation over the horizon (core.methods.ssdf_sg.ssdf)."""
 
     def theta_d(self, rows, local):
         return np.arcsin(np.clip(np.asarray(local)[..., 2], -1.0, 1.0))
@@ -701,15 +706,15 @@ def test_ggx_slice_returns_E_as_drawn_on_an_open_surface(r):
     products below the horizon count toward E and are then cut: darker (measured at
     0 / 30 / 60 / 80 / 88 deg: r 0.3 1.00 / 1.00 / 0.97 / 0.87 / 0.78, r 0.7 0.98 / 0.98 /
     0.97 / 0.97 / 0.97, r 1.0 0.98 / 0.97 / 0.97 / 0.97 / 0.96)."""
-    from prt_relight.core import ssdf_sg
+    from prt_relight.core.methods.ssdf_sg import shading as ssdf_sg
     cosine = ssdf_sg.COSINE_SG7
-    mat = sg_brdf.SGMaterial(model="GGX", roughness=r * r, specular=(1.0, 1.0, 1.0),
+    mat = reflectance.SGMaterial(model="GGX", roughness=r * r, specular=(1.0, 1.0, 1.0),
                              fresnel="NONE", multiscatter=False)
     deg = np.array([0.0, 30.0, 60.0, 80.0, 88.0])
     n = np.tile([0.0, 0.0, 1.0], (len(deg), 1))
     o = np.stack([np.sin(np.radians(deg)), 0 * deg, np.cos(np.radians(deg))], 1)
     t, b = ssdf_sg.ssdf_frames(n)
-    E, _ = sg_brdf.ggx_albedo(mat, o[:, 2], len(deg))
+    E, _ = albedo.ggx_albedo(mat, o[:, 2], len(deg))
 
     def drawn(horizon):
         lobes = sg_brdf.specular_lobes(mat, n, o, cosine=cosine, cosine_frame=(t, b),

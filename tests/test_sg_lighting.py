@@ -1,12 +1,15 @@
-"""SG lighting (core/sg_lighting.py, Wang et al. 2009, §6) against brute force and quadrature."""
+"""SG lighting (core/sg/lighting.py, Wang et al. 2009, §6) against brute force and quadrature."""
 
 import math
 
 import numpy as np
 import pytest
 
-from prt_relight.core import envmap, sg, sg_lighting
-from prt_relight.core.directions import cubemap, fibonacci_sphere
+from prt_relight.core.sphere import envmap
+from prt_relight.core.sg import algebra as sg, lighting as sg_lighting
+from prt_relight.core.sg import prefilter
+from prt_relight.core.sg import lamp_lobes
+from prt_relight.core.sphere.directions import cubemap, fibonacci_sphere
 
 
 def _smooth_env(cube):
@@ -130,7 +133,7 @@ def _brute_force_mean(L, cube, p, lam):
 def smooth_prefiltered():
     cube = cubemap(32)
     L = _smooth_env(cube)
-    return cube, L, sg_lighting.PrefilteredEnvironment(L, cube)
+    return cube, L, prefilter.PrefilteredEnvironment(L, cube)
 
 
 @pytest.mark.parametrize("lam,max_err", [(1e-3, 1e-3), (0.2, 0.005), (3.0, 0.01), (17.0, 0.02),
@@ -141,7 +144,7 @@ def test_prefiltered_lookup_matches_brute_force_convolution(smooth_prefiltered, 
     p = _random_dirs(200, 11)
     got = pe.lookup(p, np.full(len(p), lam))
     if lam >= 1e4:   # beyond the finest level: the kernel is inside one texel -> radiance itself
-        ref = sg_lighting._bilinear(L.reshape(6, 32, 32, 3), *sg_lighting.face_coordinates(p))
+        ref = prefilter.face_bilinear(L.reshape(6, 32, 32, 3), *sg_lighting.face_coordinates(p))
         ref_exact = _smooth_env_at(p)
         print(f"lam {lam}: vs analytic radiance {np.linalg.norm(got - ref_exact) / np.linalg.norm(ref_exact):.4f}")
     else:
@@ -188,7 +191,7 @@ def test_prefiltered_lookup_with_a_sun_reports_its_limit():
     """A one-texel sun (contrast 1e5): the pyramid can only be as sharp as the cube."""
     cube = cubemap(32)
     L = _sun_env(cube)
-    pe = sg_lighting.PrefilteredEnvironment(L, cube)
+    pe = prefilter.PrefilteredEnvironment(L, cube)
     p = _random_dirs(200, 2)
     for lam, lim in ((0.5, 0.01), (5.0, 0.02), (30.0, 0.06)):
         got = pe.lookup(p, np.full(200, lam))
@@ -218,17 +221,17 @@ def _sg_irradiance(axis, lam, mu, n):
 
 
 @pytest.mark.parametrize("lamp", [
-    sg_lighting.Lamp("POINT", color=(100.0, 80.0, 60.0), position=(0.5, -0.3, 3.0), radius=0.1),
-    sg_lighting.Lamp("POINT", color=(100.0, 100.0, 100.0), position=(0.0, 1.0, 2.0), radius=0.5),
-    sg_lighting.Lamp("POINT", color=(50.0, 50.0, 50.0), position=(0.0, 0.0, 4.0), radius=0.0),
-    sg_lighting.Lamp("SPOT", color=(200.0, 200.0, 200.0), position=(0.0, 0.0, 3.0),
+    lamp_lobes.Lamp("POINT", color=(100.0, 80.0, 60.0), position=(0.5, -0.3, 3.0), radius=0.1),
+    lamp_lobes.Lamp("POINT", color=(100.0, 100.0, 100.0), position=(0.0, 1.0, 2.0), radius=0.5),
+    lamp_lobes.Lamp("POINT", color=(50.0, 50.0, 50.0), position=(0.0, 0.0, 4.0), radius=0.0),
+    lamp_lobes.Lamp("SPOT", color=(200.0, 200.0, 200.0), position=(0.0, 0.0, 3.0),
                      direction=(0.0, 0.1, -1.0), radius=0.05, spot_size=math.radians(60)),
-    sg_lighting.Lamp("SUN", color=(3.0, 2.5, 2.0), direction=(-0.3, 0.2, -0.9), angle=math.radians(2.0)),
-    sg_lighting.Lamp("SUN", color=(3.0, 3.0, 3.0), direction=(0.0, 0.0, -1.0), angle=0.0),
+    lamp_lobes.Lamp("SUN", color=(3.0, 2.5, 2.0), direction=(-0.3, 0.2, -0.9), angle=math.radians(2.0)),
+    lamp_lobes.Lamp("SUN", color=(3.0, 3.0, 3.0), direction=(0.0, 0.0, -1.0), angle=0.0),
 ])
 def test_lamp_sg_gives_the_lamps_irradiance(lamp):
     x = np.array([[0.0, 0.0, 0.0], [0.3, 0.2, 0.0], [-0.5, 0.4, 0.1]])
-    axes, lam, mu = sg_lighting.lamp_sgs([lamp], x)
+    axes, lam, mu = lamp_lobes.lamp_sgs([lamp], x)
     ths = np.radians([0.0, 30.0, 60.0, 80.0])
     errs = []
     for p in range(len(x)):
@@ -236,7 +239,7 @@ def test_lamp_sg_gives_the_lamps_irradiance(lamp):
         t = np.cross(a, [1.0, 0.0, 0.0])
         t /= np.linalg.norm(t)
         normals = np.cos(ths)[:, None] * a + np.sin(ths)[:, None] * t
-        ref = sg_lighting.lamp_irradiance(lamp, np.repeat(x[p:p + 1], len(ths), 0), normals)
+        ref = lamp_lobes.lamp_irradiance(lamp, np.repeat(x[p:p + 1], len(ths), 0), normals)
         got = np.array([_sg_irradiance(a, lam[p, 0], mu[p, 0], nn) for nn in normals])
         errs.append(np.abs(got - ref) / np.maximum(ref[:, :1].max(), 1e-30))
     err = float(np.max(errs))
@@ -288,7 +291,7 @@ def _add_light(kind, location=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), **props
 def test_export_lamps_reads_blender_lights():
     import bpy
 
-    from prt_relight.addon import scene_export
+    from prt_relight.addon.blender import scene_export
 
     _lamp_scene()
     _add_light("POINT", (1.0, 2.0, 3.0), energy=50.0, shadow_soft_size=0.2, color=(1.0, 0.5, 0.25))
@@ -319,7 +322,7 @@ def test_lamp_sg_units_match_cycles(kind, tmp_path):
     cosine), the cosine integral done by quadrature -- checks the power/strength units."""
     import bpy
 
-    from prt_relight.addon import scene_export
+    from prt_relight.addon.blender import scene_export
 
     from . import blender_scene as bs
 
@@ -339,7 +342,7 @@ def test_lamp_sg_units_match_cycles(kind, tmp_path):
     ys = 1.0 - (np.arange(h) + 0.5) * 2.0 / h
     X, Y = np.meshgrid(xs, ys)
     pos = np.stack([X.ravel(), Y.ravel(), 0 * X.ravel()], 1)
-    axes, lam, mu = sg_lighting.lamp_sgs(lamps, pos)
+    axes, lam, mu = lamp_lobes.lamp_sgs(lamps, pos)
     n = np.array([0.0, 0.0, 1.0])
     E = np.array([_sg_irradiance(axes[p, 0], lam[p, 0], mu[p, 0, 0], n) for p in range(len(pos))])
     ours = (0.8 / math.pi * E).reshape(h, w)

@@ -1,12 +1,15 @@
-"""Spherical-harmonic transfer (core/sh.py) against quadrature and REFERENCE."""
+"""Spherical-harmonic transfer (core/methods/sh/harmonics.py) against quadrature and REFERENCE."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from prt_relight.core import directions, envmap, mesh, reference, sh, visibility
-from prt_relight.core.brdf import Material
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.scene import mesh, visibility
+from prt_relight.core.methods.reference import shading as reference
+from prt_relight.core.methods.sh import harmonics as sh
+from prt_relight.core.shading.materials import Material
 
 FINE = directions.cubemap(128)
 

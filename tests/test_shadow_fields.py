@@ -1,4 +1,4 @@
-"""core.shadow_fields against exact ray casting with Embree: the occluder field's eq. 9
+"""core.scene.shadow_fields against exact ray casting with Embree: the occluder field's eq. 9
 fractions, its PCA, the static scene's grid field, and an object's own visibility turned.
 
 Every reference is an Embree cast of the same triangles (``query="OCCLUDED"``), made here
@@ -11,10 +11,11 @@ import math
 import numpy as np
 import pytest
 
-from prt_relight.core import directions
-from prt_relight.core import shadow_fields as sf
-from prt_relight.core.rsl import visibility_distance_table
-from prt_relight.core.visibility import build_occluder_scene
+from prt_relight.core.sphere import directions
+from prt_relight.core.scene import shadow_fields as sf
+from prt_relight.core.scene import occluder_fields
+from prt_relight.core.scene.distance_tables import visibility_distance_table
+from prt_relight.core.scene.visibility import build_occluder_scene
 
 # --------------------------------------------------------------------------- helpers
 
@@ -106,8 +107,8 @@ def l_field():
     """The L occluder's field: 16 shells as in Xu et al. 2006 §5.1 (fewer shells blur the
     silhouette between shells), otherwise small."""
     tri = _boxes(L_BOXES)
-    layout = sf.FieldLayout(shells=16, face=8, map=16, eigen=8)
-    return tri, sf.build_occluder_field(tri, layout, threads=2)
+    layout = occluder_fields.FieldLayout(shells=16, face=8, map=16, eigen=8)
+    return tri, occluder_fields.build_occluder_field(tri, layout, threads=2)
 
 
 # --------------------------------------------------------------------------- 1. occluder field
@@ -124,8 +125,8 @@ def test_occluder_fractions_match_exact_cast(l_field):
     pts = pts[_outside(pts, L_BOXES)][:100]
     cube = directions.cubemap(8)
     exact = _exact_fractions(scene, pts, 8)
-    pi, ki, frac = sf.occluder_fractions(field, pts, cube.directions,
-                                         sf.texel_half_sides(cube),
+    pi, ki, frac = occluder_fields.occluder_fractions(field, pts, cube.directions,
+                                         occluder_fields.texel_half_sides(cube),
                                          margin=_texel_radius(cube))
     ex = exact[pi, ki]
     # the pairs that matter: blocked at least a little in the exact cast or in the field
@@ -156,8 +157,8 @@ def test_occluder_pairs_cover_every_blocked_texel(l_field):
         cube = directions.cubemap(res)
         p = pts[:count]
         exact = _exact_fractions(scene, p, res)
-        pi, ki, _ = sf.occluder_fractions(field, p, cube.directions,
-                                          sf.texel_half_sides(cube), **kw)
+        pi, ki, _ = occluder_fields.occluder_fractions(field, p, cube.directions,
+                                          occluder_fields.texel_half_sides(cube), **kw)
         listed = np.zeros(exact.shape, bool)
         listed[pi, ki] = True
         assert (exact < 1.0).sum() > 100
@@ -170,16 +171,16 @@ def test_occluder_casts_nothing_beyond_outer_shell(l_field):
     cube = directions.cubemap(8)
     u = directions.fibonacci_sphere(20)
     far = field.centre + u * field.radius * field.layout.outer * 1.01
-    pi, ki, frac = sf.occluder_fractions(field, far, cube.directions,
-                                         sf.texel_half_sides(cube))
+    pi, ki, frac = occluder_fields.occluder_fractions(field, far, cube.directions,
+                                         occluder_fields.texel_half_sides(cube))
     assert len(pi) == len(ki) == len(frac) == 0
     toward = -far / np.linalg.norm(far, axis=1)[:, None]      # the origin is in the slab
     blocked = np.diag(_cast(build_occluder_scene(tri), far, toward))
     assert blocked.all()
     # just inside the outer shell the same points do get pairs
     near = field.centre + u * field.radius * field.layout.outer * 0.99
-    assert len(np.unique(sf.occluder_fractions(field, near, cube.directions,
-                                               sf.texel_half_sides(cube))[0])) == len(u)
+    assert len(np.unique(occluder_fields.occluder_fractions(field, near, cube.directions,
+                                               occluder_fields.texel_half_sides(cube))[0])) == len(u)
 
 
 # --------------------------------------------------------------------------- 2. PCA
@@ -188,15 +189,15 @@ def _traced_tables(field, tri):
     """VDTs of every sample's map traced here (the module's frames and map directions)."""
     L = field.layout
     n, M = L.face, L.map
-    frames = sf.sample_frames(n).reshape(-1, 3, 3)
-    shell_dirs = sf.shell_directions(n).reshape(-1, 3)
+    frames = occluder_fields.sample_frames(n).reshape(-1, 3, 3)
+    shell_dirs = occluder_fields.shell_directions(n).reshape(-1, 3)
     np.testing.assert_allclose(frames[:, 2], -shell_dirs, atol=1e-12)   # z toward centre
     np.testing.assert_allclose(np.einsum("pij,pkj->pik", frames, frames),
                                np.broadcast_to(np.eye(3), frames.shape), atol=1e-12)
     ids = np.arange(L.shells * 6 * n * n)
     shell, rest = np.divmod(ids, 6 * n * n)
     pos = field.centre + L.radii(field.radius)[shell, None] * shell_dirs[rest]
-    world = np.einsum("mk,pkj->pmj", sf.map_directions(M), frames[rest]).reshape(-1, 3)
+    world = np.einsum("mk,pkj->pmj", occluder_fields.map_directions(M), frames[rest]).reshape(-1, 3)
     org = np.repeat(pos.astype(np.float32), M * M, axis=0)
     hit = np.asarray(build_occluder_scene(tri).run(
         org, np.ascontiguousarray(world, np.float32), query="OCCLUDED")) != -1
@@ -208,7 +209,7 @@ def test_pca_error_falls_with_eigen_and_reaches_half_precision():
     tri = _boxes(L_BOXES)
     errors = {}
     for k in (1, 2, 4, 16):     # 16 samples per segment (face 8): 16 is the full rank
-        field = sf.build_occluder_field(tri, sf.FieldLayout(shells=3, face=8, map=16, eigen=k),
+        field = occluder_fields.build_occluder_field(tri, occluder_fields.FieldLayout(shells=3, face=8, map=16, eigen=k),
                                         threads=2)
         ids, ref = _traced_tables(field, tri)
         tab = field.tables(ids)
@@ -223,7 +224,7 @@ def test_pca_error_falls_with_eigen_and_reaches_half_precision():
 def test_tables_equal_traced_vdt_at_full_rank():
     """At full rank tables(ids) are the traced maps' VDTs (id decoding, frames, PCA)."""
     tri = _boxes(L_BOXES)
-    field = sf.build_occluder_field(tri, sf.FieldLayout(shells=3, face=8, map=16, eigen=16),
+    field = occluder_fields.build_occluder_field(tri, occluder_fields.FieldLayout(shells=3, face=8, map=16, eigen=16),
                                     threads=2)
     ids, ref = _traced_tables(field, tri)
     order = np.random.default_rng(3).permutation(len(ids))
@@ -350,13 +351,13 @@ def test_turned_bits_match_visibility_traced_at_turned_pose():
 def test_field_layout_rejects_bad_values(kw):
     """Unusable layouts are refused when made, not after (or silently during) a trace."""
     with pytest.raises(ValueError):
-        sf.FieldLayout(**kw)
+        occluder_fields.FieldLayout(**kw)
 
 
 def test_mean_only_field_reads_back():
     """eigen=0 (means only) is a valid field whose error is its true RMS against traced VDTs."""
     tri = _boxes(L_BOXES)
-    field = sf.build_occluder_field(tri, sf.FieldLayout(shells=2, face=4, map=8, eigen=0),
+    field = occluder_fields.build_occluder_field(tri, occluder_fields.FieldLayout(shells=2, face=4, map=8, eigen=0),
                                     threads=2)
     ids, ref = _traced_tables(field, tri)
     tab = field.tables(ids)
@@ -367,7 +368,7 @@ def test_mean_only_field_reads_back():
 
 def test_field_layout_radii():
     """Shell radii run from inner r to outer r, evenly spaced in log radius (§5.1)."""
-    L = sf.FieldLayout(shells=5, inner=0.5, outer=8.0)
+    L = occluder_fields.FieldLayout(shells=5, inner=0.5, outer=8.0)
     r = L.radii(2.0)
     np.testing.assert_allclose(r, [1.0, 2.0, 4.0, 8.0, 16.0])
 
@@ -376,8 +377,8 @@ def test_bounding_sphere_ignores_non_finite_vertices():
     """NaN/inf vertices (Embree drops them) move neither centre nor radius."""
     good = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 1.0]])
     bad = np.array([[np.nan, 1.0, 1.0], [np.inf, 0.0, 0.0], [0.0, -np.inf, 0.0]])
-    c, r = sf.bounding_sphere(np.concatenate([good[:1], bad, good[1:]]))
+    c, r = occluder_fields.bounding_sphere(np.concatenate([good[:1], bad, good[1:]]))
     np.testing.assert_allclose(c, [1.0, 1.0, 0.5])
     assert r == pytest.approx(math.sqrt(2.25))
-    c, r = sf.bounding_sphere(bad)
+    c, r = occluder_fields.bounding_sphere(bad)
     assert r == 0.0 and np.isfinite(c).all()

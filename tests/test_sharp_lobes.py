@@ -1,5 +1,5 @@
 """Glossy lobes too narrow for the cubemap (mirrors, low roughness): skipped per vertex,
-drawn per pixel for every method (core.brdf.is_sharp, addon/sharp.py)."""
+drawn per pixel for every method (core.shading.brdf.is_sharp, addon/gpu/sharp.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,9 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf, envmap
+from prt_relight.core.shading import brdf
+from prt_relight.core.shading import materials
+from prt_relight.core.sphere import envmap
 
 from . import blender_scene as bs
 
@@ -21,20 +23,20 @@ METHODS = ["REFERENCE", "SSDF_SG", "RSL", "BLOCKS", "SH", "WAVELET", "AUTO"]
 # --------------------------------------------------------------------------- core
 
 def test_sharp_lobes_are_those_the_cubemap_cannot_resolve():
-    mirror = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.0)
+    mirror = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.0)
     assert brdf.is_sharp(mirror, 32) and brdf.is_sharp(mirror, 128)
-    rough = brdf.principled_material(roughness=0.5)
+    rough = materials.principled_material(roughness=0.5)
     assert not brdf.is_sharp(rough, 32)
     # the limit shrinks with the texels: roughness 0.12 is sharp at 32 and 64, not 128
-    mid = brdf.principled_material(roughness=0.12)
+    mid = materials.principled_material(roughness=0.12)
     assert [brdf.is_sharp(mid, n) for n in (32, 64, 128)] == [True, True, False]
-    assert not brdf.is_sharp(brdf.Material(diffuse_albedo=(0.5, 0.5, 0.5)), 32)
+    assert not brdf.is_sharp(materials.Material(diffuse_albedo=(0.5, 0.5, 0.5)), 32)
 
 
 def test_a_per_pixel_lobe_leaves_only_the_layered_lambert_base():
     """Every per-vertex evaluation skips the lobes; the Principled base keeps Cycles'
     layering weight (the dielectric layer above it is still there, drawn per pixel)."""
-    m = brdf.principled_material(roughness=0.05, metallic=0.25)
+    m = materials.principled_material(roughness=0.05, metallic=0.25)
     flagged = brdf.with_sharp_lobe(m, 32)
     assert flagged.per_pixel_lobe and flagged.is_diffuse_only and not m.is_diffuse_only
     n = np.array([[0.0, 0.0, 1.0]] * 3)
@@ -106,10 +108,10 @@ def _smooth_environment(height=256, width=512):
 def test_glsl_lobe_matches_quadrature_of_the_environment(roughness, tilt, tol):
     """A Glossy plane seen at ``tilt`` from the zenith through an orthographic camera:
     every pixel has the same normal and view, so each is the lobe integral over the
-    equirect (numpy quadrature of core.brdf; at roughness 0 the bilinear mirror
+    equirect (numpy quadrature of core.shading.brdf; at roughness 0 the bilinear mirror
     reflection, as Cycles' singular lobe reads the texture)."""
-    from prt_relight.addon.engine import render_pixels
-    from prt_relight.addon.runtime import FrameState
+    from prt_relight.addon.frame.engine import render_pixels
+    from prt_relight.addon.frame.state import FrameState
 
     bs.reset()
     img = _smooth_environment()
@@ -149,7 +151,7 @@ def test_glsl_lobe_matches_quadrature_of_the_environment(roughness, tilt, tol):
         expected = 0.8 * ((px(y0, x0) * (1 - fx) + px(y0, x0 + 1) * fx) * (1 - fy)
                           + (px(y0 + 1, x0) * (1 - fx) + px(y0 + 1, x0 + 1) * fx) * fy)
     else:
-        material = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.8, 0.8),
+        material = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.8, 0.8),
                                  roughness=roughness, distribution="GGX")
         expected = _quadrature(img, material, np.array([0.0, 0.0, 1.0]), v)
     np.testing.assert_allclose(got, expected, rtol=tol)
@@ -219,7 +221,7 @@ def test_smooth_shaded_sharp_edged_part_under_studio_matches_cycles(tmp_path):
     all (sharp edges with interpolated normals), standing on a ground under 'studio'.
     Its bottom ring's normals point 43 degrees into the ground; its visibility was traced
     from under it and mixed up the side, so the softboxes' rim highlights came out 24 %
-    dark (22.8 % rel-L2 for every method; core.visibility.contact_origins)."""
+    dark (22.8 % rel-L2 for every method; core.scene.visibility.contact_origins)."""
     bs.reset()
     bs.add_world(path=bs.hdri_path("studio"), rotation_z=2.2)
     bpy.ops.mesh.primitive_cylinder_add(vertices=24, radius=0.8, depth=1.2,

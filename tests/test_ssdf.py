@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from prt_relight.core import directions, ssdf
+from prt_relight.core.sphere import directions
+from prt_relight.core.methods.ssdf_sg import ssdf
 
 
 def _unit(v):
@@ -160,8 +161,8 @@ def test_open_field_equals_computed_open_ssdf():
     """Objects without visibility data get the closed-form open SSDF; it matches the SSDF
     computed from fully visible cubemap bits."""
     import importlib
-    method = importlib.import_module("prt_relight.addon.methods.ssdf_sg")
-    stored = importlib.import_module("prt_relight.addon.methods.ssdf_sg_storage")
+    method = importlib.import_module("prt_relight.addon.methods.ssdf_sg.shading")
+    stored = importlib.import_module("prt_relight.addon.methods.ssdf_sg.store")
     cube = directions.cubemap(16)
     normals = _unit([[0.2, 0.1, 1.0], [-1.0, 0.3, 0.0]])
     bits = np.packbits(np.ones((2, cube.size), bool), axis=1)

@@ -5,8 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from prt_relight.core import (brdf, directions, envmap, mesh, reference, sg, sg_brdf, ssdf,
-                              ssdf_sg, visibility)
+from prt_relight.core.shading import materials
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.scene import mesh, visibility
+from prt_relight.core.methods.reference import shading as reference
+from prt_relight.core.sg import algebra as sg, brdf as sg_brdf
+from prt_relight.core.methods.ssdf_sg import ssdf, shading as ssdf_sg
 
 
 def _unit(v):
@@ -48,7 +52,7 @@ def test_per_cosine_amplitudes_and_the_scene_fit(scene):
     the same amplitudes, and amplitudes fitted to the exact shadowed irradiance at a
     third of the points bring the held-out points closer to REFERENCE than eq. 39 with
     the true (SG) lighting itself."""
-    from prt_relight.core import sg_lighting
+    from prt_relight.core.sg import lighting as sg_lighting
     pts, cube, L = scene["pts"], scene["cube"], scene["L"]
     cos = ssdf_sg.COSINE_SG7
     rows = scene["rows"]
@@ -114,7 +118,7 @@ def test_cosine_mixture_improves_diffuse(scene):
 
 def test_glossy_eq41_close_to_reference(scene):
     pts, cube, L = scene["pts"], scene["cube"], scene["L"]
-    mat = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.8, 0.8), roughness=0.3,
+    mat = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.8, 0.8), roughness=0.3,
                         distribution="BECKMANN", fresnel="NONE")
     eye = np.array([2.0, -3.0, 2.5])
     views = reference.view_directions(pts.positions, eye)

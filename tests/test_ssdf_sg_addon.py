@@ -7,10 +7,12 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import drawing, runtime, storage
-from prt_relight.addon.methods import ssdf_sg as method
-from prt_relight.addon.methods import ssdf_sg_gpu, ssdf_sg_storage
-from prt_relight.core import ssdf_sg as core_ssdf_sg, ssdf_sg_scene
+from prt_relight.addon.gpu import drawing
+from prt_relight.addon.frame import state as runtime
+from prt_relight.addon.blender import storage
+from prt_relight.addon.methods.ssdf_sg import shading as method
+from prt_relight.addon.methods.ssdf_sg import gpu as ssdf_sg_gpu, store as ssdf_sg_storage
+from prt_relight.core.methods.ssdf_sg import shading as core_ssdf_sg, scene as ssdf_sg_scene
 
 from . import blender_scene as bs
 
@@ -53,7 +55,7 @@ def _state():
     return state
 
 
-def _camera_matrices():
+def camera_matrices():
     scene = bpy.context.scene
     cam = scene.camera
     depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -71,7 +73,7 @@ def test_glsl_equals_numpy_per_pixel(principled):
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     _gpu_ready()
     state = _state()
-    view, proj, eye = _camera_matrices()
+    view, proj, eye = camera_matrices()
     vp = proj @ view
     draws = state.draw_objects(eye, None)
     assert draws is not None and len(draws) == len(state.objects)
@@ -84,7 +86,7 @@ def test_glsl_equals_numpy_per_pixel(principled):
     gpu_px = drawing.render_offscreen([], None, vp, W, H, True, draws)        # bottom row first
 
     # numpy: a ray through every pixel centre, the hit triangle's barycentrics, and the
-    # same formulas (core.ssdf_sg_scene.shade_points) at the interpolated normal / PCA coefficients
+    # same formulas (core.methods.ssdf_sg.scene.shade_points) at the interpolated normal / PCA coefficients
     inv = np.array(vp.inverted())
     jj, ii = np.meshgrid(np.arange(H), np.arange(W), indexing="ij")
     ndc = np.stack([(ii + 0.5) / W * 2 - 1, (jj + 0.5) / H * 2 - 1], -1).reshape(-1, 2)
@@ -136,19 +138,19 @@ def test_glsl_equals_numpy_per_pixel(principled):
 def test_pair_table_holds_eq39_at_the_flat_points():
     """The pair pass (shaders/ssdf_sg_pairs_frag.glsl) read back from the GPU: per point of
     the ground's flat triangles, sum_p w_p sigma(theta_p, k_p) over the (cosine lobe, light
-    lobe) pairs equals numpy's eq. 39 (core.ssdf_sg.diffuse_transfer_per_cosine) there."""
-    from prt_relight.core import sg as core_sg
+    lobe) pairs equals numpy's eq. 39 (core.methods.ssdf_sg.shading.diffuse_transfer_per_cosine) there."""
+    from prt_relight.core.sg import algebra as core_sg
     scene = _scene()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     _gpu_ready()
     state = _state()
-    _, _, eye = _camera_matrices()
-    ssdf_sg_gpu._PAIR_TABLES.clear()
+    _, _, eye = camera_matrices()
+    ssdf_sg_gpu.PAIR_TABLES.clear()
     assert state.draw_objects(eye, None) is not None
     ground = next(st for st in state.objects if st.name == "Grid")
     field = ground.data["ssdf_sg"]
     flat_points = ssdf_sg_gpu.object_batches(ground, field).flat_points
-    tex = next(v[1] for k, v in ssdf_sg_gpu._PAIR_TABLES.items() if k[0] == "Grid")
+    tex = next(v[1] for k, v in ssdf_sg_gpu.PAIR_TABLES.items() if k[0] == "Grid")
     fit, _ = state.method_impl._lighting(state)
     cosine = method.cosine_of(state.settings)
     M, J = len(cosine.amplitudes), len(fit[1])
@@ -181,7 +183,7 @@ def test_f12_close_to_reference_and_sliders_need_no_recompute(tmp_path):
     err = bs.rel_l2(ours, ref)
     assert np.isfinite(ours).all() and err < 0.2, err          # measured 0.13 (sunset HDRI)
     scene.prt.method = "SSDF_SG"
-    method._FIELD_CACHE.clear()
+    method.FIELD_CACHE.clear()
     # world rotation and a BRDF slider: new pixels from the stored SSDFs, no precompute
     mapping = scene.world.node_tree.nodes["Mapping"]
     mapping.inputs["Rotation"].default_value[2] = 1.4
@@ -201,13 +203,13 @@ def test_f12_close_to_reference_and_sliders_need_no_recompute(tmp_path):
     assert np.isfinite(ward).all() and bs.rel_l2(ward, rough) > 0.01
     assert bs.rel_l2(ward_rough, ward) > 0.002         # measured 0.0056 (Suzanne's share)
     assert {ob.name: ob.prt.precompute_id for ob in bpy.data.objects if ob.type == "MESH"} == ids
-    assert not method._FIELD_CACHE                     # nothing derived at draw time
+    assert not method.FIELD_CACHE                     # nothing derived at draw time
     state = _state()
     assert all(st.data["ssdf_sg"].precompute_id == ids[st.name] for st in state.objects)
 
 
 def test_sun_lamp_lights_an_open_plane_like_lambert_and_moves_live(tmp_path):
-    """A Blender sun lamp is drawn per pixel by every method (addon/lights.py): an open
+    """A Blender sun lamp is drawn per pixel by every method (addon/gpu/lights.py): an open
     Lambert plane under a black world shows albedo/pi * strength * cos(theta); turning the
     lamp needs no recompute."""
     bs.reset()
@@ -313,7 +315,7 @@ def test_scene_fitted_lighting_is_closer_to_reference_than_the_environment_fit(t
 
 
 def test_pca_tells_how_much_occlusion_it_keeps():
-    """The PCA's share of blocked directions kept (core.ssdf.SSDFBasis.occlusion_kept) is
+    """The PCA's share of blocked directions kept (core.methods.ssdf_sg.ssdf.SSDFBasis.occlusion_kept) is
     stored with the field, shown in the note, and grows with a smaller error budget."""
     scene = _scene()
     scene.prt.ssdf_occlusion_target = 0.0           # the RMS budget alone

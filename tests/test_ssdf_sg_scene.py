@@ -1,13 +1,17 @@
-"""core.ssdf_sg_scene (no Blender): SSDF_SG's lighting in world space, the per-point shading
+"""core.methods.ssdf_sg.scene (no Blender): SSDF_SG's lighting in world space, the per-point shading
 of an object, the scene fit's points and algebra, flat triangles -- against quadrature,
 closed forms and hand counts."""
 
 import numpy as np
 import pytest
 
-from prt_relight.core import (brdf, directions, envmap, mesh, reference, sg, sg_brdf, ssdf,
-                              ssdf_sg, visibility)
-from prt_relight.core import ssdf_sg_scene as scene
+from prt_relight.core.shading import materials
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.scene import mesh, visibility
+from prt_relight.core.methods.reference import shading as reference
+from prt_relight.core.sg import algebra as sg, brdf as sg_brdf, prefilter
+from prt_relight.core.methods.ssdf_sg import ssdf, shading as ssdf_sg
+from prt_relight.core.methods.ssdf_sg import scene as scene
 
 
 def _unit(v):
@@ -53,7 +57,7 @@ def test_shade_points_diffuse_against_quadrature():
     fit = (axis[None], np.array([lam]), mu[None], 0.0)
     albedo = np.array([0.5, 0.4, 0.3])
     got = scene.shade_points(_open_field(1), n, np.zeros((1, 3)), np.zeros(1, np.int64),
-                             [brdf.Material(diffuse_albedo=tuple(albedo))], world, fit, None,
+                             [materials.Material(diffuse_albedo=tuple(albedo))], world, fit, None,
                              view_dir=n[0], cosine=ssdf_sg.COSINE_EQ40)
     cube = directions.cubemap(256)
     w = cube.directions
@@ -68,26 +72,26 @@ def test_shade_points_material_slots_as_cycles():
     an object without slots has Cycles' default surface (Principled)."""
     n = np.array([[0.0, 0.0, 1.0]])
     cube = directions.cubemap(8)
-    pre = scene.sg_lighting.PrefilteredEnvironment(np.ones((cube.size, 3)), cube)
+    pre = prefilter.PrefilteredEnvironment(np.ones((cube.size, 3)), cube)
     world = envmap.WorldLighting(color=(1.0, 1.0, 1.0))
     fit = (np.array([[0.0, 0.0, 1.0]]), np.array([2.0]), np.ones((1, 3)), 0.0)
-    table = [brdf.Material(diffuse_albedo=(0.2, 0.2, 0.2)),
-             brdf.Material(diffuse_albedo=(0.6, 0.1, 0.1))]
+    table = [materials.Material(diffuse_albedo=(0.2, 0.2, 0.2)),
+             materials.Material(diffuse_albedo=(0.6, 0.1, 0.1))]
 
     def shade(slot, materials):
         return scene.shade_points(_open_field(1), n, np.zeros((1, 3)), np.array([slot]),
                                   materials, world, fit, pre, view_dir=n[0])
     np.testing.assert_array_equal(shade(5, table), shade(1, table))
     np.testing.assert_array_equal(shade(-1, table), shade(0, table))
-    np.testing.assert_array_equal(shade(0, []), shade(0, [brdf.DEFAULT_MATERIAL]))
-    assert not np.allclose(shade(0, []), shade(0, [brdf.Material()]))     # not a Lambert 0.8
+    np.testing.assert_array_equal(shade(0, []), shade(0, [materials.DEFAULT_MATERIAL]))
+    assert not np.allclose(shade(0, []), shade(0, [materials.Material()]))     # not a Lambert 0.8
 
 
 def test_slot_material():
     table = ["a", "b"]
-    assert [brdf.slot_material(table, s) for s in (-3, 0, 1, 2, 9)] == ["a", "a", "b", "b", "b"]
-    assert brdf.slot_material([], 4) is brdf.DEFAULT_MATERIAL
-    assert brdf.DEFAULT_MATERIAL.fresnel == "DIELECTRIC" and brdf.DEFAULT_MATERIAL.metallic == 0
+    assert [materials.slot_material(table, s) for s in (-3, 0, 1, 2, 9)] == ["a", "a", "b", "b", "b"]
+    assert materials.slot_material([], 4) is materials.DEFAULT_MATERIAL
+    assert materials.DEFAULT_MATERIAL.fresnel == "DIELECTRIC" and materials.DEFAULT_MATERIAL.metallic == 0
 
 
 def test_diffuse_slots_and_point_weights():
@@ -97,8 +101,8 @@ def test_diffuse_slots_and_point_weights():
     tri_x = g.triangle_positions[:, :, 0].mean(axis=1)
     g.corner_materials = np.repeat((tri_x > 0).astype(np.int64), 3)
     pts = mesh.shading_points(g)
-    metal = brdf.principled_material(metallic=1.0)
-    slots = scene.diffuse_slots([brdf.Material(), metal])
+    metal = materials.principled_material(metallic=1.0)
+    slots = scene.diffuse_slots([materials.Material(), metal])
     assert slots.tolist() == [True, False]
     assert scene.diffuse_slots([]).tolist() == [True]         # the default surface
     w = scene.diffuse_point_weights(g, pts, slots)
@@ -206,5 +210,5 @@ def test_flat_triangles():
 
 @pytest.mark.parametrize("glossy", [False, True])
 def test_is_glossy(glossy):
-    m = brdf.principled_material(metallic=1.0) if glossy else brdf.Material()
+    m = materials.principled_material(metallic=1.0) if glossy else materials.Material()
     assert scene.is_glossy(sg_brdf.sg_material_from_brdf(m)) == glossy

@@ -11,23 +11,23 @@ import numpy as np
 import pytest
 
 from prt_relight.addon import methods
+from prt_relight.addon.benchmark import stability
 
 pytestmark = pytest.mark.usefixtures("registered_addon")
 
 
 @pytest.fixture(scope="module")
 def table(registered_addon):
-    from prt_relight.addon import report
-    from prt_relight.addon.methods import auto
+    from prt_relight.addon.methods.auto import measure as auto_measure
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scenes_before = len(bpy.data.scenes)
     # AUTO runs through every case like any method, choosing among SH and WAVELET only
     # here (its choice among all methods is bench/report.py's; this keeps the test short)
-    every = auto.AutoMethod.candidates
+    every = auto_measure.candidates
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(auto.AutoMethod, "candidates", staticmethod(
-            lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")]))
-        t = report.stability_table(resolution=16)
+        mp.setattr(auto_measure, "candidates",
+            lambda: [c for c in every() if c[0].id in ("SH", "WAVELET")])
+        t = stability.stability_table(resolution=16)
     assert len(bpy.data.scenes) == scenes_before          # temporary scenes are removed
     assert not bpy.data.meshes and not bpy.data.worlds     # and everything they made
     return t
@@ -38,7 +38,7 @@ def _case(table, name):
 
 
 def test_every_method_and_case_is_in_the_table(table):
-    from prt_relight.addon import report_cases
+    from prt_relight.addon.benchmark import cases as report_cases
     assert table["methods"][0] == "REFERENCE"
     assert set(table["methods"]) == set(methods.REGISTRY)
     assert [c["name"] for c in table["cases"]] == [c["name"] for c in report_cases.stability_cases()]
@@ -57,7 +57,7 @@ def test_no_cell_has_a_non_finite_value_or_a_failure(table):
 
 
 def test_every_registered_method_has_an_error_bound():
-    from prt_relight.addon import report_cases
+    from prt_relight.addon.benchmark import cases as report_cases
     assert set(methods.REGISTRY) <= set(report_cases.ERROR_BOUNDS)
     for (case, mid), bound in report_cases.CASE_ERROR_BOUNDS.items():
         assert case in [c["name"] for c in report_cases.BASE_CASES], case
@@ -83,7 +83,6 @@ def test_fully_occluded_points_are_black_for_every_method(table):
 
 def test_only_a_closed_meshs_side_turned_away_is_left_out():
     from types import SimpleNamespace as NS
-    from prt_relight.addon import report
 
     def obj(closed_side):     # two corners at the origin, normals +z and -z
         arrays = NS(positions=np.zeros((1, 3)), corner_verts=np.array([0, 0]),
@@ -91,14 +90,14 @@ def test_only_a_closed_meshs_side_turned_away_is_left_out():
         return NS(arrays=arrays, closed_side=closed_side)
 
     state = NS(objects=[obj(1), obj(0)])
-    mask = report._facing_corners(state, (0.0, 0.0, 5.0), 4)
+    mask = stability.facing_corners(state, (0.0, 0.0, 5.0), 4)
     # the closed mesh's -z corner is its inner side (drawn black); the open mesh's is drawn
     assert mask.tolist() == [True, False, True, True]
-    assert report._facing_corners(state, (0.0, 0.0, 5.0), 3) is None
+    assert stability.facing_corners(state, (0.0, 0.0, 5.0), 3) is None
 
 
 def test_stability_html_marks_an_error_above_its_bound():
-    from prt_relight.core import report as core_report
+    from prt_relight.core.report import metrics as core_report
     table = dict(methods=["REFERENCE", "SH"], cases=[dict(name="c", description="", cells=dict(
         REFERENCE=dict(finite=True, error=0.0, message="", bound=0.0),
         SH=dict(finite=True, error=0.3, message="", bound=0.1)))])
@@ -128,18 +127,17 @@ def test_one_pixel_sun_stays_finite_and_bright(table):
 
 
 def test_method_declared_cases_are_included(monkeypatch):
-    from prt_relight.addon import report_cases
+    from prt_relight.addon.benchmark import cases as report_cases
 
-    class Declares(methods.Method):
-        id = "DECLARES"
+    from prt_relight.addon.methods.contract import Bench, Method
 
-        def shade(self, state, eye, view_dir):
-            return methods.get("REFERENCE").shade(state, eye, view_dir)
-
+    class Declares(Bench):
         def stability_cases(self):
             return [dict(name="sharp lobe", description="λ = 1e5", build=lambda s: None)]
 
-    monkeypatch.setitem(methods.REGISTRY, "DECLARES", Declares())
+    reference = methods.get("REFERENCE")
+    monkeypatch.setitem(methods.REGISTRY, "DECLARES", Method(
+        "DECLARES", "Declares", "", reference.shading, bench=Declares()))
     names = [c["name"] for c in report_cases.stability_cases()]
     assert "sharp lobe [DECLARES]" in names
     assert names[:len(report_cases.BASE_CASES)] == [c["name"] for c in report_cases.BASE_CASES]

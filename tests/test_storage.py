@@ -1,4 +1,4 @@
-"""addon.storage in headless Blender: every method's stored data follows the object
+"""addon.blender.storage in headless Blender: every method's stored data follows the object
 datablock through rename, duplicate, delete, undo/redo, save/reload, append and link;
 an earlier or newer layout is reported, never misread; Clear leaves nothing."""
 
@@ -10,9 +10,15 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import methods, precompute, runtime, storage
-from prt_relight.addon.methods import blocks, rsl, ssdf_sg_storage
-from prt_relight.core import codec
+from prt_relight.addon import methods
+from prt_relight.addon.blender import precompute, storage
+from prt_relight.core.pipeline import tracing
+from prt_relight.core.store import layouts
+from prt_relight.addon.frame import state as runtime
+from prt_relight.addon.methods.blocks import shading as blocks
+from prt_relight.addon.methods.rsl import shading as rsl
+from prt_relight.addon.methods.ssdf_sg import store as ssdf_sg_storage
+from prt_relight.core.common import codec
 
 from . import blender_scene as bs
 
@@ -75,7 +81,7 @@ def stored_file(registered_addon, tmp_path_factory):
     for method_id in ("BLOCKS", "RSL", "SSDF_SG"):
         method = methods.get(method_id)
         job.method = method_id
-        method.store(scene, job, method.derive(job))
+        method.shading.store(scene, job, method.shading.derive(job))
     path = tmp_path_factory.mktemp("storage") / "stored.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     blobs = {ob.name: _blobs(ob) for ob in bpy.data.objects if ob.type == "MESH"}
@@ -108,7 +114,7 @@ def test_put_get_delete_and_a_blob_of_another_run_is_ignored():
     with pytest.raises(TypeError, match="storage.pack"):
         storage.put(ob, "probe", bits)
     with pytest.raises(ValueError, match="6x32"):
-        storage.visibility_blob(bits[:, :700], 32)
+        layouts.visibility_blob(bits[:, :700], 32)
 
 
 def test_visibility_takes_at_most_128_bytes_per_point(tmp_path):
@@ -202,7 +208,7 @@ def test_save_reload_same_blobs_and_same_f12(stored_file, tmp_path):
     _open(again)
     assert {n: _blobs(bpy.data.objects[n]) for n in blobs} == blobs
     bpy.context.scene.prt.method = "BLOCKS"
-    blocks._STORED.clear()
+    blocks.STORED.clear()
     after = bs.render_exr(tmp_path / "b.exr")
     assert blocks.LAST_STATS["sources"] == ["stored", "stored"]
     np.testing.assert_array_equal(before, after)
@@ -324,7 +330,8 @@ def test_precompute_streams_the_visibility_and_keeps_it_only_for_a_derive():
     """The trace's chunks go straight into each object's blob (the blob pack makes of the
     whole array); the bits are kept only for a method that derives from them, else read
     back from the blob."""
-    from prt_relight.core import directions, visibility
+    from prt_relight.core.sphere import directions
+    from prt_relight.core.scene import visibility
     scene = _scene()
     scene.prt.method = "REFERENCE"
     job = precompute.gather(bpy.context.evaluated_depsgraph_get(), scene.prt)
@@ -333,7 +340,7 @@ def test_precompute_streams_the_visibility_and_keeps_it_only_for_a_derive():
     pts = np.concatenate([o.points.positions for o in job.objects])
     nrm = np.concatenate([o.points.normals for o in job.objects])
     occluders = visibility.build_occluder_scene(job.occluders)
-    origins, _ = precompute.trace_origins(job.objects, occluders, job.offset)
+    origins, _ = tracing.trace_origins(job.objects, occluders, job.offset)
     whole = visibility.trace_visibility(occluders, pts, nrm, directions.cubemap(job.resolution),
                                         job.offset, origins=origins)
     start = 0
@@ -341,7 +348,7 @@ def test_precompute_streams_the_visibility_and_keeps_it_only_for_a_derive():
         rows = whole[start:start + o.points.count]
         start += o.points.count
         np.testing.assert_array_equal(o.bits, rows)
-        assert o.blob == storage.visibility_blob(rows, job.resolution)
+        assert o.blob == layouts.visibility_blob(rows, job.resolution)
     assert "rays" in job.timings and job.stage == "writing"
     scene.prt.method = "BLOCKS"
     kept = precompute.gather(bpy.context.evaluated_depsgraph_get(), scene.prt)
@@ -353,14 +360,14 @@ def test_precompute_streams_the_visibility_and_keeps_it_only_for_a_derive():
 
 def test_in_order_writer_takes_chunks_in_any_order():
     got = []
-    w = precompute._InOrder(lambda a, b, rows: got.append((a, b, rows[0, 0])))
+    w = tracing.InOrder(lambda a, b, rows: got.append((a, b, rows[0, 0])))
     chunks = [(a, a + 3, np.full((3, 2), a)) for a in range(0, 30, 3)]
     for i in np.random.default_rng(0).permutation(len(chunks)):
         w.put(*chunks[i])
     w.drain()
     assert [g[0] for g in got] == list(range(0, 30, 3)) and [g[2] for g in got] == \
         list(range(0, 30, 3))
-    gap = precompute._InOrder(lambda a, b, rows: None)
+    gap = tracing.InOrder(lambda a, b, rows: None)
     gap.put(3, 6, np.zeros((3, 2)))
     with pytest.raises(RuntimeError):
         gap.drain()

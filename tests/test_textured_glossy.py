@@ -1,5 +1,5 @@
 """Glossy Principled objects against converged Cycles (several seeds, their variance
-subtracted: core.report.rel_l2_converged): a Roughness image and a Normal Map of an image
+subtracted: core.report.metrics.rel_l2_converged): a Roughness image and a Normal Map of an image
 (issue 16's glossy case; SSDF_SG reads both per pixel, Wang et al. 2009 §4, §7), and the
 dielectric's view-dependent layering of its Lambert base."""
 
@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.core import report
+from prt_relight.core.report import metrics as report
 
 from . import blender_scene as bs
 

@@ -1,4 +1,4 @@
-"""Textured colour inputs (core/textures.py, addon/texture_export.py): sampling as Blender's
+"""Textured colour inputs (core/scene/textures.py, addon/blender/texture_export.py): sampling as Blender's
 Image Texture node, the node patterns read, per-pixel drawing for every method."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.core import textures
+from prt_relight.core.scene import textures
 
 from . import blender_scene as bs
 
@@ -79,7 +79,7 @@ def test_scalar_inputs_per_point_and_their_variants():
     """A scalar input is the colour's luminance, clamped; a point's value is the mean of its
     corners'; variants quantize within half a step and rebuild the material at the values."""
     from types import SimpleNamespace
-    from prt_relight.core import brdf
+    from prt_relight.core.shading import materials
     grey = _tex(np.array([[[0.2, 0.2, 0.2, 1.0], [2.0, 0.0, 0.0, 1.0]]], np.float32),
                 interpolation="CLOSEST", extension="EXTEND")
     rough = textures.ScalarSource(textures.ColorSource(texture=grey), "Roughness")
@@ -90,7 +90,7 @@ def test_scalar_inputs_per_point_and_their_variants():
     values = rng.random(200)
     grid, idx = textures.quantize(values, 9)
     assert np.abs(grid[idx] - values).max() <= 0.5 * (grid[1] - grid[0]) + 1e-12
-    base = brdf.principled_material(base_color=(0.5, 0.4, 0.3), roughness=0.5)
+    base = materials.principled_material(base_color=(0.5, 0.4, 0.3), roughness=0.5)
     points = SimpleNamespace(materials=np.zeros(200, np.int64))
     mats, point_mat, slot_of = textures.point_variants(
         [base], points, {0: {"Roughness": values}}, {}, levels=9)
@@ -98,7 +98,7 @@ def test_scalar_inputs_per_point_and_their_variants():
     np.testing.assert_allclose([mats[k].roughness for k in point_mat], grid[idx])
     constants = {"IOR": 1.45, "Specular Tint": (1.0, 1.0, 1.0), "distribution": "MULTI_GGX"}
     level = textures.material_at(base, {"Specular IOR Level": 0.25}, constants)
-    ref = brdf.principled_material(base_color=(0.5, 0.4, 0.3), roughness=0.5, ior=1.45,
+    ref = materials.principled_material(base_color=(0.5, 0.4, 0.3), roughness=0.5, ior=1.45,
                                    specular_ior_level=0.25)
     assert level == ref
 
@@ -173,7 +173,7 @@ def _plane_from_above(size=2.0, pixels=16):
     ("Linear", "CLIP", (0.3, -0.2, 0.0))])
 def test_glsl_texture_equals_numpy_at_every_pixel(tmp_path, interpolation, extension, mapping):
     """An unoccluded Lambert plane under a white world shows its albedo: each pixel is the
-    texture read (core.textures.sample) at the pixel centre's UV."""
+    texture read (core.scene.textures.sample) at the pixel centre's UV."""
     bs.reset()
     _white_world()
     plane = _plane_from_above()
@@ -216,7 +216,7 @@ def test_colour_attribute_and_mix_with_a_colour(tmp_path):
     mix.inputs[7].default_value = (0.5, 0.5, 0.5, 1.0)
     nt.links.new(mix.outputs[2], bsdf.inputs["Base Color"])
     plane.data.materials.append(mat)
-    from prt_relight.addon import runtime
+    from prt_relight.addon.frame import state as runtime
     state = runtime.FrameState()
     state.sync(bpy.context.evaluated_depsgraph_get())
     assert 0 in state.objects[0].textures
@@ -237,7 +237,7 @@ def test_unsupported_nodes_still_warn_by_name():
     noise = nt.nodes.new("ShaderNodeTexNoise")
     nt.links.new(noise.outputs["Color"], nt.nodes["Principled BSDF"].inputs["Base Color"])
     plane.data.materials.append(mat)
-    from prt_relight.addon import runtime
+    from prt_relight.addon.frame import state as runtime
     state = runtime.FrameState()
     state.sync(bpy.context.evaluated_depsgraph_get())
     assert state.objects[0].textures == {}
@@ -353,7 +353,7 @@ def _principled(name, base=None, img=None, **inputs):
 def test_ssdf_sg_reads_the_base_colour_per_pixel(tmp_path):
     """SSDF_SG's kd and Principled Fresnel terms are linear in the base colour (GGX): at each
     pixel, the textured frame is the frames of base colour 0 and 1 mixed by the texture read
-    at the pixel's UV (core.textures.sample), a glossy metal-dielectric mix included."""
+    at the pixel's UV (core.scene.textures.sample), a glossy metal-dielectric mix included."""
     bs.reset()
     bs.add_world(path=bs.hdri_path("forest"))
     plane = _plane_from_above(pixels=16)
@@ -470,7 +470,7 @@ def test_ssdf_sg_reads_scalar_inputs_per_pixel(tmp_path, socket, values, base):
     bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
     mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs[socket])
     plane.data.materials.append(mat)
-    from prt_relight.addon import runtime
+    from prt_relight.addon.frame import state as runtime
     state = runtime.FrameState()
     state.sync(bpy.context.evaluated_depsgraph_get())
     assert not any("driven by a node link" in w for w in state.warnings), state.warnings

@@ -3,8 +3,11 @@
 import numpy as np
 import pytest
 
-from prt_relight.core import brdf, directions, envmap, haar, reference, wavelet
-from prt_relight.core.visibility import hemisphere_mask
+from prt_relight.core.shading import materials
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.methods.wavelet import haar, transfer as wavelet
+from prt_relight.core.methods.reference import shading as reference
+from prt_relight.core.scene.visibility import hemisphere_mask
 
 RNG = np.random.default_rng(7)
 
@@ -36,7 +39,7 @@ def test_batched_triple_product_equals_pixel_sum_of_truncated_functions():
     got = wavelet.triple_product_points(light, haar.cube_forward(Vpix), rho, idx)
     want = np.einsum("sc,bs,bs->bc", light.pixels, Vpix, haar.cube_inverse(rho))
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10 * np.abs(want).max())
-    # the scalar sparse evaluator of core.haar agrees
+    # the scalar sparse evaluator of core.methods.wavelet.haar agrees
     one = haar.triple_product((light.indices, light.values[:, 1]), haar.cube_forward(Vpix[2]),
                               (idx[2], vals[2]), n)
     assert one == pytest.approx(want[2, 1], rel=1e-10)
@@ -50,7 +53,7 @@ def test_untruncated_wavelet_equals_reference():
     np.testing.assert_allclose(wavelet.diffuse_irradiance(transfer, full),
                                reference.diffuse_irradiance(bits, normals, cube, lighting),
                                rtol=2e-5, atol=1e-5)
-    mat = brdf.Material(distribution="BECKMANN", roughness=0.3, diffuse_albedo=(0, 0, 0),
+    mat = materials.Material(distribution="BECKMANN", roughness=0.3, diffuse_albedo=(0, 0, 0),
                         specular_color=(1.0, 0.8, 0.6))
     got = wavelet.glossy_radiance(bits, normals, views, cube, lighting, mat, full, cube.size)
     want = reference.specular_radiance(bits, None, normals, None, cube, lighting, mat,

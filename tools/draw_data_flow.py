@@ -29,28 +29,28 @@ BOXES = [
     ("scene", MAIN_X, MAIN_W, "Blender scene (bpy)",
      "evaluated meshes, curves, text · materials (node trees) · World: Environment Texture "
      "through a Mapping node · sun / point / spot lamps · camera", "#e8eef8"),
-    ("arrays", MAIN_X, MAIN_W, "core arrays (numpy) — addon/scene_export.py, texture_export.py",
-     "core.mesh: shading points, normals, triangles, closed sides · core.brdf materials "
+    ("arrays", MAIN_X, MAIN_W, "core arrays (numpy) — addon/blender/scene_export.py, texture_export.py",
+     "core.scene.mesh: shading points, normals, triangles, closed sides · core.shading.brdf materials "
      "(Cycles' microfacet lobes), textured colour inputs · the world image read in its colour "
-     "space, resampled exactly to the cubemap (core.envmap, core.resample: 6N² texels with "
+     "space, resampled exactly to the cubemap (core.sphere.envmap, core.sphere.resample: 6N² texels with "
      "solid angles and mean light directions)", "#eef6ea"),
-    ("precompute", MAIN_X, MAIN_W, "precompute — addon/precompute.py",
-     "gather (main thread, reads bpy) → run (worker thread, ESC cancels): core.visibility "
+    ("precompute", MAIN_X, MAIN_W, "precompute — addon/blender/precompute.py",
+     "gather (main thread, reads bpy) → run (worker thread, ESC cancels): core.scene.visibility "
      "traces Embree rays, one bit per cubemap texel and shading point; the active method's "
      "derive (BLOCKS run-length varints, RSL distance tables + clustered PCA, SSDF_SG signed "
      "distances + PCA) → commit (main thread, the only step that writes)", "#fdf3e3"),
-    ("blobs", MAIN_X, MAIN_W, "stored blobs — addon/storage.py, core/codec.py",
+    ("blobs", MAIN_X, MAIN_W, "stored blobs — addon/blender/storage.py, core/common/codec.py",
      "ob['prt_store'][name] = versioned PRTB blob (JSON header + zlib arrays): visibility, "
      "blocks, rsl, ssdf_sg; the object's record ob.prt (run, point count, fingerprint); "
      "saved with the .blend, carried through rename / duplicate / undo / append", "#fdf3e3"),
-    ("state", MAIN_X, MAIN_W, "frame state — addon/runtime.py",
+    ("state", MAIN_X, MAIN_W, "frame state — addon/frame/state.py",
      "FrameState.sync: blobs decoded once (cached by uid), stale and newer-layout checks, the "
      "world's lighting per image and rotation, each method's sync", "#f3ecf8"),
     ("method", MAIN_X, MAIN_W, "method — addon/methods/ (numerics in core/)",
      "shade → per-corner radiance: REFERENCE, SH, WAVELET, RSL, BLOCKS, AUTO (per object the "
      "cheapest within the error target) · draw_objects → per-pixel GPU draws: SSDF_SG",
      "#f3ecf8"),
-    ("gpu", MAIN_X, MAIN_W, "GPU textures and batches — addon/drawing.py",
+    ("gpu", MAIN_X, MAIN_W, "GPU textures and batches — addon/gpu/drawing.py",
      "per-corner radiance as vertex attributes (white / black split for textured colour) · "
      "float textures: PCA SSDFs, visibility bits, shadow maps, environment mips, albedo "
      "images", "#e8f4f6"),
@@ -58,15 +58,15 @@ BOXES = [
      "surface(_tex): Gouraud radiance × per-pixel colour · ssdf_sg_*: eq. 39 / 41 per pixel · "
      "lights_*: compact sources and lamps · sharp_lobe_*: mirror-like lobes · background_*: "
      "the world as Cycles shows it", "#e8f4f6"),
-    ("pixels", MAIN_X, MAIN_W, "pixels — addon/engine.py",
+    ("pixels", MAIN_X, MAIN_W, "pixels — addon/frame/engine.py",
      "Rendered viewport, or F12 drawn at s× resolution and resolved with Cycles' "
-     "Blackman-Harris filter (core.pixel_filter) → linear RGBA render result", "#e8eef8"),
-    ("sources", SIDE_X, SIDE_W, "compact sources — core/lights.py",
+     "Blackman-Harris filter (core.shading.pixel_filter) → linear RGBA render result", "#e8eef8"),
+    ("sources", SIDE_X, SIDE_W, "compact sources — core/sphere/sources.py",
      "the World's few small bright regions (a sun, softboxes) split off the cubemap; the "
      "methods shade the smooth rest (scene.prt.light_sources = 0: the whole World)",
      "#eef6ea"),
     ("passes", SIDE_X, SIDE_W, "per-pixel passes, every method",
-     "addon/lights.py: compact sources and lamps, shadow maps with PCSS · addon/sharp.py: "
+     "addon/gpu/lights.py: compact sources and lamps, shadow maps with PCSS · addon/gpu/sharp.py: "
      "lobes narrower than a texel (NDF samples, filtered environment, stored visibility) · "
      "textured colour: texture × (white − black) radiance", "#e8f4f6"),
 ]

@@ -1,5 +1,5 @@
 """Every shading method of the add-on, registered in the order of the UI enum (imported
-by ``addon/properties.py``, which builds ``scene.prt.method`` from the registry)."""
+by ``addon/ui/properties.py``, which builds ``scene.prt.method`` from the registry)."""
 
 from . import reference, sh, wavelet  # noqa: F401
 from . import ssdf_sg  # noqa: F401

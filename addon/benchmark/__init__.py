@@ -1,0 +1,1 @@
+"""prt.report: the speed/error sweep inside Blender and its hard cases."""

@@ -1,0 +1,124 @@
+"""Precompute in three steps: gather (main thread, reads bpy), run (pure core, any
+thread, cancellable), commit (main thread, writes bpy).  Nothing in the scene
+changes before commit, so an error or ESC leaves it as it was.
+
+Memory (issue 20): the trace hands each chunk of visibility rows on as it is traced;
+they are compressed into each object's stored blob in order (``storage.visibility_writer``)
+and their sky visibility (the tessellation check) is taken on the way, so no copy of the
+whole scene's visibility is held -- unless the method derives data from it (then the
+bits are kept for ``Shading.derive``; else ``ObjectJob.bits`` decodes the blob when read).
+Every step reports ``stage`` and progress; ``commit_steps`` writes one object per step."""
+
+from __future__ import annotations
+
+import time
+import uuid
+
+import numpy as np
+
+from ...core.scene import mesh as core_mesh
+from ..frame import dynamic
+from .. import methods
+from . import scene_export, storage
+from ...core.pipeline.tracing import ObjectJob, PrecomputeJob
+
+
+def gather(depsgraph, settings) -> PrecomputeJob:
+    """Read the scene into a job (raises scene_export.ExportError for bad input)."""
+    scene = depsgraph.scene
+    warnings = []
+    scene_export.export_world(scene, warnings)       # validate lighting early
+    objects = []
+    tri_blocks, all_tris = [], []
+    empty = []
+    skipped = []
+    hidden = scene_export.hidden_in_viewport(depsgraph.view_layer, depsgraph)
+    if hidden:
+        warnings.append("Hidden in the viewport but shown in renders, so not traced (their "
+                        "shadows are missing; unhide them to precompute): " + ", ".join(hidden))
+    for ob in scene_export.visible_mesh_objects(depsgraph, skipped):
+        arrays = scene_export.mesh_arrays(ob)
+        if not np.isfinite(arrays.positions).all():
+            raise scene_export.ExportError(f"Object '{ob.name}' has non-finite vertex positions")
+        if len(arrays.triangles) == 0:
+            empty.append(ob.original.name)
+            continue
+        fixed = core_mesh.repair_normals(arrays)
+        occluders, degenerate = core_mesh.occluder_triangles(arrays)
+        if degenerate:
+            warnings.append(f"'{ob.original.name}': {degenerate} zero-area face(s) ignored as "
+                            "occluders")
+        elif fixed:
+            warnings.append(f"'{ob.original.name}': {fixed} corner normal(s) repaired")
+        points = core_mesh.shading_points(arrays)
+        job = ObjectJob(ob.original.name, arrays, points, core_mesh.fingerprint(arrays))
+        if ob.original.prt.dynamic:
+            job.dynamic, job.own = True, occluders
+            job.matrix = np.array(ob.matrix_world, dtype=np.float64)
+        else:
+            tri_blocks.append(occluders)
+        all_tris.append(occluders)
+        objects.append(job)
+    if empty:
+        warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
+    warnings += scene_export.instance_warning(skipped)
+    if not objects:
+        raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")
+    occluders = np.concatenate(tri_blocks) if tri_blocks else np.zeros((0, 3, 3))
+    diag = core_mesh.bounding_diagonal(np.concatenate(all_tris).reshape(-1, 3))
+    offset = float(settings.ray_offset) * max(diag, 1e-6)
+    # static objects first: each trace group is one run of rows
+    objects.sort(key=lambda o: o.dynamic)
+    dynamic.set_reach(scene, [o for o in objects if o.dynamic], occluders)
+    method = methods.get(settings.method)
+    return PrecomputeJob(int(settings.resolution), offset, objects, occluders, warnings,
+                         method=settings.method, settings={
+                             name: getattr(settings, name)
+                             for name in methods.scene_properties()},
+                         field_detail=settings.field_detail,
+                         derive=method.shading.derive if method.derives else None,
+                         derive_label=method.label)
+
+
+def commit(scene, job: PrecomputeJob):
+    """Store the job's results in the .blend (main thread)."""
+    for _ in commit_steps(scene, job):
+        pass
+
+
+def commit_steps(scene, job: PrecomputeJob):
+    """:func:`commit` in steps (a generator of progress fractions, one object per step:
+    the modal operator runs one per timer event, so the UI stays responsive)."""
+    import bpy
+
+    t0 = time.perf_counter()
+    # Objects deleted while a modal precompute ran are dropped.
+    job.objects = [o for o in job.objects if o.name in bpy.data.objects]
+    # Every blob was made in run(): from here on only assignments change the scene.
+    if any(o.blob is None for o in job.objects):
+        raise RuntimeError("precompute commit without run(): nothing was traced")
+    run_id = uuid.uuid4().hex
+    steps = len(job.objects) + 1
+    for i, o in enumerate(job.objects):
+        ob = bpy.data.objects[o.name]
+        ob.prt.resolution = job.resolution
+        ob.prt.point_count = o.points.count
+        ob.prt.fingerprint = o.fingerprint
+        ob.prt.precompute_id = run_id
+        ob.prt.coarse_warning = o.coarse_warning
+        # what earlier runs stored (other methods' data too) is dropped with them
+        storage.replace_all(ob, {storage.VISIBILITY: o.blob, **o.extra})
+        yield (i + 1) / steps
+    storage.remove_legacy()
+    scene.prt.precomputed_resolution = job.resolution
+    scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(o.fingerprint for o in job.objects)
+    scene.prt.precompute_id = run_id
+    scene.prt.precomputed_objects = len(job.objects)
+    # last: a method's store sees the committed scene (AUTO draws on it to choose)
+    methods.get(job.method).shading.store(scene, job, job.derived)
+    job.timings["storage"] = time.perf_counter() - t0
+    t = job.timings
+    scene.prt.last_report = (f"{job.point_count} points, {t.get('ray_count', 0) / 1e6:.1f} M rays "
+                             f"in {t.get('rays', 0):.1f} s "
+                             f"({t.get('rays_per_second', 0) / 1e6:.2f} M rays/s)")
+    yield 1.0

@@ -1,0 +1,1 @@
+"""What a frame needs (FrameState), the render engine, dynamic objects, caches."""

@@ -1,0 +1,364 @@
+"""What the render engine needs per frame, derived from the scene and stored results.
+
+``FrameState.sync(depsgraph)`` exports the world and every visible mesh,
+attaches the stored visibility (decoded once and cached), and caches the
+view-independent diffuse sums per lighting.  ``FrameState.shade(eye)``
+returns per-corner radiance for each object with the active method.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+from dataclasses import replace
+
+import numpy as np
+
+from ...core.shading import brdf as core_brdf
+from ...core.sphere import directions, envmap
+from ...core.pipeline import frame_status
+from ...core.scene import mesh as core_mesh, textures, visibility
+from . import dynamic, keys
+from . import sources
+from .. import methods
+from ..blender import scene_export, storage, texture_export
+from ...core.common.parallel import Cancelled  # noqa: F401  (raised by FrameState.tick)
+
+#: What the last sync found wrong (shown in the panels; cheap to read in draw()).
+LAST_MESSAGES: list = []
+# Decoded visibility per stored blob (storage.key): room for every object of a big scene,
+# else each sync decodes them again and everything keyed on the bits is made anew
+_VIS_CACHE = keys.cache(128)
+
+
+def stored_visibility(ob_orig, points: int, nbytes: int, note=None):
+    """Decoded visibility bits of an object, or None if missing/unusable (``note`` is
+    told why a stored blob cannot be read)."""
+    if ob_orig.prt.point_count != points:
+        return None
+    stored = storage.load(ob_orig, storage.VISIBILITY, _VIS_CACHE, note=note)
+    bits = None if stored is None else stored[0].get("bits")
+    if bits is None or bits.shape != (points, nbytes):
+        return None
+    return bits
+
+
+def open_visibility(normals: np.ndarray, cube) -> np.ndarray:
+    """Unshadowed visibility (every traced texel visible), for objects without data."""
+    return np.packbits(visibility.hemisphere_mask(normals, cube), axis=1)
+
+
+def _traced_objects(scene, run: str) -> int:
+    """How many of the scene's objects that renders show carry the precompute ``run``
+    (objects hidden in the viewport count: they still render)."""
+    return sum(1 for ob in scene.objects
+               if ob.type in scene_export.GEOMETRY_TYPES and not ob.hide_render
+               and ob.prt.precompute_id == run)
+
+
+# core.scene.mesh.closed_side per geometry fingerprint (a cheap key: every sync exports anew)
+_CLOSED_SIDE = keys.cache(256)
+
+
+def closed_side(arrays, fingerprint: str) -> int:
+    return keys.held(_CLOSED_SIDE, fingerprint, (), lambda: core_mesh.closed_side(arrays))
+
+
+class TexturedRadiance(np.ndarray):
+    """Per-corner radiance (C, 3) with the mean colour of its textured slots (what every
+    consumer of plain radiance gets), plus ``diffuse`` (C, 3), the part a slot's colour
+    texture multiplies per pixel, and ``specular`` (C, 3), the rest."""
+
+    diffuse = None
+    specular = None
+
+    @classmethod
+    def of(cls, radiance, diffuse, specular):
+        out = np.asarray(radiance).view(cls)
+        out.diffuse = np.asarray(diffuse, np.float32)
+        out.specular = np.asarray(specular, np.float32)
+        return out
+
+
+def _with_base(state, value: float):
+    """``state`` (a shallow copy) whose objects' textured slots have base colour ``value``."""
+    sub = copy.copy(state)
+    sub.objects = []
+    for st in state.objects:
+        twin = copy.copy(st)
+        twin.data = st.data
+        twin.materials = [replace(m, diffuse_albedo=(value, value, value))
+                          if st.slot_of[i] in st.textures else m
+                          for i, m in enumerate(st.materials)]
+        sub.objects.append(twin)
+    return sub
+
+
+class ObjectState:
+    __slots__ = ("name", "arrays", "points", "materials", "_bits", "_pose", "status", "data",
+                 "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of", "dynamic",
+                 "shape", "near")
+
+    def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
+        self.name = name
+        #: core.scene.mesh.fingerprint of ``arrays`` (what caches of derived geometry key on:
+        #: every sync exports new arrays)
+        self.fingerprint = fingerprint
+        self.arrays = arrays
+        self.points = points
+        self.materials = materials
+        self._pose = None
+        self.bits = bits
+        #: "ok", "stale" (changed since its precompute), "missing" (never precomputed),
+        #: "unshadowed" (hidden from renders, drawn in the viewport only, never traced) or
+        #: "posed" (its bits are the product with dynamic objects' fields: addon.frame.dynamic)
+        self.status = status
+        #: a dynamic object's stored fields and motion since the precompute (addon.frame.dynamic)
+        self.dynamic = None
+        #: the geometry up to a dynamic object's rigid motion (its precompute's fingerprint;
+        #: ``fingerprint`` for the others): what a choice that survives motion keys on
+        self.shape = fingerprint
+        #: the dynamic objects whose fields reach this one now (addon.frame.dynamic.apply)
+        self.near = []
+        self.data = {}               # per-method data loaded in Method.sync
+        #: core.scene.mesh.closed_side: which side of a closed mesh is its (black) inside
+        self.closed_side = closed_side(arrays, fingerprint) if fingerprint else 0
+        #: {slot: (core.scene.textures.ColorSource, per-corner UVs or colours)}: the slots whose
+        #: colour varies per pixel (addon.blender.texture_export)
+        self.textures = {}
+        #: {slot: {input: (core.scene.textures.ScalarSource, per-corner UVs or colours)}} and
+        #: {slot: Principled constants}: textured scalar inputs (roughness, metallic, ...)
+        self.inputs = ({}, {})
+        #: {slot: (core.scene.textures.NormalSource, per-corner UVs (C, 2), per-corner world
+        #: tangents and bitangent signs (C, 4))}: normal- or bump-mapped slots (drawn per
+        #: pixel by the sources' pass and SSDF_SG; the per-vertex transport ignores them)
+        self.normals = {}
+        #: the material slot of each entry of ``materials`` (per-point variants of
+        #: textured scalar inputs follow the slots, core.scene.textures.point_variants)
+        self.slot_of = np.arange(len(materials))
+
+    @property
+    def bits(self):
+        """Visibility bits (P, 6N²/8): stored, or their product with the fields of the
+        dynamic objects near (made when first read: RSL reads the fields instead)."""
+        if self._pose is not None:
+            make, self._pose = self._pose, None
+            self._bits = make()
+        return self._bits
+
+    @bits.setter
+    def bits(self, value):
+        self._bits, self._pose = value, None
+
+    def pose(self, make):
+        """The bits become ``make()`` when next read (addon.frame.dynamic)."""
+        self._pose = make
+
+
+class FrameState:
+    """Scene data for drawing one or more frames."""
+
+    def __init__(self):
+        self.objects: list[ObjectState] = []
+        #: the lighting the methods shade: the world less its compact sources
+        self.world: envmap.WorldLighting | None = None
+        #: the world as exported (the background, the per-pixel sharp lobes)
+        self.full_world: envmap.WorldLighting | None = None
+        #: addon.gpu.lights.DrawnSource of the world's compact sources (drawn per pixel)
+        self.sources: list = []
+        self.drawn_lamps: list = []  # core.sg.lighting.Lamp drawn per pixel (addon/gpu/lights.py)
+        self.warnings: list[str] = []
+        self.error: str | None = None
+        self.resolution = 32
+        self.method = "REFERENCE"
+        self.settings: dict = {}     # scene.prt values of every method's settings
+        self.lamps: list = []        # core.sg.lighting.Lamp the method draws itself (SSDF_SG)
+        self.background = None       # (world, GPU texture) cached by the engine
+        #: the camera of the frame being drawn (set by the engine before shading):
+        #: dict(clip=4×4 world-to-clip, width, height, eye, view_dir), or None
+        self.camera: dict | None = None
+        #: set by F12 (engine.render): ``progress(fraction)`` reports 0..1 of the frame,
+        #: ``cancelled()`` is true once the user pressed ESC (see :meth:`tick`)
+        self.progress = None
+        self.cancelled = None
+        #: the part of the frame's progress that ticks now report in (:meth:`span`)
+        self._span = (0.0, 1.0)
+
+    # ------------------------------------------------------------------ progress
+    def tick(self, fraction=None):
+        """Called between objects and chunks of work (methods, AUTO, the sync): raises
+        :class:`Cancelled` when the frame was stopped (ESC), reports ``fraction`` of the
+        current :meth:`span` when given.  Costs nothing without hooks (the viewport)."""
+        if self.cancelled is not None and self.cancelled():
+            raise Cancelled()
+        if self.progress is not None and fraction is not None:
+            lo, hi = self._span
+            self.progress(lo + (hi - lo) * min(max(float(fraction), 0.0), 1.0))
+
+    @contextlib.contextmanager
+    def span(self, lo: float, hi: float):
+        """Ticks inside report within ``[lo, hi]`` of the current span."""
+        outer = self._span
+        a, b = outer
+        self._span = (a + (b - a) * lo, a + (b - a) * hi)
+        try:
+            yield self
+        finally:
+            self._span = outer
+
+    # ------------------------------------------------------------------ sync
+    def sync(self, depsgraph):
+        scene = depsgraph.scene
+        self.warnings = []
+        self.error = None
+        try:
+            self.world = scene_export.export_world(scene, self.warnings)
+        except scene_export.ExportError as exc:
+            self.error = str(exc)
+            self.world = envmap.WorldLighting(color=(0.0, 0.0, 0.0))
+        # the compact sources are drawn per pixel (addon/gpu/lights.py); methods shade the rest
+        self.full_world = self.world
+        self.world, self.sources = sources.split_world(self.world,
+                                                      sources.extraction_settings(scene.prt))
+        self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
+        self.method = scene.prt.method
+        self.settings = {name: getattr(scene.prt, name) for name in methods.scene_properties()}
+        cube = directions.cubemap(self.resolution)
+        nbytes = cube.size // 8
+        objects = []
+        notes = frame_status.SyncNotes()
+        skipped = []
+        shown_only = [] if depsgraph.mode != "RENDER" else None
+        found = scene_export.visible_mesh_objects(depsgraph, skipped, shown_only)
+        run = scene.prt.precompute_id
+        listed = found + (shown_only or [])
+        for i, ob in enumerate(listed):
+            self.tick(i / len(listed))          # F12's progress; ESC stops here
+            arrays = scene_export.mesh_arrays(ob)
+            if len(arrays.triangles) == 0:
+                continue
+            core_mesh.repair_normals(arrays)
+            points = core_mesh.shading_points(arrays)
+            fingerprint = core_mesh.fingerprint(arrays)
+            # textured colour inputs: their mean colour in the material, drawn per pixel
+            textured = texture_export.slot_sources(ob, self.warnings)
+            colours = {slot: texture_export.mean_albedo(src, values)
+                       for slot, (src, values) in textured.items()}
+            scalars = texture_export.slot_scalars(ob, self.warnings)
+            means = {slot: texture_export.mean_scalars(inputs)
+                     for slot, inputs in scalars.items()}
+            # lobes too narrow for the cubemap are drawn per pixel (addon/gpu/sharp.py)
+            mats = [core_brdf.with_sharp_lobe(m, self.resolution)
+                    for m in scene_export.object_materials(ob, self.warnings, colours, means)]
+            orig = ob.original
+            data = orig.prt
+            bits = None
+            status = "ok"
+            moving = None
+            unreadable = False
+            if orig.hide_render:
+                status = "unshadowed"          # viewport only: never traced, casts nothing
+            elif storage.has(orig, storage.VISIBILITY) and data.resolution == self.resolution:
+                why = []
+                bits = stored_visibility(orig, points.count, nbytes, why.append)
+                if why:                        # drawn like an object without data
+                    status, unreadable = "missing", True
+                    notes.unreadable += why
+                else:
+                    status = frame_status.stored_status(
+                        bits is not None, data.dynamic or storage.has(orig, storage.SHADOW_FIELD),
+                        data.fingerprint == fingerprint)
+                    if status == "dynamic":
+                        status, moving = dynamic.check(ob, arrays.positions, self.note)
+                    elif status == "ok" and run and data.precompute_id != run:
+                        notes.earlier.append(orig.name)
+            else:
+                status = "missing"
+            if bits is None:
+                bits = open_visibility(points.normals, cube)
+            if not unreadable:
+                notes.add(orig.name, status, status == "missing" and storage.legacy(orig))
+            if data.coarse_warning and status == "ok":
+                self.warnings.append(data.coarse_warning)
+            st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
+            st.textures = textured
+            st.normals = texture_export.slot_normals(ob, self.warnings)
+            st.dynamic = moving if status == "ok" else None
+            if st.dynamic is not None:
+                st.shape = data.fingerprint
+            if scalars:
+                # per-vertex methods: each point's values, as material variants
+                constants = {slot: texture_export.principled_constants(
+                    ob.material_slots[slot].material) for slot in scalars}
+                per_point = {slot: {name: textures.point_values(
+                    scalar, values, points.point_of_corner, points.count)
+                    for name, (scalar, values) in inputs.items()}
+                    for slot, inputs in scalars.items()}
+                variants, point_mat, st.slot_of = textures.point_variants(
+                    mats, points, per_point, constants)
+                st.materials = [core_brdf.with_sharp_lobe(m, self.resolution)
+                                for m in variants]
+                st.points = replace(points, materials=point_mat)
+                st.inputs = (scalars, constants)
+            # the original material per slot, for methods with their own material settings
+            st.data["material_names"] = [
+                slot.material.original.name if slot.material is not None else None
+                for slot in ob.material_slots] or [None]
+            objects.append(st)
+        self.warnings += scene_export.instance_warning(skipped)
+        self.warnings += notes.messages(
+            bool(run) and _traced_objects(scene, run) < scene.prt.precomputed_objects)
+        self.objects = objects
+        dynamic.apply(self)       # the fields at the current poses (before methods sync)
+        lamp_warnings = []
+        lamps = scene_export.export_lamps(depsgraph, lamp_warnings)
+        # lamps are drawn per pixel (addon/gpu/lights.py), except the point and spot lamps of a
+        # method that draws them itself (SSDF_SG: its spherical Gaussians, eq. 32-33)
+        own = self.method_impl.draws_lamps
+        mine = ("POINT", "SPOT") if own else ()
+        self.lamps = [lamp for lamp in lamps if lamp.kind in mine]
+        self.drawn_lamps = [lamp for lamp in lamps if lamp.kind not in mine]
+        self.warnings += lamp_warnings
+        self.method_impl.sync(self)
+        LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
+
+    def note(self, message: str):
+        """Add a warning for the panels/status bar once (methods call this while shading)."""
+        if message not in self.warnings:
+            self.warnings.append(message)
+            LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
+
+    @property
+    def method_impl(self):
+        return methods.get(self.method).shading
+
+    @property
+    def view_dependent(self) -> bool:
+        """Whether shading changes with the camera (e.g. REFERENCE with glossy or
+        layered materials); SH and diffuse-only scenes do not."""
+        return self.method_impl.view_dependent(self)
+
+    # ------------------------------------------------------------------ shade
+    def shade(self, eye, view_dirs_for=None):
+        """Per-corner radiance (C, 3) float32 for each object, by the active method.
+
+        ``eye``: camera position for perspective views; ``view_dirs_for`` a unit
+        direction toward an orthographic camera (then ``eye`` is ignored).
+        """
+        out = self.method_impl.shade(self, eye, view_dirs_for)
+        textured = [i for i, st in enumerate(self.objects) if st.textures]
+        if out is None or not textured:
+            return out
+        # Radiance is linear in a slot's base colour (Lambert base, metal F0): shaded with
+        # white and with black, their difference is what the texture multiplies per pixel
+        sub = copy.copy(self)
+        sub.objects = [self.objects[i] for i in textured]
+        white = self.method_impl.shade(_with_base(sub, 1.0), eye, view_dirs_for)
+        black = self.method_impl.shade(_with_base(sub, 0.0), eye, view_dirs_for)
+        for i, w, b in zip(textured, white, black):
+            out[i] = TexturedRadiance.of(out[i], np.asarray(w) - np.asarray(b), b)
+        return out
+
+    def draw_objects(self, eye, view_dirs_for=None):
+        """Per-pixel draw callables of the active method, or None (see methods)."""
+        return self.method_impl.draw_objects(self, eye, view_dirs_for)

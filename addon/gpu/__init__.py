@@ -1,0 +1,1 @@
+"""GPU drawing: the shader builder, textures and batches, the per-pixel passes."""

@@ -1,0 +1,362 @@
+"""GPU drawing shared by the viewport and final renders.
+
+:func:`draw_frame` draws one frame into the bound framebuffer: the world as
+background (unless the film is transparent), then every object's triangles
+with per-vertex linear radiance.  The viewport and F12 call the same function;
+only the matrices and the target differ.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+import bpy  # noqa: F401  (Blender's ``gpu`` module is importable once bpy is)
+import gpu
+import numpy as np
+from gpu_extras.batch import batch_for_shader
+
+from ...core.common.cache import Cache, clear_all
+
+SHADER_DIR = Path(__file__).resolve().parents[2] / "shaders"
+
+
+def gpu_cache(initial: dict | None = None, limit: int = 64, name: str = "") -> Cache:
+    """A cache of GPU objects (shaders, batches, textures; ``addon.frame.keys``' policy: at most
+    ``limit`` entries, least recently used dropped), emptied by :func:`free_gpu_resources`
+    (``initial``: entries to start with)."""
+    import sys
+    cache = Cache(limit, name, gpu=True, module=sys._getframe(1).f_globals.get("__name__", ""))
+    cache.update(initial or {})
+    return cache
+
+
+def free_gpu_resources():
+    """Drop every cached GPU object while Blender's GPU context still exists: on
+    unregister, and at interpreter exit before Blender's own exit handler frees the
+    context (Python collecting a texture or shader after that crashes)."""
+    clear_all(gpu=True)
+    import gc
+    gc.collect()
+
+
+#: the shaders of this module (per name) and the background's quad ("quad")
+_SHADERS = gpu_cache({}, limit=8)
+
+
+# whether the gpu module has been readied in -b (:func:`ensure_gpu`)
+_GPU_READY = False
+
+
+def ensure_gpu(scene):
+    """In ``-b`` the gpu module needs one Workbench render before offscreen drawing."""
+    if _GPU_READY or not bpy.app.background:
+        return
+    with temporary_camera(scene):
+        r = scene.render
+        saved = (r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage)
+        try:
+            _workbench_render(scene)
+        finally:
+            r.engine, r.resolution_x, r.resolution_y, r.resolution_percentage = saved
+
+
+@contextlib.contextmanager
+def temporary_camera(scene):
+    """A render needs a camera: without one, a temporary camera in ``scene`` while the
+    block runs, removed afterwards with its data (nothing else changes)."""
+    if scene.camera is not None:
+        yield
+        return
+    cam_data = bpy.data.cameras.new("PRT temporary camera")
+    cam = bpy.data.objects.new("PRT temporary camera", cam_data)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    try:
+        yield
+    finally:
+        scene.camera = None
+        bpy.data.objects.remove(cam)
+        bpy.data.cameras.remove(cam_data)
+
+
+def _workbench_render(scene):
+    global _GPU_READY
+    r = scene.render
+    r.engine = "BLENDER_WORKBENCH"
+    r.resolution_x = r.resolution_y = 8
+    r.resolution_percentage = 100
+    with bpy.context.temp_override(scene=scene):
+        bpy.ops.render.render()
+    _GPU_READY = True
+
+
+def redraw_viewports(self=None, context=None):
+    """Property update callback: redraw every 3D viewport."""
+    wm = bpy.context.window_manager if context is None else context.window_manager
+    for window in getattr(wm, "windows", []):
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+
+def _source(name):
+    return (SHADER_DIR / name).read_text()
+
+
+def glsl_source(*names) -> str:
+    """Shader files of ``shaders/`` joined in order (libraries of functions first)."""
+    return "".join(_source(n) for n in names)
+
+
+def _shader(name, push_constants, vertex_inputs, varyings, samplers=()):
+    """Build (once) the shader ``shaders/<name>_vert.glsl`` + ``<name>_frag.glsl``."""
+    if name not in _SHADERS:
+        info = gpu.types.GPUShaderCreateInfo()
+        for kind, ident in push_constants:
+            info.push_constant(kind, ident)
+        for slot, (kind, ident) in enumerate(samplers):
+            info.sampler(slot, kind, ident)
+        for slot, (kind, ident) in enumerate(vertex_inputs):
+            info.vertex_in(slot, kind, ident)
+        iface = gpu.types.GPUStageInterfaceInfo(f"prt_{name}_iface")
+        for kind, ident in varyings:
+            iface.smooth(kind, ident)
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source(_source(f"{name}_vert.glsl"))
+        info.fragment_source(_source(f"{name}_frag.glsl"))
+        _SHADERS[name] = gpu.shader.create_from_info(info)
+    return _SHADERS[name]
+
+
+def surface_shader():
+    return _shader("surface", [("MAT4", "viewProjection")],
+                   [("VEC3", "pos"), ("VEC4", "radiance")], [("VEC4", "vRadiance")])
+
+
+def textured_shader():
+    """Per-vertex radiance times a per-pixel colour (shaders/surface_tex_*.glsl)."""
+    if "surface_tex" not in _SHADERS:
+        info = gpu.types.GPUShaderCreateInfo()
+        for kind, ident in (("MAT4", "viewProjection"), ("VEC4", "texInfo"),
+                            ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
+            info.push_constant(kind, ident)
+        info.sampler(0, "FLOAT_2D", "albedoTex")
+        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC4", "diffuse"),
+                                              ("VEC3", "specular"), ("VEC2", "uv"),
+                                              ("VEC4", "attr"))):
+            info.vertex_in(slot, kind, ident)
+        iface = gpu.types.GPUStageInterfaceInfo("prt_surface_tex_iface")
+        for kind, ident in (("VEC4", "vDiffuse"), ("VEC3", "vSpecular"), ("VEC2", "vUv"),
+                            ("VEC4", "vAttr")):
+            iface.smooth(kind, ident)
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source(_source("surface_tex_vert.glsl"))
+        info.fragment_source(glsl_source("texture_lib.glsl", "surface_tex_frag.glsl"))
+        _SHADERS["surface_tex"] = gpu.shader.create_from_info(info)
+    return _SHADERS["surface_tex"]
+
+
+# GPU textures of colour inputs, per image content (keys.image_key), and "white"
+_ALBEDO_TEXTURES = gpu_cache({}, limit=16, name="albedo textures")
+
+
+def albedo_texture(pixels: np.ndarray):
+    """The GPU texture of a core.scene.textures.ImageTexture's pixels (H, W, 4), row 0 at v = 0."""
+    from ..frame.keys import image_key
+    key = image_key(pixels)
+    tex = _ALBEDO_TEXTURES.get(key)
+    if tex is None:
+        tex = _ALBEDO_TEXTURES[key] = float_texture(pixels)
+    return tex
+
+
+def source_uniforms(source) -> dict:
+    """Push-constant values of a core.scene.textures.ColorSource (texture_lib.glsl); None: a
+    slot without one."""
+    if source is None:
+        return dict(texInfo=(0.0, 0.0, -1.0, 0.0), texMap0=(1.0, 0.0, 0.0),
+                    texMap1=(0.0, 1.0, 0.0), mixColor=(0.0, 0.0, 0.0, 0.0))
+    tex = source.texture
+    interp = ext = 0.0
+    map0, map1 = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)
+    if tex is not None:
+        interp = {"CLOSEST": 0.0, "LINEAR": 1.0, "CUBIC": 2.0}[tex.interpolation]
+        ext = {"REPEAT": 0.0, "EXTEND": 1.0, "CLIP": 2.0, "MIRROR": 3.0}[tex.extension]
+        map0, map1 = (tuple(map(float, tex.transform[0])), tuple(map(float, tex.transform[1])))
+    mode, mix_colour = 0.0, (0.0, 0.0, 0.0, 0.0)
+    if source.mix is not None:
+        kind, f, other, first = source.mix
+        mode = (1.0 if kind == "MIX" else 2.0) + (0.0 if first else 2.0)
+        mix_colour = (*(float(c) for c in other[:3]), float(f))
+    return dict(texInfo=(interp, ext, 0.0 if tex is not None else 1.0, mode), texMap0=map0,
+                texMap1=map1, mixColor=mix_colour)
+
+
+def white_texture():
+    """A 1x1 white RGBA texture (the colour of a slot without one)."""
+    tex = _ALBEDO_TEXTURES.get("white")
+    if tex is None:
+        tex = _ALBEDO_TEXTURES["white"] = float_texture(np.ones((1, 1, 4), np.float32))
+    return tex
+
+
+def textured_draws(positions, radiance, triangles, closed_side, textures, corner_slots):
+    """Draw callables of an object whose radiance is an ``addon.frame.state.TexturedRadiance``:
+    per textured slot a batch multiplying ``radiance.diffuse`` by the slot's colour per
+    pixel (plus ``radiance.specular``); the other slots as plain radiance."""
+    tri_slot = corner_slots[triangles[:, 0]]
+    draws = []
+    rest = ~np.isin(tri_slot, list(textures))
+    if rest.any():
+        plain = surface_batch(positions, radiance, triangles[rest], closed_side)
+
+        def draw_plain(view_projection, batch=plain):
+            sh = surface_shader()
+            sh.bind()
+            sh.uniform_float("viewProjection", view_projection)
+            batch.draw(sh)
+        draws.append(draw_plain)
+    for slot, (source, values) in textures.items():
+        sel = triangles[tri_slot == slot]
+        if not len(sel):
+            continue
+        corners = sel.reshape(-1)
+        diffuse = np.empty((len(corners), 4), np.float32)
+        diffuse[:, :3] = radiance.diffuse[corners]
+        diffuse[:, 3] = float(closed_side)
+        uv = np.zeros((len(corners), 2), np.float32)
+        attr = np.ones((len(corners), 4), np.float32)
+        if source.texture is not None:
+            uv[:] = values[corners]
+        else:
+            attr[:] = values[corners]
+        batch = batch_for_shader(textured_shader(), "TRIS", {
+            "pos": np.ascontiguousarray(positions[corners], dtype=np.float32),
+            "diffuse": diffuse,
+            "specular": np.ascontiguousarray(radiance.specular[corners], dtype=np.float32),
+            "uv": uv, "attr": attr})
+        tex = albedo_texture(source.texture.pixels) if source.texture is not None \
+            else white_texture()
+        uniforms = source_uniforms(source)
+
+        def draw_textured(view_projection, batch=batch, tex=tex, uniforms=uniforms):
+            sh = textured_shader()
+            sh.bind()
+            sh.uniform_float("viewProjection", view_projection)
+            for name, value in uniforms.items():
+                sh.uniform_float(name, value)
+            sh.uniform_sampler("albedoTex", tex)
+            batch.draw(sh)
+        draws.append(draw_textured)
+    return draws
+
+
+def background_shader():
+    return _shader("background",
+                   [("MAT4", "invViewProjection"), ("MAT3", "texRotation"), ("FLOAT", "strength")],
+                   [("VEC2", "ndc")], [("VEC2", "vNdc")], samplers=[("FLOAT_2D", "envMap")])
+
+
+def float_texture(rgba: np.ndarray):
+    """A RGBA32F GPU texture from (H, W, 4) float32 (row 0 = texture t = 0)."""
+    h, w, _ = rgba.shape
+    flat = np.ascontiguousarray(rgba, dtype=np.float32).reshape(-1)
+    buf = gpu.types.Buffer("FLOAT", flat.size, flat)
+    return gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
+
+
+def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles: np.ndarray,
+                  closed_side: int = 0):
+    """Batch of one object's corners: positions (C, 3), radiance (C, 3), triangles (T, 3).
+    ``closed_side`` (core.scene.mesh.closed_side) rides in the radiance's alpha: the shader
+    draws a closed mesh's inner side black."""
+    rgba = np.empty((len(radiance), 4), dtype=np.float32)
+    rgba[:, :3] = radiance
+    rgba[:, 3] = float(closed_side)
+    return batch_for_shader(surface_shader(), "TRIS",
+                            {"pos": np.ascontiguousarray(positions, dtype=np.float32),
+                             "radiance": rgba},
+                            indices=np.ascontiguousarray(triangles, dtype=np.int32))
+
+
+def _quad_batch():
+    quad = _SHADERS.get("quad")
+    if quad is None:
+        quad = _SHADERS["quad"] = batch_for_shader(
+            background_shader(), "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+            indices=[(0, 1, 2), (0, 2, 3)])
+    return quad
+
+
+def draw_frame(batches, background, view_projection, transparent: bool, object_draws=(),
+               added_draws=()):
+    """Draw into the bound framebuffer.  ``background`` = (texture, rotation 4x4, strength);
+    ``object_draws``: callables ``draw(view_projection)`` of a per-pixel method;
+    ``added_draws``: callables whose output is added onto the surfaces already drawn
+    (depth test equal, no depth writes: the per-pixel sharp lobes)."""
+    fb = gpu.state.active_framebuffer_get()
+    fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+    gpu.state.blend_set("NONE")
+    gpu.state.face_culling_set("NONE")
+    if not transparent and background is not None:
+        texture, rotation, strength = background
+        gpu.state.depth_test_set("NONE")
+        gpu.state.depth_mask_set(False)
+        sh = background_shader()
+        sh.bind()
+        sh.uniform_float("invViewProjection", view_projection.inverted())
+        sh.uniform_float("texRotation", rotation)
+        sh.uniform_float("strength", float(strength))
+        sh.uniform_sampler("envMap", texture)
+        _quad_batch().draw(sh)
+    gpu.state.depth_test_set("LESS_EQUAL")
+    gpu.state.depth_mask_set(True)
+    sh = surface_shader()
+    sh.bind()
+    sh.uniform_float("viewProjection", view_projection)
+    for batch in batches:
+        batch.draw(sh)
+    for draw in object_draws:
+        draw(view_projection)
+    if added_draws:
+        gpu.state.depth_mask_set(False)
+        gpu.state.blend_set("ADDITIVE_PREMULT")
+        for draw in added_draws:
+            draw(view_projection)
+        gpu.state.blend_set("NONE")
+    gpu.state.depth_test_set("NONE")
+    gpu.state.depth_mask_set(False)
+
+
+def render_offscreen(batches, background, view_projection, width, height, transparent,
+                     object_draws=(), added_draws=()):
+    """Draw a frame offscreen; return linear RGBA (height, width, 4), bottom row first."""
+    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            draw_frame(batches, background, view_projection, transparent, object_draws,
+                       added_draws)
+            fb = gpu.state.active_framebuffer_get()
+            buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
+        buf.dimensions = width * height * 4
+        return np.array(buf, dtype=np.float32).reshape(height, width, 4)
+    finally:
+        offscreen.free()
+
+
+def triangle_corners(st):
+    """Per drawn corner (three per triangle, unshared) of a synced object: positions,
+    normals, the shading point of each of its triangle's corners and its barycentric
+    weights -- what the per-pixel passes interpolate stored per-point data with."""
+    arrays, pts = st.arrays, st.points
+    tri = arrays.triangles
+    corner = tri.reshape(-1)
+    pos = arrays.positions[arrays.corner_verts[corner]].astype(np.float32)
+    nrm = arrays.corner_normals[corner].astype(np.float32)
+    tri_points = np.repeat(pts.point_of_corner[tri].astype(np.float32), 3, axis=0)
+    bary = np.tile(np.eye(3, dtype=np.float32), (len(tri), 1))
+    return pos, nrm, tri_points, bary
+

@@ -1,0 +1,494 @@
+"""Compact light sources drawn per pixel for every method.
+
+The world's few compact, bright sources (a sun, softboxes, windows: :func:`core.sphere.sources.
+extract_sources`) are split off the environment; every method shades the smooth residual
+from its precomputed transfer, and this pass adds the sources per pixel
+(``shaders/lights_*.glsl``), each with its own shadow map filtered to its angular size.
+Blender's sun lamps go through the same path.  The sources are found in the image's
+texture space, so turning the world (a Mapping rotation) moves them with no new
+extraction; the shadow maps follow.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...core.shading import brdf as core_brdf
+from ...core.shading.materials import Material
+from ...core.scene import textures
+from . import drawing
+from ..blender import texture_export
+from ..frame.sources import lamp_sources
+
+#: shadow map tile per source (texels per side)
+SHADOW_TILE = 2048
+#: sources drawn per frame at most (the extracted ones plus sun lamps)
+MAX_DRAWN = 8
+#: view-cosine nodes of the per-material tables (lights_frag.glsl TABLE)
+TABLE = 32
+
+_GPU = drawing.gpu_cache({})
+_BATCHES = drawing.gpu_cache({})
+_SHADOWS = drawing.gpu_cache({})
+# the atlas's depth texture and framebuffer, drawn into again after a turn (same size)
+_SHADOW_TARGET = drawing.gpu_cache({}, limit=1)
+
+
+# --------------------------------------------------------------------------- shaders
+
+#: every optional feature of lights_frag.glsl (a #define each)
+FEATURES = ("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "LOCAL_LAMPS", "AREA_LAMPS")
+
+
+def _shader(features=FEATURES):
+    """The pass compiled with ``features`` (lights_frag.glsl: what a draw lacks is left
+    out of its shader, not branched around)."""
+    import gpu
+    features = tuple(sorted(features))
+    sh = _GPU.get(("shader", features))
+    if sh is None:
+        info = gpu.types.GPUShaderCreateInfo()
+        # 128 bytes of push constants at most (the closed side rides in paramTex, the
+        # source count is srcTex's height)
+        for kind, ident in (("MAT4", "viewProjection"), ("VEC4", "texInfo"),
+                            ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
+            info.push_constant(kind, ident)
+        for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex", "albedoTex",
+                                      "cubeTex", "roughTex", "normalTex")):
+            info.sampler(slot, "FLOAT_2D", ident)
+        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"), ("VEC2", "uv"),
+                                              ("VEC4", "attr"), ("VEC4", "tng"))):
+            info.vertex_in(slot, kind, ident)
+        iface = gpu.types.GPUStageInterfaceInfo("prt_lights_iface")
+        for kind, ident in (("VEC3", "vPos"), ("VEC3", "vNrm"), ("VEC2", "vUv"),
+                            ("VEC4", "vAttr"), ("VEC4", "vTng")):
+            iface.smooth(kind, ident)
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source(drawing.glsl_source("lights_vert.glsl"))
+        defines = "".join(f"#define {f}\n" for f in features)
+        info.fragment_source("#define COS_VIEW_MIN 1e-4\n" + defines + drawing.glsl_source(
+            "brdf_lib.glsl", "texture_lib.glsl", "lights_frag.glsl"))
+        sh = _GPU[("shader", features)] = gpu.shader.create_from_info(info)
+    return sh
+
+
+def slot_features(params: np.ndarray, albedo_source) -> tuple:
+    """The per-slot features of a slot's paramTex rows (:func:`slot_texels`) and textured
+    colour source."""
+    out = []
+    if params[0, 1, 2] > 0 and params[0, 1, 3] > 0.5:
+        out.append("GLOSSY")
+    if params[0, 11, 0] >= 2:
+        out.append("ROUGH_TEX")
+    if params[0, 16, 0] > 0.5:
+        out.append("NORMAL_MAP")
+    if albedo_source is not None:
+        out.append("ALBEDO_TEX")
+    return tuple(out)
+
+
+#: shadow-map taps per source and sample with one sample per pixel (blocker search, filter;
+#: lights_frag.glsl's defaults)
+TAPS = (16, 24)
+
+
+def frame_features(sources, supersampling: int = 1) -> tuple:
+    """The per-frame features: local lamps (point, spot) and area lamps, and with
+    ``supersampling`` s > 1 fewer filter taps per sample: a pixel's s² samples turn their
+    taps differently, so n / s taps per sample still give each pixel s times the taps of
+    one sample per pixel.  The blocker search keeps its taps: fewer miss blockers, a bias
+    the pixel's average does not remove."""
+    s = max(1, int(supersampling))
+    out = [] if s == 1 else [f"PCF_TAPS {max(4, -(-TAPS[1] // s))}"]
+    if any(s.local and s.area is None for s in sources):
+        out.append("LOCAL_LAMPS")
+    if any(s.area is not None for s in sources):
+        out.append("AREA_LAMPS")
+    return tuple(out)
+
+
+def _surface_batch(pos, nrm, uv, attr, tng):
+    """A batch of the pass's vertex layout (any feature set's shader draws it)."""
+    import gpu
+    fmt = _GPU.get("format")
+    if fmt is None:
+        fmt = _GPU["format"] = gpu.types.GPUVertFormat()
+        for ident, n in (("pos", 3), ("nrm", 3), ("uv", 2), ("attr", 4), ("tng", 4)):
+            fmt.attr_add(id=ident, comp_type="F32", len=n, fetch_mode="FLOAT")
+    vbo = gpu.types.GPUVertBuf(fmt, len(pos))
+    for ident, data in (("pos", pos), ("nrm", nrm), ("uv", uv), ("attr", attr), ("tng", tng)):
+        vbo.attr_fill(ident, np.ascontiguousarray(data, dtype=np.float32))
+    return gpu.types.GPUBatch(type="TRIS", buf=vbo)
+
+
+def _distance_shader():
+    """Writes each fragment's distance to ``lamp`` (a local lamp's shadow faces)."""
+    import gpu
+    sh = _GPU.get("distance")
+    if sh is None:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.push_constant("MAT4", "viewProjection")
+        info.push_constant("VEC3", "lamp")
+        info.vertex_in(0, "VEC3", "pos")
+        iface = gpu.types.GPUStageInterfaceInfo("prt_lights_distance_iface")
+        iface.smooth("VEC3", "vPos")
+        info.vertex_out(iface)
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source("void main() { vPos = pos; "
+                           "gl_Position = viewProjection * vec4(pos, 1.0); }")
+        info.fragment_source("void main() { fragColor = vec4(length(vPos - lamp)); }")
+        sh = _GPU["distance"] = gpu.shader.create_from_info(info)
+    return sh
+
+
+def _depth_shader():
+    import gpu
+    sh = _GPU.get("depth")
+    if sh is None:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.push_constant("MAT4", "viewProjection")
+        info.vertex_in(0, "VEC3", "pos")
+        info.fragment_out(0, "VEC4", "fragColor")
+        info.vertex_source("void main() { gl_Position = viewProjection * vec4(pos, 1.0); }")
+        info.fragment_source("void main() { fragColor = vec4(0.0); }")
+        sh = _GPU["depth"] = gpu.shader.create_from_info(info)
+    return sh
+
+
+# --------------------------------------------------------------------------- geometry
+
+def _object_batches(st):
+    """(depth batch, [(slot, surface batch)]) of one object, cached per geometry."""
+    from gpu_extras.batch import batch_for_shader
+    key = (st.name, st.fingerprint, tuple(sorted((slot, id(values)) for slot, (_, values)
+                                                 in st.textures.items())),
+           tuple(sorted((slot, id(got[2])) for slot, got in st.normals.items())),
+           tuple(sorted((slot, id(v)) for slot, got in st.inputs[0].items()
+                        for _, v in got.values())))
+    got = _BATCHES.get(key)
+    if got is not None:
+        return got
+    arrays = st.arrays
+    tri = arrays.triangles
+    corner_pos = arrays.positions[arrays.corner_verts].astype(np.float32)
+    depth = batch_for_shader(_depth_shader(), "TRIS", {"pos": np.ascontiguousarray(corner_pos)},
+                             indices=np.ascontiguousarray(tri, dtype=np.int32))
+    corner = tri.reshape(-1)
+    pos = np.ascontiguousarray(corner_pos[corner])
+    nrm = np.ascontiguousarray(arrays.corner_normals[corner].astype(np.float32))
+    tri_slot = np.repeat(arrays.corner_materials[tri[:, 0]], 3)
+    surfaces = []
+    for slot in np.unique(tri_slot):
+        sel = tri_slot == slot
+        uv = np.zeros((int(sel.sum()), 2), np.float32)
+        attr = np.ones((int(sel.sum()), 4), np.float32)
+        source, values = st.textures.get(int(slot), (None, None))
+        uvs = texture_export.slot_uvs(st, int(slot))
+        if uvs is not None:
+            uv[:] = uvs[1][corner[sel]]
+        if source is not None and source.texture is None:
+            attr[:] = values[corner[sel]]
+        tng = np.zeros((int(sel.sum()), 4), np.float32)
+        mapped = texture_export.shader_normal(st, int(slot))
+        if mapped is not None:
+            tng[:] = mapped[1][corner[sel]]
+        surfaces.append((int(slot), _surface_batch(pos[sel], nrm[sel], uv, attr, tng)))
+    if len(_BATCHES) >= 64:
+        _BATCHES.pop(next(iter(_BATCHES)))
+    got = _BATCHES[key] = (depth, surfaces)
+    return got
+
+
+def light_matrix(direction, centre, radius) -> np.ndarray:
+    """World -> clip of an orthographic view from ``direction`` (toward the light) that
+    holds the sphere (``centre``, ``radius``): depth 0 at the light's side."""
+    c = np.asarray(direction, np.float64)
+    u = np.cross(c, [0.0, 0.0, 1.0] if abs(c[2]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(c, u)
+    M = np.eye(4)
+    for row, axis in enumerate((u, v, -c)):
+        M[row, :3] = axis / radius
+        M[row, 3] = -axis @ np.asarray(centre, np.float64) / radius
+    return M
+
+
+def _shadow_atlas(state, sources, casters):
+    """Render every source's shadow map into one depth atlas: (texture, per-source
+    (matrix, tile (u, v, size), depth range, texel size)).  Cached per geometry and
+    directions."""
+    import gpu
+    import mathutils
+    positions = [st.arrays.positions for st in casters]
+    allp = np.concatenate(positions) if positions else np.zeros((1, 3))
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6) * 1.01
+    key = (tuple(st.fingerprint for st in casters),
+           tuple(np.round(s.direction, 7).tobytes() for s in sources))
+    got = _SHADOWS.get(key)
+    if got is not None:
+        return got
+    cols = min(len(sources), 4)
+    rows = -(-len(sources) // 4)
+    width, height = SHADOW_TILE * cols, SHADOW_TILE * rows
+    target = _SHADOW_TARGET.get((width, height))
+    if target is None:
+        _SHADOW_TARGET.clear()
+        tex = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
+        target = _SHADOW_TARGET[(width, height)] = (tex, gpu.types.GPUFrameBuffer(depth_slot=tex))
+    tex, fb = target
+    tiles = []
+    saved = gpu.state.viewport_get()
+    sh = _depth_shader()
+    with fb.bind():
+        fb.clear(depth=1.0)
+        gpu.state.depth_test_set("LESS_EQUAL")
+        gpu.state.depth_mask_set(True)
+        gpu.state.face_culling_set("NONE")
+        for k, s in enumerate(sources):
+            x, y = (k % 4) * SHADOW_TILE, (k // 4) * SHADOW_TILE
+            gpu.state.viewport_set(x, y, SHADOW_TILE, SHADOW_TILE)
+            M = light_matrix(s.direction, centre, radius)
+            sh.bind()
+            sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
+            for st in casters:
+                _object_batches(st)[0].draw(sh)
+            tiles.append((M, (x, y, SHADOW_TILE), 2.0 * radius, 2.0 * radius / SHADOW_TILE))
+    gpu.state.viewport_set(*saved)
+    gpu.state.depth_test_set("NONE")
+    got = (tex, tiles)
+    _SHADOWS.clear()
+    _SHADOWS[key] = got
+    return got
+
+
+#: a local lamp's shadow faces (texels per side; six per lamp)
+CUBE_TILE = 1024
+_CUBES = drawing.gpu_cache({})
+#: the six 90-degree faces around a local lamp, in lights_frag.glsl's order
+CUBE_AXES = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0],
+                      [0, 0, -1.0]])
+
+
+def face_matrix(position, axis, near, far) -> np.ndarray:
+    """World -> clip of a square 90-degree perspective view from ``position`` along
+    ``axis`` (one face of a local lamp's shadow cube)."""
+    f = np.asarray(axis, np.float64)
+    up = np.array([0.0, 0.0, 1.0]) if abs(f[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    right = np.cross(f, up)
+    right /= np.linalg.norm(right)
+    up = np.cross(right, f)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = right, up, -f
+    view[:3, 3] = -view[:3, :3] @ np.asarray(position, np.float64)
+    proj = np.zeros((4, 4))
+    proj[0, 0] = proj[1, 1] = 1.0
+    proj[2, 2] = -(far + near) / (far - near)
+    proj[2, 3] = -2.0 * far * near / (far - near)
+    proj[3, 2] = -1.0
+    return proj @ view
+
+
+def _cube_atlas(sources, casters):
+    """Render each local lamp's six faces (distance to the lamp) into one R32F atlas: one
+    row of six tiles per lamp.  (texture, per lamp (tile origin x, y, face size, the six
+    matrices)); cached per geometry and lamp positions."""
+    import gpu
+    import mathutils
+    key = (tuple(st.fingerprint for st in casters),
+           tuple(np.round(s.position, 7).tobytes() for s in sources))
+    got = _CUBES.get(key)
+    if got is not None:
+        return got
+    allp = np.concatenate([st.arrays.positions for st in casters]) if casters else \
+        np.zeros((1, 3))
+    width, height = 6 * CUBE_TILE, CUBE_TILE * len(sources)
+    colour = gpu.types.GPUTexture((width, height), format="R32F")
+    depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
+    fb = gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=colour)
+    saved = gpu.state.viewport_get()
+    sh = _distance_shader()
+    out = []
+    with fb.bind():
+        fb.clear(color=(1e30, 1e30, 1e30, 1e30), depth=1.0)
+        gpu.state.depth_test_set("LESS_EQUAL")
+        gpu.state.depth_mask_set(True)
+        gpu.state.face_culling_set("NONE")
+        gpu.state.blend_set("NONE")
+        for k, s in enumerate(sources):
+            reach = float(np.max(np.linalg.norm(allp - s.position, axis=1))) * 1.01 + 1e-3
+            near = max(min(0.5 * s.radius, 0.05 * reach), 1e-4 * reach)
+            mats = []
+            for face, axis in enumerate(CUBE_AXES):
+                gpu.state.viewport_set(face * CUBE_TILE, k * CUBE_TILE, CUBE_TILE, CUBE_TILE)
+                M = face_matrix(s.position, axis, near, reach)
+                mats.append(M)
+                sh.bind()
+                sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
+                sh.uniform_float("lamp", tuple(map(float, s.position)))
+                for st in casters:
+                    _object_batches(st)[0].draw(sh)
+            out.append(((0.0, float(k * CUBE_TILE), float(CUBE_TILE)), mats))
+    gpu.state.viewport_set(*saved)
+    gpu.state.depth_test_set("NONE")
+    got = (colour, out)
+    _CUBES.clear()
+    _CUBES[key] = got
+    return got
+
+
+# --------------------------------------------------------------------------- parameters
+
+#: roughness nodes of a slot whose Roughness is textured (values i / (n - 1))
+ROUGHNESS_NODES = 17
+
+
+def slot_texels(st, slot, eye4) -> np.ndarray:
+    """The paramTex rows of one material slot: :func:`material_texels` of its material,
+    and with a textured Roughness (on the batch's UV map) the same rows at each of
+    :data:`ROUGHNESS_NODES` below them, with the roughness source in row 0 (texels 11-15,
+    lights_frag.glsl)."""
+    material = st.materials[slot] if 0 <= slot < len(st.materials) else Material()
+    p = material_texels(material, eye4, st.closed_side)
+    mapped = texture_export.shader_normal(st, slot)
+    if mapped is not None:                  # texels 16-20: the normal or bump map
+        src = mapped[0]
+        u = drawing.source_uniforms(src.source)
+        p[0, 16] = (1.0 if src.kind == "NORMAL_MAP" else 2.0, src.strength, src.distance, 0.0)
+        p[0, 17], p[0, 20] = u["texInfo"], u["mixColor"]
+        p[0, 18, :3], p[0, 19, :3] = u["texMap0"], u["texMap1"]
+    got = texture_export.shader_inputs(st, slot).get("Roughness")
+    if got is None:
+        return p
+    n = ROUGHNESS_NODES
+    nodes = [material_texels(textures.material_at(material, {"Roughness": i / (n - 1)}),
+                             eye4, st.closed_side) for i in range(n)]
+    u = drawing.source_uniforms(got[0].source)
+    p[0, 11] = (n, core_brdf.ALPHA_MIN, 0.0, 0.0)
+    p[0, 12], p[0, 15] = u["texInfo"], u["mixColor"]
+    p[0, 13, :3], p[0, 14, :3] = u["texMap0"], u["texMap1"]
+    return np.concatenate([p] + nodes, axis=0)
+
+
+def material_texels(material, eye4, closed_side=0) -> np.ndarray:
+    """The paramTex rows of one material slot of an object (layout in lights_frag.glsl)."""
+    p = np.zeros((4, max(TABLE, 10), 4), np.float32)
+    p[0, 9, 0] = closed_side
+    if material.has_diffuse:
+        p[0, 0, :3] = np.asarray(material.diffuse_albedo) / math.pi
+        p[0, 0, 3] = 1.0
+    lobes = [] if material.is_diffuse_only else core_brdf.sharp_lobes(material)
+    r = material.table_roughness
+    p[0, 1] = (max(r * r, core_brdf.ALPHA_MIN), 0.0 if material.lobe_distribution == "BECKMANN"
+               else 1.0, len(lobes), 1.0 if lobes else 0.0)
+    for j, (kind, weight, f0, B, eta) in enumerate(lobes[:2]):
+        p[0, 2 + 3 * j] = (kind, weight, eta, 0.0)
+        p[0, 3 + 3 * j, :3] = f0
+        p[0, 4 + 3 * j, :3] = B
+    p[0, 8] = eye4
+    mu = np.linspace(0.0, 1.0, TABLE)
+    views = np.stack([np.sqrt(np.maximum(1.0 - mu * mu, 0.0)), np.zeros(TABLE), mu], axis=1)
+    normals = np.tile([0.0, 0.0, 1.0], (TABLE, 1))
+    p[1, :TABLE, :3] = core_brdf.diffuse_view_weight(material, normals, views)
+    p[1, :TABLE, 3] = 1.0
+    cos_o = np.maximum(mu, core_brdf.COS_VIEW_MIN)
+    which = ["metal" if (material.fresnel == "DIELECTRIC" and kind == core_brdf.SHARP_F82)
+             else "main" for kind, *_ in lobes[:2]]
+    for j, w in enumerate(which):
+        p[2 + j, :TABLE, :3] = core_brdf.multiscatter_factor(material, cos_o, w)
+    return p
+
+
+def _input_texture(st, slot):
+    """The GPU texture of a slot's textured Roughness (white without one)."""
+    got = texture_export.shader_inputs(st, slot).get("Roughness")
+    return drawing.albedo_texture(got[0].source.texture.pixels) if got is not None \
+        else drawing.white_texture()
+
+
+def _normal_texture(st, slot):
+    """The GPU texture of a slot's normal or bump map (white without one)."""
+    mapped = texture_export.shader_normal(st, slot)
+    return drawing.albedo_texture(mapped[0].source.texture.pixels) if mapped is not None \
+        else drawing.white_texture()
+
+
+def _texture(rgba):
+    return drawing.float_texture(np.ascontiguousarray(rgba, dtype=np.float32))
+
+
+def draws(state, eye, view_dir, supersampling: int = 1) -> list:
+    """``draw(view_projection)`` callables adding every source to the objects (empty when
+    there is none), for a frame of ``supersampling``² samples per pixel.  Renders the
+    sources' shadow maps first (cached)."""
+    sources = (list(state.sources) + lamp_sources(state.drawn_lamps))[:MAX_DRAWN]
+    casters = [st for st in state.objects if st.status != "unshadowed"]
+    if not sources or not state.objects:
+        return []
+    distant = [s for s in sources if not s.local]
+    local = [s for s in sources if s.local]
+    shadow_tex, tiles = _shadow_atlas(state, distant, casters) if distant else \
+        (drawing.white_texture(), [])
+    cube_tex, cubes = _cube_atlas(local, casters) if local else (drawing.white_texture(), [])
+    src = np.zeros((len(sources), 32, 4), np.float32)
+    for k, (s, (M, tile, depth_range, texel)) in enumerate(zip(distant, tiles)):
+        src[k, 0] = (*s.direction, s.radius)
+        src[k, 1] = (*s.radiance, 1.0 if s.point_like else 0.0)
+        src[k, 2:6] = M.T                       # columns of the matrix (GLSL mat4 order)
+        src[k, 6] = (*tile, depth_range)
+        src[k, 7] = (texel, *(M[0, :3] / np.linalg.norm(M[0, :3])))   # the map's x axis
+    for k, (s, (tile, mats)) in enumerate(zip(local, cubes), start=len(distant)):
+        src[k, 0] = (*s.position, s.radius)
+        src[k, 1] = (*s.radiance, 2.0 if s.spot is None else 3.0)
+        if s.area is not None:
+            half_x, half_y, ellipse = s.area
+            src[k, 1, 3] = 5.0 if ellipse else 4.0
+            src[k, 2, :3] = s.direction
+            src[k, 4, :3] = half_x
+            src[k, 5, :3] = half_y
+        elif s.spot is not None:
+            axis, cos_half, smooth = s.spot
+            src[k, 2] = (*axis, cos_half)
+            src[k, 3, 0] = smooth
+        src[k, 6, :3] = tile
+        for face, M in enumerate(mats):
+            src[k, 8 + 4 * face:12 + 4 * face] = M.T
+    src_tex = _texture(src)
+    eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
+    per_frame = frame_features(sources, supersampling)
+    out = []
+    for st in state.objects:
+        slots = []
+        for slot, batch in _object_batches(st)[1]:
+            texels = slot_texels(st, slot, eye4)
+            source = st.textures.get(slot, (None, None))[0]
+            slots.append((batch, _texture(texels), source, _input_texture(st, slot),
+                          _normal_texture(st, slot),
+                          slot_features(texels, source) + per_frame))
+
+        def draw(view_projection, slots=slots):
+            for batch, params, source, rough, bump, features in slots:
+                sh = _shader(features)
+                sh.bind()
+                sh.uniform_float("viewProjection", view_projection)
+                sh.uniform_sampler("srcTex", src_tex)
+                sh.uniform_sampler("shadowTex", shadow_tex)
+                sh.uniform_sampler("cubeTex", cube_tex)
+                sh.uniform_sampler("paramTex", params)
+                if source is not None:         # the push constants only ALBEDO_TEX reads
+                    for name, value in drawing.source_uniforms(source).items():
+                        sh.uniform_float(name, value)
+                    sh.uniform_sampler("albedoTex",
+                                       drawing.albedo_texture(source.texture.pixels)
+                                       if source.texture is not None
+                                       else drawing.white_texture())
+                sh.uniform_sampler("roughTex", rough)
+                sh.uniform_sampler("normalTex", bump)
+                batch.draw(sh)
+
+        out.append(draw)
+    return out

@@ -1,0 +1,1 @@
+"""Properties, panels and operators."""

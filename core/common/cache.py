@@ -1,0 +1,141 @@
+"""The one cache policy of prt_relight: bounded, least-recently-used, thread-safe, and
+listed so that the add-on's unregister empties every cache (no bpy).
+
+* :class:`Cache` -- a mapping of at most ``limit`` entries; reading an entry makes it the
+  most recent, writing past the bound drops the least recent.  Every read and write holds
+  the cache's lock: the viewport shades in a worker thread (``addon.frame.engine``) while the
+  main thread syncs, precomputes and draws.  Values are computed outside the lock (a
+  computation may take seconds); two threads asking for a missing key at once may both
+  compute it, the later write wins.
+* :func:`memo` -- ``functools.lru_cache`` (bounded, thread-safe) for pure functions of
+  small hashable arguments, listed like a :class:`Cache`.
+* :data:`CACHES` -- every cache made by either; :func:`clear_all` empties them.
+
+The add-on's helpers on top of it (``held``, ``per_visibility``, ``image_key``) are in
+``addon/frame/keys.py``; docs/README.md lists every cache with its bound.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+import threading
+from collections import OrderedDict
+from collections.abc import MutableMapping
+
+#: every :class:`Cache` and :func:`memo` function made so far (module order)
+CACHES: list = []
+
+
+class Cache(MutableMapping):
+    """A bounded LRU mapping with a lock (see the module docstring).
+
+    ``name``: how docs and tests call it (``module.VARIABLE`` by default, found on first
+    use of :attr:`name`); ``limit``: the most entries kept; ``gpu``: its values hold GPU
+    objects (freed by ``addon.gpu.drawing.free_gpu_resources`` while a GPU context exists)."""
+
+    def __init__(self, limit: int, name: str = "", gpu: bool = False, module: str = ""):
+        if int(limit) < 1:
+            raise ValueError("a cache keeps at least one entry")
+        self.limit = int(limit)
+        self.gpu = bool(gpu)
+        self._name = name
+        self._module = module or sys._getframe(1).f_globals.get("__name__", "")
+        self._data: OrderedDict = OrderedDict()
+        self.lock = threading.RLock()
+        CACHES.append(self)
+
+    @property
+    def name(self) -> str:
+        if not self._name:
+            module = sys.modules.get(self._module)
+            found = [k for k, v in vars(module).items() if v is self] if module else []
+            short = self._module.rsplit(".", 1)[-1]     # the module, whatever package holds it
+            self._name = f"{short}.{found[0]}" if found else short
+        return self._name
+
+    def __repr__(self):
+        return f"<Cache {self.name}: {len(self)}/{self.limit}>"
+
+    # ---------------------------------------------------------------- mapping
+    def __getitem__(self, key):
+        with self.lock:
+            value = self._data[key]
+            self._data.move_to_end(key)
+            return value
+
+    def __setitem__(self, key, value):
+        with self.lock:
+            self._data[key] = value
+            self._data.move_to_end(key)
+            while len(self._data) > self.limit:
+                self._data.popitem(last=False)
+
+    def __delitem__(self, key):
+        with self.lock:
+            del self._data[key]
+
+    def __contains__(self, key):
+        with self.lock:
+            return key in self._data
+
+    def __iter__(self):
+        with self.lock:
+            return iter(list(self._data))
+
+    def __len__(self):
+        return len(self._data)
+
+    def get(self, key, default=None):
+        with self.lock:
+            if key not in self._data:
+                return default
+            self._data.move_to_end(key)
+            return self._data[key]
+
+    def clear(self):
+        with self.lock:
+            self._data.clear()
+
+    def trim(self, limit: int):
+        """Drop the least recent entries until at most ``limit`` are left."""
+        with self.lock:
+            while len(self._data) > max(int(limit), 0):
+                self._data.popitem(last=False)
+
+
+def memo(maxsize: int):
+    """``functools.lru_cache(maxsize)`` listed in :data:`CACHES` (cleared by
+    :func:`clear_all`; ``len`` of its entry there is ``cache_info().currsize``)."""
+    def wrap(fn):
+        cached = functools.lru_cache(maxsize=maxsize)(fn)
+        CACHES.append(_Memo(cached, f"{fn.__module__.split('.', 1)[-1]}.{fn.__name__}",
+                            maxsize))
+        return cached
+    return wrap
+
+
+class _Memo:
+    """A :func:`memo` function as :data:`CACHES` lists it."""
+
+    gpu = False
+
+    def __init__(self, fn, name, limit):
+        self.fn, self.name, self.limit = fn, name, limit
+
+    def __len__(self):
+        return self.fn.cache_info().currsize
+
+    def clear(self):
+        self.fn.cache_clear()
+
+    def __repr__(self):
+        return f"<memo {self.name}: {len(self)}/{self.limit}>"
+
+
+def clear_all(gpu: bool | None = None):
+    """Empty every listed cache (``gpu``: only those that hold GPU objects, or only those
+    that do not; None: all)."""
+    for c in CACHES:
+        if gpu is None or c.gpu == gpu:
+            c.clear()

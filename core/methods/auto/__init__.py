@@ -1,0 +1,1 @@
+"""AUTO: the per-object choice of method and budget, its screen weights."""

@@ -1,0 +1,1 @@
+"""SH (Sloan, Kautz, Snyder 2002): diffuse transfer in spherical harmonics."""

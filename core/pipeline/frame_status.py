@@ -1,0 +1,69 @@
+"""What a frame says about each object's stored precompute: whether it is drawn with its
+stored visibility, stale, missing or unshadowed, and the messages the panels and the
+render log show for them (the policy of ``addon/frame/state.py``'s sync, bpy-free)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+#: how an object is drawn: with its stored visibility ("ok"), with its old data after an
+#: edit that kept its topology ("stale"), without shadows ("missing": never precomputed,
+#: unreadable or older), unshadowed and casting none ("unshadowed": hidden from renders)
+STATUSES = ("ok", "stale", "missing", "unshadowed")
+
+
+def stored_status(bits_found: bool, dynamic: bool, fingerprint_same: bool) -> str:
+    """The status of an object whose stored visibility was read at the frame's resolution:
+    ``"stale"`` when its shading points no longer match (``bits_found`` false) or its
+    geometry changed (same topology: the old data stays correctly indexed), ``"dynamic"``
+    when it has shadow fields (its motion decides, ``addon.frame.dynamic.check``), else
+    ``"ok"``."""
+    if not bits_found:
+        return "stale"
+    if dynamic:
+        return "dynamic"
+    return "ok" if fingerprint_same else "stale"
+
+
+@dataclass
+class SyncNotes:
+    """Object names per kind of note, gathered while a frame state is synced."""
+
+    missing: list = field(default_factory=list)
+    older: list = field(default_factory=list)
+    unreadable: list = field(default_factory=list)      # reasons, one per blob
+    unshadowed: list = field(default_factory=list)
+    stale: list = field(default_factory=list)
+    earlier: list = field(default_factory=list)
+
+    def add(self, name: str, status: str, legacy: bool = False):
+        """Note ``name`` drawn as ``status``; a missing object with data of an earlier
+        layout (``legacy``) is noted as older instead."""
+        if status == "missing" and legacy:
+            self.older.append(name)
+        elif status in ("stale", "missing", "unshadowed"):
+            getattr(self, status).append(name)
+
+    def messages(self, removed_since: bool = False) -> list[str]:
+        """The warnings, most pressing first; ``removed_since``: the scene traces fewer
+        objects of the newest precompute than it had (shadows of removed objects stay)."""
+        out = []
+        if self.missing:
+            out.append("Not precomputed (drawn without shadows): " + ", ".join(self.missing))
+        if self.older:
+            out.append("Stored by an earlier prt_relight, which this version does not read "
+                       "(drawn without shadows, press Precompute): " + ", ".join(self.older))
+        out += [w + " (drawn without shadows)" for w in self.unreadable]
+        if self.unshadowed:
+            out.append("Hidden from renders (drawn without shadows, cast none): "
+                       + ", ".join(self.unshadowed))
+        if self.stale:
+            out.append("Changed since precompute (stale, press Precompute): "
+                       + ", ".join(self.stale))
+        elif self.earlier:
+            out.append("Precomputed in an earlier run than the others (their shadows on each "
+                       "other may be stale, press Precompute): " + ", ".join(self.earlier))
+        elif removed_since:
+            out.append("Objects were removed or hidden from renders since the precompute: "
+                       "their shadows are stale, press Precompute")
+        return out

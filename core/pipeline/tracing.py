@@ -1,0 +1,263 @@
+"""The precompute's run, between gather and commit (addon/blender/precompute.py): per shading
+point one ray per cubemap texel of its hemisphere, streamed into each object's compressed
+visibility blob, the shadow fields of moving objects, the tessellation check and the
+method's derived data; any thread, cancellable, no bpy."""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..common import codec
+from ..methods.reference import shading as reference
+from ..scene import mesh as core_mesh
+from ..scene import occluder_fields, rigid, shadow_fields, visibility
+from ..sphere import directions
+from ..store import layouts
+
+
+@dataclass
+class ObjectJob:
+    name: str
+    arrays: core_mesh.MeshArrays
+    points: core_mesh.ShadingPoints
+    fingerprint: str
+    #: the visibility as stored (storage.visibility_blob), made in run()
+    blob: bytes | None = None
+    coarse_warning: str = ""
+    #: the traced bits, kept when the job's method derives from them
+    kept: np.ndarray | None = field(default=None, repr=False)
+    #: a dynamic object (shadow fields): its own triangles, its world matrix now, the box
+    #: it reaches over the animation, and its field's blob (made in run())
+    dynamic: bool = False
+    own: np.ndarray | None = field(default=None, repr=False)
+    matrix: np.ndarray | None = None
+    reach: tuple | None = None
+    extra: dict = field(default_factory=dict, repr=False)
+    field_note: str = ""
+
+    @property
+    def bits(self) -> np.ndarray | None:
+        """The traced visibility (P, 6N^2/8): kept, else decoded from the blob each time
+        it is read (nothing is held)."""
+        if self.kept is not None or self.blob is None:
+            return self.kept
+        return layouts.visibility_of_blob(self.blob)
+
+    @bits.setter
+    def bits(self, value):
+        self.kept = value
+
+
+@dataclass
+class PrecomputeJob:
+    resolution: int
+    offset: float
+    objects: list
+    occluders: np.ndarray
+    warnings: list = field(default_factory=list)
+    method: str = "REFERENCE"
+    #: scene.prt values of every method's settings at gather time
+    settings: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+    #: method data from Shading.derive (stored by Shading.store in the commit)
+    derived: object = None
+    progress_done: int = 0
+    progress_total: int = 0
+    cancel_requested: bool = False
+    #: what run() is doing now (shown with the progress)
+    stage: str = ""
+    #: AUTO's choice is left to the caller (the modal operator runs it in steps)
+    defer_choice: bool = False
+    #: the dynamic objects' field detail (core.scene.shadow_fields.DETAIL)
+    field_detail: str = "HIGH"
+    #: the method's ``derive(job)`` run after the trace (it reads the traced bits), or None
+    derive: object = field(default=None, repr=False)
+    #: what the progress calls that step ("deriving <label>")
+    derive_label: str = ""
+
+    @property
+    def point_count(self):
+        return sum(o.points.count for o in self.objects)
+
+    # -------------------------------------------------------------- run (no bpy)
+    def run(self, threads=None):
+        cube = directions.cubemap(self.resolution)
+        pts = np.concatenate([o.points.positions for o in self.objects])
+        nrm = np.concatenate([o.points.normals for o in self.objects])
+        total = len(pts)
+        starts = np.cumsum([0] + [o.points.count for o in self.objects])
+        self.progress_done, self.progress_total = 0, total
+        self.stage = "tracing"
+
+        def progress(done, count):
+            self.progress_done = done
+
+        keep = self.derive is not None     # it reads the bits
+        kept = np.empty((total, cube.size // 8), np.uint8) if keep else None
+        writers = [layouts.visibility_writer(o.points.count, self.resolution)
+                   for o in self.objects]
+        sky = np.empty(total, np.float32)       # the tessellation check's, per point
+        stream = InOrder(lambda a, b, rows: [
+            w.write(rows[max(a, lo) - a:min(b, hi) - a])
+            for w, lo, hi in zip(writers, starts[:-1], starts[1:]) if max(a, lo) < min(b, hi)])
+
+        def consume(start, stop, bits):
+            """A traced chunk (worker thread): its sky visibility, then on to the blobs."""
+            sky[start:stop] = reference.sky_visibility(bits, nrm[start:stop], cube)
+            if kept is not None:
+                kept[start:stop] = bits
+            stream.put(start, stop, bits)
+
+        # static objects against the static occluders; a dynamic object against itself
+        # only (what other objects cast on it comes from the fields at its current pose)
+        groups = [(self.occluders, 0, int(sum(o.points.count for o in self.objects
+                                                if not o.dynamic)))]
+        groups += [(o.own, int(starts[i]), int(starts[i + 1]))
+                   for i, o in enumerate(self.objects) if o.dynamic]
+        stats = {"rays": 0}
+        bvh = 0.0
+        t1 = time.perf_counter()
+        for tris, lo, hi in groups:
+            if hi <= lo:
+                continue
+            self.stage = "building the BVH"
+            tb = time.perf_counter()
+            scene = visibility.build_occluder_scene(tris)
+            bvh += time.perf_counter() - tb
+            self.stage = "tracing"
+            got = {}
+            origins, moved = trace_origins(
+                [o for i, o in enumerate(self.objects)
+                 if lo <= starts[i] and starts[i + 1] <= hi], scene, self.offset)
+            self.timings["contact_points"] = (self.timings.get("contact_points", 0)
+                                              + int(moved.sum()))
+            visibility.trace_visibility(
+                scene, pts[lo:hi], nrm[lo:hi], cube, self.offset, threads=threads, origins=origins,
+                progress=lambda done, count, lo=lo: progress(lo + done, total),
+                cancel=lambda: self.cancel_requested, stats=got,
+                consume=lambda a, b, bits, lo=lo: consume(lo + a, lo + b, bits))
+            stats["rays"] += got["rays"]
+            del scene
+        stream.drain()
+        t2 = time.perf_counter()
+        self._shadow_fields(cube, threads)
+        t1 += bvh
+        t_fields = time.perf_counter()
+        self.stage = "checking the tessellation"
+        for i, o in enumerate(self.objects):
+            o.blob = writers[i].finish()
+            o.kept = None if kept is None else kept[starts[i]:starts[i + 1]]
+            o.coarse_warning = coarse_receiver_warning(o, cube, sky[starts[i]:starts[i + 1]])
+            self.progress_done = int(starts[i + 1])
+        t3 = time.perf_counter()
+        self.timings.update(build_bvh=bvh, rays=t2 - t1, ray_count=stats["rays"],
+                            rays_per_second=stats["rays"] / max(t2 - t1, 1e-9),
+                            tessellation_check=t3 - t_fields, encode=stream.seconds)
+        if self.derive is not None:
+            self.stage = f"deriving {self.derive_label}"
+            self.progress_done = 0
+            self.derived = self.derive(self)
+        self.timings["derive"] = time.perf_counter() - t3
+        self.stage = "writing"
+
+    def _shadow_fields(self, cube, threads):
+        """Each dynamic object's occluder field (its own frame: the world at this pose)
+        and the static scene's field over where it goes (Zhou et al. 2005)."""
+        dyn = [o for o in self.objects if o.dynamic]
+        if not dyn:
+            return
+        t0 = time.perf_counter()
+        layout, samples = shadow_fields.DETAIL[self.field_detail]
+        for k, o in enumerate(dyn):
+            self.stage = f"shadow field of '{o.name}' ({k + 1}/{len(dyn)})"
+            cancel = lambda: self.cancel_requested     # noqa: E731
+            field = occluder_fields.build_occluder_field(o.own, layout, threads, cancel)
+            static = None
+            if len(self.occluders):
+                lo, hi = o.reach
+                static = shadow_fields.build_static_field(self.occluders, lo, hi, cube, samples,
+                                                          threads, cancel)
+            data = shadow_fields.DynamicData(
+                field=field, static=static, matrix=o.matrix,
+                rotation=rigid.rotation_part(o.matrix),
+                probe=rigid.local_probe(o.arrays.positions, o.matrix), offset=self.offset)
+            o.extra[layouts.SHADOW_FIELD] = codec.pack(*shadow_fields.dynamic_arrays(data))
+            o.field_note = (f"{o.name}: field {field.nbytes / 2**20:.1f} MiB (PCA error "
+                            f"{field.error:.1%})" + (f", static field {static.nbytes / 2**20:.1f}"
+                                                     " MiB" if static is not None else ""))
+        self.timings["shadow_fields"] = time.perf_counter() - t0
+
+
+def trace_origins(objects, scene, offset):
+    """``(origins, moved)`` of the shading points of ``objects`` (one trace group, in row
+    order) against ``scene``: stepped off along the normal, or out of a surface they touch
+    (core.scene.visibility.contact_origins)."""
+    starts = np.cumsum([0] + [o.points.count for o in objects])
+    return visibility.contact_origins(
+        scene, np.concatenate([o.points.positions for o in objects]),
+        np.concatenate([o.points.normals for o in objects]),
+        np.concatenate([o.arrays.triangle_positions for o in objects]),
+        np.concatenate([o.points.point_of_corner[o.arrays.triangles] + s
+                        for o, s in zip(objects, starts[:-1])]), offset)
+
+
+class InOrder:
+    """Rows handed on in order: ``put(start, stop, rows)`` from any thread (chunks come
+    out of order); one thread at a time passes the next ones to ``write(start, stop,
+    rows)`` while the others go back to tracing; ``drain()`` at the end passes the rest.
+    Holds only the chunks that wait for an earlier one."""
+
+    def __init__(self, write):
+        self.write = write
+        self.at = 0
+        self.pending: dict = {}
+        self.lock = threading.Lock()
+        self.writing = threading.Lock()
+        self.seconds = 0.0          # spent writing (compressing)
+
+    def put(self, start, stop, rows):
+        with self.lock:
+            self.pending[start] = (stop, rows)
+        if self.writing.acquire(blocking=False):
+            try:
+                self._write()
+            finally:
+                self.writing.release()
+
+    def _write(self):
+        while True:
+            with self.lock:
+                got = self.pending.pop(self.at, None)
+            if got is None:
+                return
+            t0 = time.perf_counter()
+            self.write(self.at, got[0], got[1])
+            self.seconds += time.perf_counter() - t0
+            self.at = got[0]
+
+    def drain(self):
+        with self.writing:
+            self._write()
+        if self.pending:
+            raise RuntimeError("visibility rows missing from the trace")
+
+
+def coarse_receiver_warning(job: ObjectJob, cube, sky=None) -> str:
+    """A note when shadows change faster than the tessellation can show.
+
+    When more than 5 % of the mesh's edges join points whose sky visibility differs by
+    over a quarter (:func:`core.methods.reference.shading.coarse_edge_share`; ``sky`` per point when
+    the trace took it already: the bits are then not decoded), per-vertex shading blurs
+    or aliases the shadows.
+    """
+    bits = job.bits if sky is None else None
+    frac = reference.coarse_edge_share(bits, job.points.normals, job.points.point_of_corner,
+                                       job.arrays.triangles, cube, sky=sky)
+    if frac > reference.COARSE_SHARE:
+        return (f"'{job.name}' is too coarse for its shadows ({frac:.0%} of edges jump by more "
+                "than a quarter of the sky): subdivide it for sharper per-vertex shadows")
+    return ""

@@ -1,0 +1,1 @@
+"""The scene as arrays: meshes and shading points, traced visibility, rigid motion, shadow fields of moving objects, textures."""

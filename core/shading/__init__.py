@@ -1,0 +1,1 @@
+"""Cycles' reflectance: microfacet distributions, the Lambert/Glossy/Principled materials, their albedo tables, the pixel filter."""
