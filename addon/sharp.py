@@ -65,8 +65,9 @@ def _shader():
 
 
 def sharp_slots(st) -> list:
-    """Material slots of an object whose glossy lobes this pass draws."""
-    return [i for i, m in enumerate(st.materials) if m.per_pixel_lobe]
+    """Material slots of an object whose glossy lobes this pass draws (``st.materials``
+    also holds a textured slot's per-point variants: ``st.slot_of`` maps them back)."""
+    return sorted({int(st.slot_of[i]) for i, m in enumerate(st.materials) if m.per_pixel_lobe})
 
 
 def _batches(st, slots):

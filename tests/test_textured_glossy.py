@@ -150,3 +150,40 @@ def test_principled_dielectric_sphere_against_converged_cycles(tmp_path, roughne
     _, err, noise = _converged_cycles_and_ssdf_sg(tmp_path, 512)
     print(f"dielectric r {roughness}: SSDF_SG {100 * err:.2f} % (noise {100 * noise:.2f} %)")
     assert err < 0.02, err
+
+
+def test_a_roughness_image_reaching_below_the_sharp_limit_leaves_the_slot_to_the_sharp_pass(
+        tmp_path):
+    """A metal slot whose Roughness image is 0.1 on one half and 0.4 on the other (mean
+    above the 6x32² sharp limit of 0.19, its low half below): every per-point variant of the
+    slot is drawn per pixel (addon/sharp.py, by slot), so no method drops the low half's
+    lobes (REFERENCE drew it black) and every method draws the slot alike.  A 0.3 / 0.6
+    image keeps its lobes in the methods."""
+    from prt_relight.addon import runtime, sharp
+    bs.reset()
+    bs.add_world(path=bs.hdri_path("forest"))
+    bsdf = _glossy_object(1.0, "SPHERE")
+    rough_tex = bsdf.inputs["Roughness"].links[0].from_node
+    u = (np.arange(64) + 0.5) / 64
+    halves = np.where(np.meshgrid(u, u)[0] < 0.5, 0.1, 0.4)
+    rough_tex.image = bs.float_image("halves", np.repeat(halves[..., None], 3, axis=2))
+    bs.add_camera(location=(0.0, -4.0, 1.0), rotation=(1.33, 0.0, 0.0))
+    bs.set_resolution(24, 24)
+    scene = bpy.context.scene
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    st = state.objects[0]
+    assert len(st.materials) > 2 and all(m.per_pixel_lobe for m in st.materials)
+    assert sharp.sharp_slots(st) == [0]
+    frames = {}
+    for method in ("REFERENCE", "SSDF_SG"):
+        scene.prt.method = method
+        frames[method] = bs.render_exr(tmp_path / f"{method}.exr")
+    ball = frames["REFERENCE"][..., 3] > 0.5
+    assert frames["REFERENCE"][ball][:, :3].min(axis=1).max() > 0.05
+    np.testing.assert_allclose(frames["SSDF_SG"], frames["REFERENCE"], rtol=1e-4, atol=1e-5)
+    rough_tex.image = bs.float_image("rough halves", np.repeat(0.2 + halves[..., None], 3, 2))
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    assert not any(m.per_pixel_lobe for m in state.objects[0].materials)
+    assert sharp.sharp_slots(state.objects[0]) == []

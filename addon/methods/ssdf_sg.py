@@ -238,7 +238,9 @@ class SSDFSGMethod(Method):
                         or slot >= len(st.materials):
                     continue
                 own[slot] = sg_material.export_sg_material(mat, state.warnings)
-                st.materials[slot] = replace(st.materials[slot], per_pixel_lobe=False)
+                # the slot's textured-input variants too (addon/sharp.py draws by slot)
+                st.materials = [replace(m, per_pixel_lobe=False) if st.slot_of[i] == slot
+                                else m for i, m in enumerate(st.materials)]
             st.data["sg_own"] = own
         cube = directions.cubemap(state.resolution)
         res, budget, max_terms, occlusion = pca_settings(state.settings)
