@@ -1,7 +1,7 @@
 """Blender node trees -> the textured colour inputs of core/textures.py (bpy only).
 
 Recognised (a Principled BSDF's *Base Color*, a Diffuse BSDF's *Color*): an Image Texture
-(its UV Map node or the active UV map, an optional Mapping node on the UVs, Closest /
+(its UV Map node or the render UV map, an optional Mapping node on the UVs, Closest /
 Linear / Cubic interpolation, Repeat / Extend / Clip / Mirror, packed or on disk, read in
 its colour space as Cycles does), a Color Attribute node, or a Mix node (colour mode,
 *Mix* or *Multiply*, a constant factor) between one of those and a constant colour.
@@ -260,6 +260,13 @@ def shader_normal(st, slot):
     return got[0], got[2]
 
 
+def _uv_layer(layers, uv_map: str):
+    """The UV map ``uv_map`` names, else the one Cycles renders with by default (the
+    camera icon, ``active_render``: a map added in the UI is active but not that one)."""
+    named = layers.get(uv_map) if uv_map else None
+    return named or next((l for l in layers if l.active_render), None) or layers.active
+
+
 def corner_uvs(ob_eval, uv_map: str = ""):
     """(C, 2) float32 UVs per face corner of the evaluated mesh (loops order), or None."""
     mesh = ob_eval.to_mesh()
@@ -267,7 +274,7 @@ def corner_uvs(ob_eval, uv_map: str = ""):
         layers = mesh.uv_layers
         if not len(layers):
             return None
-        layer = (layers.get(uv_map) if uv_map else None) or layers.active
+        layer = _uv_layer(layers, uv_map)
         uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
         layer.data.foreach_get("uv", uv)
         return uv.reshape(-1, 2)
@@ -367,14 +374,14 @@ def normal_source(material):
 
 def corner_tangents(ob_eval, uv_map: str = ""):
     """(C, 4) world-space unit tangents per face corner and the bitangent sign (MikkTSpace,
-    ``mesh.calc_tangents`` on ``uv_map`` or the active UV map), or None when the mesh has
+    ``mesh.calc_tangents`` on ``uv_map`` or the render's UV map), or None when the mesh has
     no such UV map or a face of more than four corners."""
     mesh = ob_eval.to_mesh()
     try:
         layers = mesh.uv_layers
         if not len(layers):
             return None
-        layer = (layers.get(uv_map) if uv_map else None) or layers.active
+        layer = _uv_layer(layers, uv_map)
         try:
             mesh.calc_tangents(uvmap=layer.name)
         except RuntimeError:
