@@ -175,7 +175,7 @@ def principled_constants(material) -> dict | None:
 def _corner_values(ob_eval, mat, source, warnings):
     """The UVs or attribute colours per corner a source is read at, or None (warned)."""
     if source.texture is not None:
-        values = corner_uvs(ob_eval, source.texture.uv_map)
+        values = _resolved_uvs(ob_eval, source.texture)
         if values is None:
             warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no UV map for "
                             "its image texture; drawn with the texture's mean")
@@ -267,8 +267,9 @@ def _uv_layer(layers, uv_map: str):
     return named or next((l for l in layers if l.active_render), None) or layers.active
 
 
-def corner_uvs(ob_eval, uv_map: str = ""):
-    """(C, 2) float32 UVs per face corner of the evaluated mesh (loops order), or None."""
+def corner_uvs(ob_eval, uv_map: str = "", named=None):
+    """(C, 2) float32 UVs per face corner of the evaluated mesh (loops order), or None;
+    ``named``: a list the UV map's name is appended to."""
     mesh = ob_eval.to_mesh()
     try:
         layers = mesh.uv_layers
@@ -277,9 +278,21 @@ def corner_uvs(ob_eval, uv_map: str = ""):
         layer = _uv_layer(layers, uv_map)
         uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
         layer.data.foreach_get("uv", uv)
+        if named is not None:
+            named.append(layer.name)
         return uv.reshape(-1, 2)
     finally:
         ob_eval.to_mesh_clear()
+
+
+def _resolved_uvs(ob_eval, texture):
+    """:func:`corner_uvs` of an image texture, its ``uv_map`` set to the map's name ("" is
+    the render UV map): the per-pixel passes compare the maps of a slot's images by name."""
+    named = []
+    uvs = corner_uvs(ob_eval, texture.uv_map, named)
+    if named:
+        texture.uv_map = named[0]
+    return uvs
 
 
 def corner_colours(ob_eval, name: str = ""):
@@ -420,7 +433,7 @@ def slot_normals(ob_eval, warnings: list) -> dict:
                             "normal")
         if src is None:
             continue
-        uvs = corner_uvs(ob_eval, src.source.texture.uv_map)
+        uvs = _resolved_uvs(ob_eval, src.source.texture)
         tangents = corner_tangents(ob_eval, uv_map) if uvs is not None else None
         if tangents is None:
             warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no UV map (or a "
