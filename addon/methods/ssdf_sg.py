@@ -32,6 +32,7 @@ import numpy as np
 from ...core import directions, ssdf, ssdf_sg
 from ...core import ssdf_sg_scene as scene
 from .. import drawing, keys, sg_material
+from ..texture_export import shader_inputs
 from . import Method, register
 from .ssdf_sg_gpu import gpu_draws
 from .ssdf_sg_storage import field_from, open_field, read_field, write_field
@@ -240,6 +241,13 @@ class SSDFSGMethod(Method):
                 own[slot] = sg_material.export_sg_material(mat, state.warnings)
                 # the slot's textured-input variants too (addon/sharp.py draws by slot)
                 st.materials = [replace(m, per_pixel_lobe=False) if st.slot_of[i] == slot
+                                else m for i, m in enumerate(st.materials)]
+            # a Roughness image read per pixel: the slot table's nodes span 0-1, closer to
+            # Cycles than addon/sharp.py's samples (not under AUTO: its other methods need
+            # the sharp pass)
+            if state.method == self.id:
+                mine = [slot for slot in st.inputs[0] if "Roughness" in shader_inputs(st, slot)]
+                st.materials = [replace(m, per_pixel_lobe=False) if st.slot_of[i] in mine
                                 else m for i, m in enumerate(st.materials)]
             st.data["sg_own"] = own
         cube = directions.cubemap(state.resolution)
