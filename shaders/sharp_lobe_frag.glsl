@@ -10,11 +10,21 @@
  * singular reflection) one sample at the mirror direction gives F(cos_o) L(r) V(r)
  * exactly.
  *
- * paramTex texels: 0 eye (xyz, w = 1 perspective / 0 direction toward the viewer),
+ * A textured Roughness is read per pixel (alpha = r^2), a normal or bump map gives the
+ * lobes the mapped normal after Cycles' bump map correction (as lights_frag.glsl), and
+ * each lobe is scaled by its multiscatter factor at the pixel's roughness and cos_o.
+ *
+ * paramTex row 0: 0 eye (xyz, w = 1 perspective / 0 direction toward the viewer),
  * 1 (alpha, distribution 0 Beckmann / 1 GGX, lobe count, samples K), 2 (W0, H0, levels
  * below level 0, strength), 3 (cube N, visibility texels per point), then per lobe
  * (kind, weight, eta, -), (f0 rgb, -), (B rgb, -); kinds: 0 F = f0, 1 Schlick,
- * 2 Principled dielectric, 3 F82-tint (core.shading.brdf.sharp_lobes). */
+ * 2 Principled dielectric, 3 F82-tint (core.shading.brdf.sharp_lobes); 10 (roughness nodes n:
+ * 1 = the slot's roughness, else a textured Roughness at i / (n - 1)), 11-14 its image
+ * (texture_lib.glsl's info, mapping rows, mix colour), 15 a normal or bump map (kind 0
+ * none / 1 Normal Map / 2 Bump, strength, distance, -), 16-19 its image.  Rows 1 + 2k + j:
+ * lobe j's multiscatter factor at roughness node k, over cos_o = i / (TABLE - 1). */
+
+#define TABLE 32
 
 #define COS_VIEW_MIN 1e-4
 #define LOD_BIAS -2.0
@@ -168,6 +178,39 @@ float visibility(vec3 d)
           w.z * visible_bit(vTri.z, k)) / total;
 }
 
+/* ---------------------------------------------------------------- textured inputs */
+
+/* the pixel's roughness: the textured Roughness (clamped luminance), else the slot's */
+float pixel_roughness()
+{
+#ifdef ROUGH_TEX
+  vec3 c = input_colour(roughTex, vUv, vec4(1.0), param(11), param(12).xyz, param(13).xyz,
+                        param(14));
+  return clamp(dot(c, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0);
+#else
+  return sqrt(param(1).x);
+#endif
+}
+
+/* lobe j's multiscatter factor at roughness r and cos_o (rows of addon/sharp.py) */
+vec3 multiscatter(int j, float r, float cos_o)
+{
+  int n = int(param(10).x + 0.5);
+  float x = clamp(cos_o, 0.0, 1.0) * float(TABLE - 1);
+  int i0 = min(int(x), TABLE - 2);
+  float fx = x - float(i0);
+  float y = n > 1 ? clamp(r, 0.0, 1.0) * float(n - 1) : 0.0;
+  int k0 = min(int(y), max(n - 2, 0));
+  int k1 = min(k0 + 1, n - 1);
+  float fy = y - float(k0);
+  int r0 = 1 + 2 * k0 + j, r1 = 1 + 2 * k1 + j;
+  vec3 a = mix(texelFetch(paramTex, ivec2(i0, r0), 0).rgb,
+               texelFetch(paramTex, ivec2(i0 + 1, r0), 0).rgb, fx);
+  vec3 b = mix(texelFetch(paramTex, ivec2(i0, r1), 0).rgb,
+               texelFetch(paramTex, ivec2(i0 + 1, r1), 0).rgb, fx);
+  return mix(a, b, fy);
+}
+
 /* ---------------------------------------------------------------- main */
 
 void main()
@@ -178,8 +221,26 @@ void main()
     return;
   }
   vec3 n = normalize(vNrm);
+  vec3 smoothN = n;
   vec4 eye = param(0);
   vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+#ifdef NORMAL_MAP
+  /* the mapped normal, corrected as Cycles' glossy closures take it; the visibility and
+   * the horizon tests stay the surface's */
+  vec4 nmap = param(15);
+  bool mapped = nmap.x > 0.5;
+  if (mapped) {
+    vec3 ng = normalize(cross(dFdx(vPos), dFdy(vPos)));
+    ng = dot(ng, n) < 0.0 ? -ng : ng;
+    n = mapped_normal(normalTex, vUv, vPos, vNrm, vTng.xyz, vTng.w, nmap, param(16),
+                      param(17).xyz, param(18).xyz, param(19));
+    if (dot(ng, o) > 0.0) {
+      n = valid_reflection_normal(ng, o, n);
+    }
+  }
+#else
+  const bool mapped = false;
+#endif
   float cos_o = dot(n, o);
   if (cos_o < COS_VIEW_MIN) {          /* core.shading.brdf._bend_views */
     o = normalize(o + (COS_VIEW_MIN - cos_o) * n);
@@ -187,10 +248,15 @@ void main()
   }
   cos_o = clamp(cos_o, COS_VIEW_MIN, 1.0);
   vec4 lobe = param(1);
-  float a = lobe.x;
+  float rough = pixel_roughness();
+  float a = rough * rough;
   int dist = int(lobe.y);
   int lobes = int(lobe.z);
   int K = a > 0.0 ? int(lobe.w) : 1;
+  vec3 ms[2];
+  for (int j = 0; j < min(lobes, 2); j++) {
+    ms[j] = multiscatter(j, rough, cos_o);
+  }
   vec3 tx, ty;
   tangent_frame(n, tx, ty);
   float lam_o = smith_lambda(dist, a, cos_o);
@@ -210,7 +276,8 @@ void main()
     }
     vec3 i = 2.0 * oh * h - o;
     float cos_i = dot(n, i);
-    if (cos_i <= 0.0) {
+    /* a mapped normal's light from below the smooth normal's horizon reaches no closure */
+    if (cos_i <= 0.0 || (mapped && dot(smoothN, i) * dot(smoothN, n) < 0.0)) {
       continue;
     }
     float nh = max(dot(n, h), 1e-6);
@@ -219,9 +286,10 @@ void main()
     float omega = a > 0.0 ? 4.0 * oh / (float(K) * ndf(dist, a, nh) * nh) : 0.0;
     vec3 light = env_filtered(i, omega) * visibility(i);
     vec3 f = vec3(0.0);
-    for (int j = 0; j < lobes; j++) {
+    for (int j = 0; j < min(lobes, 2); j++) {
       vec4 k0 = param(4 + 3 * j);
-      f += k0.y * lobe_fresnel(int(k0.x), param(5 + 3 * j).rgb, param(6 + 3 * j).rgb, k0.z, oh);
+      f += k0.y * ms[j] *
+           lobe_fresnel(int(k0.x), param(5 + 3 * j).rgb, param(6 + 3 * j).rgb, k0.z, oh);
     }
     color += f * light * (g2 * oh / (cos_o * nh));
   }

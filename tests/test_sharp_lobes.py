@@ -157,6 +157,51 @@ def test_glsl_lobe_matches_quadrature_of_the_environment(roughness, tilt, tol):
     np.testing.assert_allclose(got, expected, rtol=tol)
 
 
+def test_glsl_lobe_reads_a_roughness_image_per_pixel():
+    """A Glossy plane whose Roughness image is 0.06 on its left half and 0.16 on its right
+    (Closest; both below the sharp limit), seen as above at the blob's mirror direction:
+    each half is the lobe integral at its own roughness (the pass drew both at the mean)."""
+    from prt_relight.addon.frame.engine import render_pixels
+    from prt_relight.addon.frame.state import FrameState
+
+    bs.reset()
+    img = _smooth_environment()
+    bs.add_world(image=bs.float_image("env", img))
+    bpy.ops.mesh.primitive_plane_add(size=4.0)          # u = 0.5 + x / 4
+    plane = bpy.context.object
+    mat = bs.bsdf_material("G", "ShaderNodeBsdfGlossy", distribution="GGX",
+                           Color=(0.8, 0.8, 0.8, 1.0))
+    glossy = next(n for n in mat.node_tree.nodes if n.type == "BSDF_GLOSSY")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bs.float_image("halves", np.array([[[0.06] * 3, [0.16] * 3]], np.float32))
+    tex.interpolation = "Closest"
+    mat.node_tree.links.new(tex.outputs["Color"], glossy.inputs["Roughness"])
+    plane.data.materials.append(mat)
+    tilt = 0.8
+    v = np.array([0.0, -math.sin(tilt), math.cos(tilt)])
+    cam = bs.add_camera(location=tuple(6.0 * v), rotation=(tilt, 0.0, 0.0))
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 1.0
+    bs.set_resolution(8, 8)
+    bpy.ops.prt.precompute()
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()                      # gives the gpu module a context in -b
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    state = FrameState()
+    state.sync(depsgraph)
+    assert all(m.per_pixel_lobe for m in state.objects[0].materials)
+    cam_eval = cam.evaluated_get(depsgraph)
+    pixels = render_pixels(state, cam_eval.matrix_world.inverted(),
+                           cam_eval.calc_matrix_camera(depsgraph, x=8, y=8), 8, 8, True, False)
+    for columns, r in ((slice(0, 3), 0.06), (slice(5, 8), 0.16)):
+        got = pixels[:, columns, :3].reshape(-1, 3).mean(axis=0)
+        material = brdf.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.8, 0.8, 0.8),
+                                 roughness=r, distribution="GGX")
+        expected = _quadrature(img, material, np.array([0.0, 0.0, 1.0]), v)
+        np.testing.assert_allclose(got, expected, rtol=0.03, err_msg=f"roughness {r}")
+
+
 # --------------------------------------------------------------------------- scenes
 
 def _mirror_ball(kind="glossy", roughness=0.0, hdri="courtyard", size=(64, 48), ground=True):

@@ -1,7 +1,7 @@
 """Blender node trees -> the textured colour inputs of core/scene/textures.py (bpy only).
 
 Recognised (a Principled BSDF's *Base Color*, a Diffuse BSDF's *Color*): an Image Texture
-(its UV Map node or the active UV map, an optional Mapping node on the UVs, Closest /
+(its UV Map node or the render UV map, an optional Mapping node on the UVs, Closest /
 Linear / Cubic interpolation, Repeat / Extend / Clip / Mirror, packed or on disk, read in
 its colour space as Cycles does), a Color Attribute node, or a Mix node (colour mode,
 *Mix* or *Multiply*, a constant factor) between one of those and a constant colour.
@@ -176,7 +176,7 @@ def principled_constants(material) -> dict | None:
 def _corner_values(ob_eval, mat, source, warnings):
     """The UVs or attribute colours per corner a source is read at, or None (warned)."""
     if source.texture is not None:
-        values = corner_uvs(ob_eval, source.texture.uv_map)
+        values = _resolved_uvs(ob_eval, source.texture)
         if values is None:
             warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no UV map for "
                             "its image texture; drawn with the texture's mean")
@@ -261,19 +261,39 @@ def shader_normal(st, slot):
     return got[0], got[2]
 
 
-def corner_uvs(ob_eval, uv_map: str = ""):
-    """(C, 2) float32 UVs per face corner of the evaluated mesh (loops order), or None."""
+def _uv_layer(layers, uv_map: str):
+    """The UV map ``uv_map`` names, else the one Cycles renders with by default (the
+    camera icon, ``active_render``: a map added in the UI is active but not that one)."""
+    named = layers.get(uv_map) if uv_map else None
+    return named or next((l for l in layers if l.active_render), None) or layers.active
+
+
+def corner_uvs(ob_eval, uv_map: str = "", named=None):
+    """(C, 2) float32 UVs per face corner of the evaluated mesh (loops order), or None;
+    ``named``: a list the UV map's name is appended to."""
     mesh = ob_eval.to_mesh()
     try:
         layers = mesh.uv_layers
         if not len(layers):
             return None
-        layer = (layers.get(uv_map) if uv_map else None) or layers.active
+        layer = _uv_layer(layers, uv_map)
         uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
         layer.data.foreach_get("uv", uv)
+        if named is not None:
+            named.append(layer.name)
         return uv.reshape(-1, 2)
     finally:
         ob_eval.to_mesh_clear()
+
+
+def _resolved_uvs(ob_eval, texture):
+    """:func:`corner_uvs` of an image texture, its ``uv_map`` set to the map's name ("" is
+    the render UV map): the per-pixel passes compare the maps of a slot's images by name."""
+    named = []
+    uvs = corner_uvs(ob_eval, texture.uv_map, named)
+    if named:
+        texture.uv_map = named[0]
+    return uvs
 
 
 def corner_colours(ob_eval, name: str = ""):
@@ -368,14 +388,14 @@ def normal_source(material):
 
 def corner_tangents(ob_eval, uv_map: str = ""):
     """(C, 4) world-space unit tangents per face corner and the bitangent sign (MikkTSpace,
-    ``mesh.calc_tangents`` on ``uv_map`` or the active UV map), or None when the mesh has
+    ``mesh.calc_tangents`` on ``uv_map`` or the render's UV map), or None when the mesh has
     no such UV map or a face of more than four corners."""
     mesh = ob_eval.to_mesh()
     try:
         layers = mesh.uv_layers
         if not len(layers):
             return None
-        layer = (layers.get(uv_map) if uv_map else None) or layers.active
+        layer = _uv_layer(layers, uv_map)
         try:
             mesh.calc_tangents(uvmap=layer.name)
         except RuntimeError:
@@ -414,7 +434,7 @@ def slot_normals(ob_eval, warnings: list) -> dict:
                             "normal")
         if src is None:
             continue
-        uvs = corner_uvs(ob_eval, src.source.texture.uv_map)
+        uvs = _resolved_uvs(ob_eval, src.source.texture)
         tangents = corner_tangents(ob_eval, uv_map) if uvs is not None else None
         if tangents is None:
             warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no UV map (or a "

@@ -296,8 +296,12 @@ class FrameState:
                     for slot, inputs in scalars.items()}
                 variants, point_mat, st.slot_of = textures.point_variants(
                     mats, points, per_point, constants)
-                st.materials = [core_brdf.with_sharp_lobe(m, self.resolution)
-                                for m in variants]
+                variants = [core_brdf.with_sharp_lobe(m, self.resolution) for m in variants]
+                # a slot's lobes are drawn by one pass: all per pixel (addon/sharp.py, at
+                # each pixel's roughness) once any of its points' lobes is too narrow
+                sharp = {int(st.slot_of[i]) for i, m in enumerate(variants) if m.per_pixel_lobe}
+                st.materials = [replace(m, per_pixel_lobe=True) if st.slot_of[i] in sharp
+                                else m for i, m in enumerate(variants)]
                 st.points = replace(points, materials=point_mat)
                 st.inputs = (scalars, constants)
             # the original material per slot, for methods with their own material settings

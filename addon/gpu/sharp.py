@@ -10,7 +10,9 @@ sample's share of the lobe from a mip pyramid of the equirect (level 0 is the
 background's texture), the shading points' stored visibility at each sample direction
 (mixed over the triangle's corners whose normal's hemisphere holds it: only those traced it).
 The viewport and F12 draw it alike, after the method's own pass, adding with depth
-test equal.
+test equal.  A slot's textured Roughness and normal or bump map are read per pixel (as
+the compact sources' pass does, addon/lights.py), with Cycles' multiscatter factor at the
+pixel's roughness: every method leaves such a slot's lobes to this pass.
 """
 
 from __future__ import annotations
@@ -19,8 +21,9 @@ import numpy as np
 
 from ...core.shading import brdf as core_brdf
 from ...core.sphere import envmap
-from ...core.scene import visibility as core_visibility
+from ...core.scene import textures, visibility as core_visibility
 from . import drawing
+from ..blender import texture_export
 from ..frame import keys
 
 #: NDF samples per pixel for a lobe of non-zero roughness (one for a mirror)
@@ -29,7 +32,11 @@ SAMPLES = 32
 VIS_WIDTH = 4096
 
 _SAMPLERS = (("FLOAT_2D", "envTex"), ("FLOAT_2D", "mipTex"), ("FLOAT_2D", "visTex"),
-             ("FLOAT_2D", "paramTex"))
+             ("FLOAT_2D", "paramTex"), ("FLOAT_2D", "roughTex"), ("FLOAT_2D", "normalTex"))
+#: roughness nodes of a textured Roughness' multiscatter rows (values i / (n - 1))
+ROUGHNESS_NODES = 17
+#: cos_o nodes of a multiscatter row (values i / (TABLE - 1), sharp_lobe_frag.glsl)
+TABLE = 32
 _GPU = drawing.gpu_cache({})
 # per object: (geometry fingerprint, sharp slots) -> batch; visibility textures per bits
 _BATCHES = drawing.gpu_cache({})
@@ -37,9 +44,12 @@ _VISIBILITY = drawing.gpu_cache({})
 _MIPS = drawing.gpu_cache({})
 
 
-def _shader():
+def _shader(features=()):
+    """The pass compiled with ``features`` (ROUGH_TEX, NORMAL_MAP: left out of the draws
+    without them, as addon/lights.py does)."""
     import gpu
-    sh = _GPU.get("shader")
+    features = tuple(sorted(features))
+    sh = _GPU.get(("shader", features))
     if sh is None:
         info = gpu.types.GPUShaderCreateInfo()
         for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
@@ -47,37 +57,61 @@ def _shader():
             info.push_constant(kind, ident)
         for slot, (kind, ident) in enumerate(_SAMPLERS):
             info.sampler(slot, kind, ident)
-        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"),
-                                              ("VEC3", "triPoints"), ("VEC3", "bary"),
-                                              ("VEC3", "triN0"), ("VEC3", "triN1"),
-                                              ("VEC3", "triN2"))):
+        for slot, (kind, ident) in enumerate(_ATTRIBUTES):
             info.vertex_in(slot, kind, ident)
         iface = gpu.types.GPUStageInterfaceInfo("prt_sharp_lobe_iface")
         iface.smooth("VEC3", "vPos")
         iface.smooth("VEC3", "vNrm")
         iface.smooth("VEC3", "vBary")
+        iface.smooth("VEC2", "vUv")
+        iface.smooth("VEC4", "vTng")
         iface.flat("VEC3", "vTri")
         for k in range(3):
             iface.flat("VEC3", "vTriN%d" % k)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
         info.vertex_source((drawing.SHADER_DIR / "sharp_lobe_vert.glsl").read_text())
-        info.fragment_source(drawing.glsl_source("brdf_lib.glsl", "sharp_lobe_frag.glsl"))
-        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
+        defines = "".join(f"#define {f}\n" for f in features)
+        info.fragment_source(defines + drawing.glsl_source("brdf_lib.glsl", "texture_lib.glsl",
+                                                           "sharp_lobe_frag.glsl"))
+        sh = _GPU[("shader", features)] = gpu.shader.create_from_info(info)
     return sh
 
 
+_ATTRIBUTES = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"),
+               ("VEC3", "triN0"), ("VEC3", "triN1"), ("VEC3", "triN2"), ("VEC2", "uv"),
+               ("VEC4", "tng"))
+
+
+def _batch(attrs):
+    """A batch of the pass's vertex layout, which any feature set's shader draws
+    (``batch_for_shader`` refuses the UVs a shader without textures compiles out)."""
+    import gpu
+    fmt = _GPU.get("format")
+    if fmt is None:
+        fmt = _GPU["format"] = gpu.types.GPUVertFormat()
+        for kind, ident in _ATTRIBUTES:
+            fmt.attr_add(id=ident, comp_type="F32", len=int(kind[-1]), fetch_mode="FLOAT")
+    vbo = gpu.types.GPUVertBuf(fmt, len(attrs["pos"]))
+    for _, ident in _ATTRIBUTES:
+        vbo.attr_fill(ident, np.ascontiguousarray(attrs[ident], dtype=np.float32))
+    return gpu.types.GPUBatch(type="TRIS", buf=vbo)
+
+
 def sharp_slots(st) -> list:
-    """Material slots of an object whose glossy lobes this pass draws."""
-    return [i for i, m in enumerate(st.materials) if m.per_pixel_lobe]
+    """Material slots of an object whose glossy lobes this pass draws (``st.materials``
+    also holds a textured slot's per-point variants: ``st.slot_of`` maps them back)."""
+    return sorted({int(st.slot_of[i]) for i, m in enumerate(st.materials) if m.per_pixel_lobe})
 
 
 def _batches(st, slots):
     """Per sharp slot a batch of its triangles' corners: position, normal, the three
     shading points, barycentric weights and the three points' normals (the hemispheres
-    their visibility was traced over)."""
-    from gpu_extras.batch import batch_for_shader
-    key = (st.name, st.fingerprint, tuple(slots))
+    their visibility was traced over), the UVs and tangents of its textured inputs."""
+    key = (st.name, st.fingerprint, tuple(slots),
+           tuple((slot, id(got[1])) for slot in slots
+                 for got in [texture_export.slot_uvs(st, slot)] if got is not None),
+           tuple((slot, id(got[2])) for slot, got in sorted(st.normals.items())))
     got = _BATCHES.get(key)
     if got is not None:
         return got
@@ -88,15 +122,23 @@ def _batches(st, slots):
     tri_normals = np.repeat(pts.normals[pts.point_of_corner[tri]].astype(np.float32), 3,
                             axis=0)                                  # (3T, 3 points, 3)
     tri_slot = arrays.corner_materials[tri[:, 0]]
+    corner = tri.reshape(-1)
     out = []
     for slot in slots:
         sel = np.repeat(tri_slot == slot, 3)
         if sel.any():
-            out.append((slot, batch_for_shader(_shader(), "TRIS", {
-                "pos": np.ascontiguousarray(pos[sel]), "nrm": np.ascontiguousarray(nrm[sel]),
-                "triPoints": np.ascontiguousarray(tri_points[sel]),
-                "bary": np.ascontiguousarray(bary[sel]),
-                **{"triN%d" % k: np.ascontiguousarray(tri_normals[sel, k]) for k in range(3)}})))
+            uv = np.zeros((int(sel.sum()), 2), np.float32)
+            tng = np.zeros((int(sel.sum()), 4), np.float32)
+            uvs = texture_export.slot_uvs(st, slot)
+            if uvs is not None:
+                uv[:] = uvs[1][corner[sel]]
+            mapped = texture_export.shader_normal(st, slot)
+            if mapped is not None:
+                tng[:] = mapped[1][corner[sel]]
+            out.append((slot, _batch({
+                "pos": pos[sel], "nrm": nrm[sel], "triPoints": tri_points[sel],
+                "bary": bary[sel], "uv": uv, "tng": tng,
+                **{"triN%d" % k: tri_normals[sel, k] for k in range(3)}})))
     if len(_BATCHES) >= 32:
         _BATCHES.pop(next(iter(_BATCHES)))
     _BATCHES[key] = out
@@ -147,10 +189,14 @@ def _mip_texture(world):
     return got
 
 
-def parameters(material, eye4, env_size, levels, strength, cube_n, stride):
-    """The paramTex texels of one slot (layout in sharp_lobe_frag.glsl)."""
-    lobes = core_brdf.sharp_lobes(material)
-    p = np.zeros((1, 4 + 3 * max(len(lobes), 1), 4), np.float32)
+def parameters(material, eye4, env_size, levels, strength, cube_n, stride, rough=None,
+               normal=None):
+    """The paramTex texels of one slot (layout in sharp_lobe_frag.glsl); ``rough``: the
+    slot's textured Roughness (core.textures.ScalarSource) read per pixel, ``normal`` its
+    core.textures.NormalSource."""
+    lobes = core_brdf.sharp_lobes(material)[:2]
+    n = ROUGHNESS_NODES if rough is not None else 1
+    p = np.zeros((1 + 2 * n, max(TABLE, 20), 4), np.float32)
     p[0, 0] = eye4
     r = material.table_roughness
     p[0, 1] = (r * r, 0.0 if material.lobe_distribution == "BECKMANN" else 1.0, len(lobes),
@@ -161,6 +207,25 @@ def parameters(material, eye4, env_size, levels, strength, cube_n, stride):
         p[0, 4 + 3 * j] = (kind, weight, eta, 0.0)
         p[0, 5 + 3 * j, :3] = f0
         p[0, 6 + 3 * j, :3] = B
+    p[0, 10, 0] = n
+    if rough is not None:
+        u = drawing.source_uniforms(rough.source)
+        p[0, 11], p[0, 14] = u["texInfo"], u["mixColor"]
+        p[0, 12, :3], p[0, 13, :3] = u["texMap0"], u["texMap1"]
+    if normal is not None:
+        u = drawing.source_uniforms(normal.source)
+        p[0, 15] = (1.0 if normal.kind == "NORMAL_MAP" else 2.0, normal.strength,
+                    normal.distance, 0.0)
+        p[0, 16], p[0, 19] = u["texInfo"], u["mixColor"]
+        p[0, 17, :3], p[0, 18, :3] = u["texMap0"], u["texMap1"]
+    # rows 1 + 2k + j: lobe j's multiscatter factor over cos_o at roughness node k
+    cos_o = np.maximum(np.linspace(0.0, 1.0, TABLE), core_brdf.COS_VIEW_MIN)
+    for k in range(n):
+        m = material if n == 1 else textures.material_at(material, {"Roughness": k / (n - 1)})
+        for j, (kind, *_) in enumerate(lobes):
+            which = "metal" if material.fresnel == "DIELECTRIC" and kind == core_brdf.SHARP_F82 \
+                else "main"
+            p[1 + 2 * k + j, :TABLE, :3] = core_brdf.multiscatter_factor(m, cos_o, which)
     return _texture(p)
 
 
@@ -182,21 +247,34 @@ def draws(state, eye, view_dir, background) -> list:
         if not batches:
             continue
         vis_tex, stride = _visibility_texture(st)
-        params = {slot: parameters(st.materials[slot], eye4, env_size, levels, float(strength),
-                                   state.resolution, stride) for slot, _ in batches}
+        slot_draws = []
+        for slot, batch in batches:
+            rough = texture_export.shader_inputs(st, slot).get("Roughness")
+            mapped = texture_export.shader_normal(st, slot)
+            features = (("ROUGH_TEX",) if rough is not None else ()) + \
+                (("NORMAL_MAP",) if mapped is not None else ())
+            textures_ = [drawing.albedo_texture(got[0].source.texture.pixels)
+                         if got is not None else drawing.white_texture()
+                         for got in (rough, mapped)]
+            params = parameters(st.materials[slot], eye4, env_size, levels, float(strength),
+                                state.resolution, stride, rough and rough[0],
+                                mapped and mapped[0])
+            slot_draws.append((batch, params, features, textures_))
 
-        def draw(view_projection, batches=batches, params=params, vis_tex=vis_tex,
+        def draw(view_projection, slot_draws=slot_draws, vis_tex=vis_tex,
                  side=float(st.closed_side)):
-            sh = _shader()
-            sh.bind()
-            sh.uniform_float("viewProjection", view_projection)
-            sh.uniform_float("envRot", rotation)
-            sh.uniform_float("closedSide", side)
-            sh.uniform_sampler("envTex", env_tex)
-            sh.uniform_sampler("mipTex", mip_tex)
-            sh.uniform_sampler("visTex", vis_tex)
-            for slot, batch in batches:
-                sh.uniform_sampler("paramTex", params[slot])
+            for batch, params, features, (rough_tex, normal_tex) in slot_draws:
+                sh = _shader(features)
+                sh.bind()
+                sh.uniform_float("viewProjection", view_projection)
+                sh.uniform_float("envRot", rotation)
+                sh.uniform_float("closedSide", side)
+                sh.uniform_sampler("envTex", env_tex)
+                sh.uniform_sampler("mipTex", mip_tex)
+                sh.uniform_sampler("visTex", vis_tex)
+                sh.uniform_sampler("paramTex", params)
+                sh.uniform_sampler("roughTex", rough_tex)
+                sh.uniform_sampler("normalTex", normal_tex)
                 batch.draw(sh)
 
         out.append(draw)

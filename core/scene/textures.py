@@ -37,7 +37,7 @@ EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
 @dataclass
 class ImageTexture:
     pixels: np.ndarray                         # (H, W, 4) float32, linear, row 0 at v = 0
-    uv_map: str = ""                           # "" = the mesh's active UV map
+    uv_map: str = ""                           # "" = the mesh's render UV map
     transform: np.ndarray = field(default_factory=lambda: np.array([[1.0, 0.0, 0.0],
                                                                     [0.0, 1.0, 0.0]]))
     interpolation: str = "LINEAR"

@@ -32,6 +32,7 @@ import numpy as np
 from ....core.sphere import directions
 from ....core.methods.ssdf_sg import ssdf, shading as ssdf_sg
 from ....core.methods.ssdf_sg import scene as scene
+from ...blender.texture_export import shader_inputs
 from ...frame import keys
 from ...ui import sg_material
 from ..contract import Shading
@@ -183,7 +184,16 @@ class SSDFSGShading(Shading):
                         or slot >= len(st.materials):
                     continue
                 own[slot] = sg_material.export_sg_material(mat, state.warnings)
-                st.materials[slot] = replace(st.materials[slot], per_pixel_lobe=False)
+                # the slot's textured-input variants too (addon/gpu/sharp.py draws by slot)
+                st.materials = [replace(m, per_pixel_lobe=False) if st.slot_of[i] == slot
+                                else m for i, m in enumerate(st.materials)]
+            # a Roughness image read per pixel: the slot table's nodes span 0-1, closer to
+            # Cycles than addon/gpu/sharp.py's samples (not under AUTO: its other methods need
+            # the sharp pass)
+            if state.method == "SSDF_SG":
+                mine = [slot for slot in st.inputs[0] if "Roughness" in shader_inputs(st, slot)]
+                st.materials = [replace(m, per_pixel_lobe=False) if st.slot_of[i] in mine
+                                else m for i, m in enumerate(st.materials)]
             st.data["sg_own"] = own
         cube = directions.cubemap(state.resolution)
         res, budget, max_terms, occlusion = pca_settings(state.settings)
