@@ -444,6 +444,7 @@ void main()
 {
   float texAlpha = textured_alpha();
   float closedSide = param(9, 0).x;
+  if (closedSide > 1.5 && !gl_FrontFacing) discard;   /* a two-sided mesh: its other copy */
   int sourceCount = textureSize(srcTex, 0).y;
   bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
   if (inner || sourceCount == 0) {

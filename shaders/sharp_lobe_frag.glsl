@@ -215,6 +215,7 @@ vec3 multiscatter(int j, float r, float cos_o)
 
 void main()
 {
+  if (closedSide > 1.5 && !gl_FrontFacing) discard;   /* a two-sided mesh: its other copy */
   bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
   if (inner) {
     fragColor = vec4(0.0);

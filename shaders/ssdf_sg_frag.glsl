@@ -323,6 +323,7 @@ void main()
       color += cl.w * amp * mu * visible_lighting(p, lam, t, b, n, W) * envStrength;
     }
   }
+  if (closedSide > 1.5 && !gl_FrontFacing) discard;   /* a two-sided mesh: its other copy */
   /* a closed mesh's inner side (core.scene.mesh.closed_side) sees only itself: black, as in
    * Cycles; SG products can ring slightly below zero: clamped */
   bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);

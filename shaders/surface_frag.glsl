@@ -1,5 +1,6 @@
 /* vRadiance.a is core.scene.mesh.closed_side: 0 open, +1/-1 a closed mesh whose front faces
- * look outward/inward.  Its inner side sees only itself: no direct light, as in Cycles.
+ * look outward/inward, 2 a two-sided mesh (each side a triangle of its own, drawn from the
+ * front only).  Its inner side sees only itself: no direct light, as in Cycles.
  * Radiance is clamped at zero where a basis rings below it. */
 bool inner_side(float side)
 {
@@ -8,6 +9,7 @@ bool inner_side(float side)
 
 void main()
 {
+  if (vRadiance.a > 1.5 && !gl_FrontFacing) discard;  /* a two-sided mesh: its other copy */
   vec3 rgb = inner_side(vRadiance.a) ? vec3(0.0) : max(vRadiance.rgb, vec3(0.0));
   fragColor = vec4(rgb, 1.0);
 }

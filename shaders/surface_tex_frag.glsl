@@ -6,6 +6,7 @@ bool inner_side(float side)
 
 void main()
 {
+  if (vDiffuse.a > 1.5 && !gl_FrontFacing) discard;   /* a two-sided mesh: its other copy */
   vec3 c = input_colour(albedoTex, vUv, vAttr, texInfo, texMap0, texMap1, mixColor);
   vec3 rgb = inner_side(vDiffuse.a) ? vec3(0.0) : max(vDiffuse.rgb * c + vSpecular, vec3(0.0));
   fragColor = vec4(rgb, 1.0);

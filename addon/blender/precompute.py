@@ -16,7 +16,7 @@ import uuid
 
 import numpy as np
 
-from ...core.scene import mesh as core_mesh
+from ...core.scene import mesh as core_mesh, sides, visibility
 from ..frame import dynamic
 from .. import methods
 from . import scene_export, storage
@@ -67,17 +67,35 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     occluders = np.concatenate(tri_blocks) if tri_blocks else np.zeros((0, 3, 3))
     diag = core_mesh.bounding_diagonal(np.concatenate(all_tris).reshape(-1, 3))
     offset = float(settings.ray_offset) * max(diag, 1e-6)
+    two_sided(objects, occluders, offset, scene.camera)
     # static objects first: each trace group is one run of rows
     objects.sort(key=lambda o: o.dynamic)
     dynamic.set_reach(scene, [o for o in objects if o.dynamic], occluders)
     method = methods.get(settings.method)
     return PrecomputeJob(int(settings.resolution), offset, objects, occluders, warnings,
+                         bounces=scene_export.light_bounces(scene),
                          method=settings.method, settings={
                              name: getattr(settings, name)
                              for name in methods.scene_properties()},
                          field_detail=settings.field_detail,
                          derive=method.shading.derive if method.derives else None,
                          derive_label=method.label)
+
+
+def two_sided(objects, occluders, offset, camera):
+    """Give the open static meshes whose back side exchanges light or faces the scene
+    camera their back side as surfaces of their own (core.scene.sides), so it is traced,
+    stored and drawn with its own light (as Cycles shades a back face)."""
+    open_static = [o for o in objects if not o.dynamic and core_mesh.closed_side(o.arrays) == 0]
+    if not open_static or len(occluders) == 0:
+        return
+    scene = visibility.build_occluder_scene(occluders)
+    eye = None if camera is None else np.array(camera.matrix_world.translation, np.float64)
+    for o in open_static:
+        if sides.needs_back_side(scene, o.arrays, offset, eye):
+            o.arrays = core_mesh.with_back_sides(o.arrays)
+            o.points = core_mesh.shading_points(o.arrays)
+            o.fingerprint = core_mesh.fingerprint(o.arrays)
 
 
 def commit(scene, job: PrecomputeJob):
@@ -106,6 +124,7 @@ def commit_steps(scene, job: PrecomputeJob):
         ob.prt.fingerprint = o.fingerprint
         ob.prt.precompute_id = run_id
         ob.prt.coarse_warning = o.coarse_warning
+        ob.prt.back_sides = o.arrays.two_sided
         # what earlier runs stored (other methods' data too) is dropped with them
         storage.replace_all(ob, {storage.VISIBILITY: o.blob, **o.extra})
         yield (i + 1) / steps

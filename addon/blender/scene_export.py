@@ -133,6 +133,15 @@ def mesh_arrays(ob_eval) -> MeshArrays:
     return MeshArrays(pos, corner_verts, nrm, tris.reshape(-1, 3), corner_mat)
 
 
+def light_bounces(scene) -> int:
+    """The bounces of diffuse light the scene's Cycles *Light Paths* allow:
+    ``min(max_bounces, diffuse_bounces)`` (0: direct light only, as without Cycles)."""
+    cycles = getattr(scene, "cycles", None)
+    if cycles is None:
+        return 0
+    return max(0, min(int(cycles.max_bounces), int(cycles.diffuse_bounces)))
+
+
 # --------------------------------------------------------------------------- materials
 
 def _input_value(node, name, warnings, label, given=None):

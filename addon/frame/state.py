@@ -14,11 +14,13 @@ from dataclasses import replace
 
 import numpy as np
 
+from ...core.methods.reference import shading as reference
 from ...core.shading import brdf as core_brdf
+from ...core.shading.materials import slot_material
 from ...core.sphere import directions, envmap
 from ...core.pipeline import frame_status
 from ...core.scene import mesh as core_mesh, textures, visibility
-from . import dynamic, keys
+from . import bounce, dynamic, keys
 from . import sources
 from .. import methods
 from ..blender import scene_export, storage, texture_export
@@ -80,6 +82,24 @@ class TexturedRadiance(np.ndarray):
         return out
 
 
+def _per_corner(slots: dict, corners):
+    """Per-slot exported values read per corner (UVs, colours, tangents: arrays of one row
+    per corner of the mesh's own) at every corner of a two-sided mesh (``corners``:
+    core.scene.mesh.corner_source; None: the mesh's own corners only)."""
+    if corners is None:
+        return slots
+
+    def extend(v):
+        if isinstance(v, np.ndarray) and v.ndim >= 1 and len(v) * 2 == len(corners):
+            return v[corners]
+        if isinstance(v, tuple):
+            return tuple(extend(x) for x in v)
+        if isinstance(v, dict):
+            return {k: extend(x) for k, x in v.items()}
+        return v
+    return {slot: extend(v) for slot, v in slots.items()}
+
+
 def _with_base(state, value: float):
     """``state`` (a shallow copy) whose objects' textured slots have base colour ``value``."""
     sub = copy.copy(state)
@@ -97,6 +117,7 @@ def _with_base(state, value: float):
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "_bits", "_pose", "status", "data",
                  "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of", "dynamic",
+                 "bounce",
                  "shape", "near")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
@@ -136,6 +157,8 @@ class ObjectState:
         #: the material slot of each entry of ``materials`` (per-point variants of
         #: textured scalar inputs follow the slots, core.scene.textures.point_variants)
         self.slot_of = np.arange(len(materials))
+        #: the stored bounce transfer of its precompute (addon.frame.bounce.stored_rows)
+        self.bounce = None
 
     @property
     def bits(self):
@@ -174,6 +197,8 @@ class FrameState:
         self.settings: dict = {}     # scene.prt values of every method's settings
         self.lamps: list = []        # core.sg.lighting.Lamp the method draws itself (SSDF_SG)
         self.background = None       # (world, GPU texture) cached by the engine
+        #: the frame's bounced light (addon.frame.bounce.FrameBounce), None: direct only
+        self.bounce = None
         #: the camera of the frame being drawn (set by the engine before shading):
         #: dict(clip=4×4 world-to-clip, width, height, eye, view_dir), or None
         self.camera: dict | None = None
@@ -238,13 +263,16 @@ class FrameState:
             if len(arrays.triangles) == 0:
                 continue
             core_mesh.repair_normals(arrays)
+            if ob.original.prt.back_sides and not ob.original.hide_render:
+                arrays = core_mesh.with_back_sides(arrays)    # as its precompute traced it
+            corners = core_mesh.corner_source(arrays) if arrays.two_sided else None
             points = core_mesh.shading_points(arrays)
             fingerprint = core_mesh.fingerprint(arrays)
             # textured colour inputs: their mean colour in the material, drawn per pixel
-            textured = texture_export.slot_sources(ob, self.warnings)
+            textured = _per_corner(texture_export.slot_sources(ob, self.warnings), corners)
             colours = {slot: texture_export.mean_albedo(src, values)
                        for slot, (src, values) in textured.items()}
-            scalars = texture_export.slot_scalars(ob, self.warnings)
+            scalars = _per_corner(texture_export.slot_scalars(ob, self.warnings), corners)
             means = {slot: texture_export.mean_scalars(inputs)
                      for slot, inputs in scalars.items()}
             # lobes too narrow for the cubemap are drawn per pixel (addon/gpu/sharp.py)
@@ -282,7 +310,9 @@ class FrameState:
                 self.warnings.append(data.coarse_warning)
             st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
-            st.normals = texture_export.slot_normals(ob, self.warnings)
+            st.normals = _per_corner(texture_export.slot_normals(ob, self.warnings), corners)
+            if status == "ok" and moving is None:
+                st.bounce = bounce.stored_rows(orig, points.count, self.note)
             st.dynamic = moving if status == "ok" else None
             if st.dynamic is not None:
                 st.shape = data.fingerprint
@@ -324,6 +354,7 @@ class FrameState:
         self.drawn_lamps = [lamp for lamp in lamps if lamp.kind not in mine]
         self.warnings += lamp_warnings
         self.method_impl.sync(self)
+        self.bounce = bounce.FrameBounce.of(self, scene_export.light_bounces(scene))
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
 
     def note(self, message: str):
@@ -350,6 +381,11 @@ class FrameState:
         direction toward an orthographic camera (then ``eye`` is ignored).
         """
         out = self.method_impl.shade(self, eye, view_dirs_for)
+        bounced = white = None
+        if out is not None and self.bounce is not None:
+            # the bounce reaches every receiver's diffuse base (addon.frame.bounce)
+            bounced, white = self.bounced_radiance(eye, view_dirs_for)
+            out = [r if b is None else np.asarray(r) + b for r, b in zip(out, bounced)]
         textured = [i for i, st in enumerate(self.objects) if st.textures]
         if out is None or not textured:
             return out
@@ -357,11 +393,39 @@ class FrameState:
         # white and with black, their difference is what the texture multiplies per pixel
         sub = copy.copy(self)
         sub.objects = [self.objects[i] for i in textured]
-        white = self.method_impl.shade(_with_base(sub, 1.0), eye, view_dirs_for)
+        white_radiance = self.method_impl.shade(_with_base(sub, 1.0), eye, view_dirs_for)
         black = self.method_impl.shade(_with_base(sub, 0.0), eye, view_dirs_for)
-        for i, w, b in zip(textured, white, black):
-            out[i] = TexturedRadiance.of(out[i], np.asarray(w) - np.asarray(b), b)
+        for i, w, b in zip(textured, white_radiance, black):
+            diffuse = np.asarray(w) - np.asarray(b)
+            if white is not None and white[i] is not None:
+                diffuse = diffuse + white[i]
+            out[i] = TexturedRadiance.of(out[i], diffuse, b)
         return out
+
+    def bounced_radiance(self, eye, view_dirs_for=None) -> tuple[list, list]:
+        """Per object, per corner (C, 3) float32 or None: the bounced light its diffuse base
+        sends toward the view with each slot's colour, and with a textured slot's colour
+        white (what its colour multiplies per pixel)."""
+        plain, white = [], []
+        for st, E in zip(self.objects, self.bounce.irradiance(self)):
+            if E is None:
+                plain.append(None)
+                white.append(None)
+                continue
+            pts = st.points
+            views = reference.point_views(pts.positions, eye, view_dirs_for)
+            rad = np.zeros((pts.count, 3), np.float32)
+            unit = np.zeros((pts.count, 3), np.float32)
+            for m in np.unique(pts.materials):
+                sel = np.nonzero(pts.materials == m)[0]
+                mat = slot_material(st.materials, m)
+                rad[sel] = reference.lambert_layer(mat, E[sel], pts.normals[sel], views[sel])
+                if st.slot_of[min(int(m), len(st.slot_of) - 1)] in st.textures:
+                    unit[sel] = reference.lambert_layer(replace(mat, diffuse_albedo=(
+                        1.0, 1.0, 1.0)), E[sel], pts.normals[sel], views[sel])
+            plain.append(rad[pts.point_of_corner])
+            white.append(unit[pts.point_of_corner])
+        return plain, white
 
     def draw_objects(self, eye, view_dirs_for=None):
         """Per-pixel draw callables of the active method, or None (see methods)."""

@@ -69,6 +69,9 @@ class PRTObjectData(bpy.types.PropertyGroup):
     precompute_id: StringProperty(name="Precompute ID", default="",
                                   description="Unique per precompute: identifies the stored data")
     coarse_warning: StringProperty(name="Tessellation Note", default="")
+    back_sides: BoolProperty(name="Back Sides", default=False,
+                             description="The precompute traced this open surface's back "
+                                         "side too (light reaches it, or the camera sees it)")
     dynamic: BoolProperty(name="Dynamic", default=False,
                           description="Precompute a shadow field for this object, so that it "
                                       "can move, turn and scale uniformly (keyframed or by "

@@ -17,6 +17,7 @@ from ..scene import mesh as core_mesh
 from ..scene import occluder_fields, rigid, shadow_fields, visibility
 from ..sphere import directions
 from ..store import layouts
+from ..transport import clusters, transfer
 
 
 @dataclass
@@ -78,6 +79,9 @@ class PrecomputeJob:
     derive: object = field(default=None, repr=False)
     #: what the progress calls that step ("deriving <label>")
     derive_label: str = ""
+    #: diffuse bounces of the scene's light paths: > 0 stores each static object's bounce
+    #: transfer (core.transport), traced from the same rays as the visibility
+    bounces: int = 0
 
     @property
     def point_count(self):
@@ -118,6 +122,7 @@ class PrecomputeJob:
                                                 if not o.dynamic)))]
         groups += [(o.own, int(starts[i]), int(starts[i + 1]))
                    for i, o in enumerate(self.objects) if o.dynamic]
+        rows = self._transfer_rows(cube, starts) if self.bounces > 0 else None
         stats = {"rays": 0}
         bvh = 0.0
         t1 = time.perf_counter()
@@ -139,8 +144,13 @@ class PrecomputeJob:
                 scene, pts[lo:hi], nrm[lo:hi], cube, self.offset, threads=threads, origins=origins,
                 progress=lambda done, count, lo=lo: progress(lo + done, total),
                 cancel=lambda: self.cancel_requested, stats=got,
-                consume=lambda a, b, bits, lo=lo: consume(lo + a, lo + b, bits))
+                consume=lambda a, b, bits, lo=lo: consume(lo + a, lo + b, bits),
+                hits=None if rows is None or tris is not self.occluders else (
+                    lambda a, b, blocked, prim, lo=lo: rows.add(
+                        lo + a, lo + b, nrm[lo + a:lo + b], blocked, prim)))
             stats["rays"] += got["rays"]
+            if rows is not None and tris is self.occluders:
+                self._trace_samples(scene, rows, threads)
             del scene
         stream.drain()
         t2 = time.perf_counter()
@@ -148,6 +158,8 @@ class PrecomputeJob:
         t1 += bvh
         t_fields = time.perf_counter()
         self.stage = "checking the tessellation"
+        if rows is not None:
+            self._store_transfer(rows, starts)
         for i, o in enumerate(self.objects):
             o.blob = writers[i].finish()
             o.kept = None if kept is None else kept[starts[i]:starts[i + 1]]
@@ -163,6 +175,68 @@ class PrecomputeJob:
             self.derived = self.derive(self)
         self.timings["derive"] = time.perf_counter() - t3
         self.stage = "writing"
+
+    def _transfer_rows(self, cube, starts):
+        """The receivers' bounce rows over gather clusters of the static objects' triangle
+        sides (:mod:`..transport`), filled as the static group's rays are traced."""
+        static = [o for o in self.objects if not o.dynamic]
+        count = sum(o.points.count for o in static)
+        if count == 0:
+            return None
+        patches = transfer.Patches.of_meshes([o.arrays for o in static])
+        cluster_of, k, cell = clusters.cluster_patches(
+            patches.centroids, patches.normals, patches.areas,
+            max(1, count // clusters.POINTS_PER_CLUSTER))
+        hits = transfer.HitMap.of_meshes([o.arrays for o in static], patches, cluster_of)
+        rows = transfer.TransferRows(count, k, hits, cube)
+        rows.patches, rows.cluster_of, rows.cell = patches, cluster_of, cell
+        return rows
+
+    def _trace_samples(self, scene, rows, threads):
+        """The clusters' samples (:func:`..transport.clusters.sample_sets`): their
+        visibility at the sample cubemap (the frame's direct light there) and each
+        cluster's row, the weighted mean of its samples' (further bounces)."""
+        p = rows.patches
+        patch, owner, weight = clusters.sample_sets(rows.cluster_of, p.centroids, p.areas,
+                                                    rows.clusters, rows.cell)
+        cube = directions.cubemap(layouts.BOUNCE_SAMPLE_RESOLUTION)
+        own = transfer.TransferRows(len(patch), rows.clusters, rows.hits, cube)
+        pos, nrm = p.centroids[patch], p.normals[patch]
+        bits = visibility.trace_visibility(
+            scene, pos, nrm, cube, self.offset, threads=threads,
+            cancel=lambda: self.cancel_requested,
+            hits=lambda a, b, blocked, prim: own.add(a, b, nrm[a:b], blocked, prim))
+        w = (own.weights * weight[:, None]).reshape(-1)
+        keep = w > 0.0
+        k_cols, k_w = transfer.sparse_top(np.repeat(owner, own.width)[keep],
+                                          own.columns.reshape(-1)[keep].astype(np.int64),
+                                          w[keep], rows.clusters, transfer.CLUSTER_ROW_WIDTH)
+        rows.samples = (patch, owner, weight, pos, nrm, bits, k_cols, k_w)
+
+    def _store_transfer(self, rows, starts):
+        """Each static object's rows, its triangle sides' clusters, the samples lying on it
+        and the rows of the clusters whose first sample does, as its ``bounce`` blob
+        (core.store.layouts)."""
+        patch, owner, weight, pos, nrm, bits, k_cols, k_w = rows.samples
+        cluster_of = np.asarray(rows.cluster_of, np.int64)
+        first = np.full(rows.clusters, -1, np.int64)
+        first[owner[::-1]] = patch[::-1]             # the first sample of each cluster
+        j = 0
+        for i, o in enumerate(self.objects):
+            if o.dynamic:
+                continue
+            a, b = int(starts[i]), int(starts[i + 1])
+            front, back = rows.patches.of_mesh(j, o.arrays)
+            lo, hi = int(rows.patches.offsets[j]), int(rows.patches.offsets[j + 1])
+            mine = (patch >= lo) & (patch < hi)
+            held = np.nonzero((first >= lo) & (first < hi))[0]
+            o.extra[layouts.BOUNCE] = layouts.bounce_blob(
+                rows.columns[a:b], rows.weights[a:b], cluster_of[front],
+                None if back is None else cluster_of[back],
+                dict(cluster=owner[mine], weight=weight[mine], position=pos[mine],
+                     normal=nrm[mine], bits=bits[mine]),
+                dict(ids=held, columns=k_cols[held], weights=k_w[held]), rows.clusters)
+            j += 1
 
     def _shadow_fields(self, cube, threads):
         """Each dynamic object's occluder field (its own frame: the world at this pose)

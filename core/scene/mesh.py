@@ -9,6 +9,11 @@ depsgraph (or built by tests):
 * ``triangles`` (T, 3) corner indices of each triangle,
 * ``corner_materials`` (C,) material slot of each corner's face.
 
+A two-sided mesh (:func:`with_back_sides`) carries its back side as triangles of its own:
+the first ``front_triangles`` triangles and ``front_corners`` corners are the mesh's, the
+rest copy them reversed with flipped normals, so every method shades the back side as a
+surface of its own (Cycles shades a back face with the flipped normal).
+
 Transfer is computed per *shading point*: a distinct (vertex, normal,
 material) triple.  A smooth mesh has one point per vertex; a flat-shaded
 cube has three per corner vertex.  Points are derived deterministically from
@@ -32,6 +37,9 @@ class MeshArrays:
     corner_normals: np.ndarray
     triangles: np.ndarray
     corner_materials: np.ndarray | None = None
+    #: triangles / corners that are the mesh's own (the rest are back sides); None: all
+    front_triangles: int | None = None
+    front_corners: int | None = None
 
     def __post_init__(self):
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float64).reshape(-1, 3)
@@ -41,6 +49,15 @@ class MeshArrays:
         if self.corner_materials is None:
             self.corner_materials = np.zeros(len(self.corner_verts), dtype=np.int64)
         self.corner_materials = np.ascontiguousarray(self.corner_materials, dtype=np.int64).reshape(-1)
+        if self.front_triangles is None:
+            self.front_triangles = len(self.triangles)
+        if self.front_corners is None:
+            self.front_corners = len(self.corner_verts)
+
+    @property
+    def two_sided(self) -> bool:
+        """Whether the mesh carries its back side (:func:`with_back_sides`)."""
+        return self.front_triangles < len(self.triangles)
 
     @property
     def triangle_positions(self) -> np.ndarray:
@@ -62,13 +79,43 @@ def degenerate_triangles(mesh: MeshArrays, scale: float | None = None) -> np.nda
     return ~np.isfinite(area) | (area <= (1e-12 * max(scale, 1e-30) ** 2))
 
 
+def occluder_index(mesh: MeshArrays) -> np.ndarray:
+    """Indices of the triangles that cast shadows: the mesh's own (not its back sides)
+    but the zero-area ones of :func:`degenerate_triangles`."""
+    own = degenerate_triangles(mesh)[:mesh.front_triangles]
+    return np.nonzero(~own)[0]
+
+
 def occluder_triangles(mesh: MeshArrays) -> tuple[np.ndarray, int]:
-    """``(triangle positions (T', 3, 3), ignored)``: the triangles that cast shadows --
-    all but the zero-area ones of :func:`degenerate_triangles` -- and how many were left
-    out (the count the precompute's warning reports: the faces it calls ignored are
-    exactly the faces the occluder scene does not hold)."""
-    degenerate = degenerate_triangles(mesh)
-    return mesh.triangle_positions[~degenerate], int(degenerate.sum())
+    """``(triangle positions (T', 3, 3), ignored)``: the triangles that cast shadows
+    (:func:`occluder_index`) and how many zero-area ones were left out (the count the
+    precompute's warning reports: the faces it calls ignored are exactly the faces the
+    occluder scene does not hold)."""
+    keep = occluder_index(mesh)
+    return mesh.triangle_positions[keep], int(mesh.front_triangles - len(keep))
+
+
+def with_back_sides(mesh: MeshArrays) -> MeshArrays:
+    """``mesh`` with the back side of every triangle as a triangle of its own: corners
+    ``C..2C-1`` copy corners ``0..C-1`` with flipped normals and triangles ``T..2T-1``
+    are the originals reversed (so a back side seen from behind winds counter-clockwise,
+    as a front face does).  The mesh itself when it is two-sided already."""
+    if mesh.two_sided:
+        return mesh
+    c = len(mesh.corner_verts)
+    back = mesh.triangles[:, ::-1] + c
+    return MeshArrays(mesh.positions, np.concatenate([mesh.corner_verts, mesh.corner_verts]),
+                      np.concatenate([mesh.corner_normals, -mesh.corner_normals]),
+                      np.concatenate([mesh.triangles, back]),
+                      np.concatenate([mesh.corner_materials, mesh.corner_materials]),
+                      front_triangles=len(mesh.triangles), front_corners=c)
+
+
+def corner_source(mesh: MeshArrays) -> np.ndarray:
+    """(C,) the corner of the mesh's own each corner copies (itself for its own corners):
+    what per-corner values exported for the mesh (UVs, colours, tangents) are read at."""
+    c = np.arange(len(mesh.corner_verts))
+    return c if not mesh.two_sided else c % mesh.front_corners
 
 
 def corner_areas(mesh: MeshArrays) -> np.ndarray:
@@ -95,9 +142,12 @@ def closed_side(mesh: MeshArrays) -> int:
     by exactly two triangles that traverse it in opposite directions) +1 when its
     triangles wind outward (signed volume > 0), -1 when inward (e.g. a negative scale).
     Seen from inside a closed mesh every direction is blocked by it, so the renderer
-    draws its inner side black, as Cycles' direct light is there."""
+    draws its inner side black, as Cycles' direct light is there.  2 for a two-sided mesh
+    (:func:`with_back_sides`): each side is a triangle of its own, drawn from its front."""
     if len(mesh.triangles) == 0:
         return 0
+    if mesh.two_sided:
+        return 2
     # vertices welded by position, so meshes split at seams (imports) count as closed
     scale = max(bounding_diagonal(mesh.positions), 1e-30)
     q = np.round(np.nan_to_num(mesh.positions) / (scale * 1e-7)).astype(np.int64)

@@ -242,7 +242,8 @@ RAYS_IN_FLIGHT = 4_000_000
 def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubemap,
                      offset: float, chunk_points: int | None = None, threads: int | None = None,
                      progress=None, cancel=None, stats: dict | None = None,
-                     consume=None, origins: np.ndarray | None = None) -> np.ndarray | None:
+                     consume=None, origins: np.ndarray | None = None,
+                     hits=None) -> np.ndarray | None:
     """Bit-packed visibility (P, cube.size // 8) of ``cube`` directions at ``points``.
 
     ``progress(done, total)`` is called from worker threads after each chunk;
@@ -251,6 +252,11 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
     ``consume(start, stop, bits)``, when given, receives each chunk of rows as it is
     traced (from worker threads, in any order) and nothing is kept: returns None.
     ``origins`` (P, 3): where each point's rays start (default :func:`ray_origins`).
+    ``hits(start, stop, blocked, prim)``, when given, receives what each chunk's rays
+    hit: ``blocked`` (n, D) the texels whose ray is blocked, ``prim`` (n, D) the triangle
+    the blocked rays of :func:`hit_texels` hit first, -2 where that hit grazes a surface
+    the point touches (within four steps), else -1 (:mod:`..transport.transfer` builds
+    the bounce from them).
     """
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -267,6 +273,7 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
                                   2 * RAYS_IN_FLIGHT // (nthreads * cube.size)))
     lock = threading.Lock()
     done = [0, 0]
+    subset = hit_texels(cube)
 
     def work(start):
         if cancel is not None and cancel():
@@ -275,7 +282,29 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
         origins_, rays, mask = hemisphere_rays(
             pts[start:stop], nrm[start:stop], cube, offset,
             None if origins is None else origins[start:stop])
-        if len(rays):
+        if len(rays) and hits is not None:
+            # occlusion for every ray; the nearest hit only for the blocked rays of the
+            # texels of hit_texels(cube) (the bounce is smooth: about 6 x 16^2 of them)
+            blocked = scene.run(origins_, rays, query="OCCLUDED") != -1
+            traced = mask.copy()                      # (n, D): which texels were traced
+            mask[mask] = blocked                      # now: which texels are blocked
+            nearest = mask & subset
+            prim = np.full(mask.shape, -1, np.int32)
+            if nearest.any():
+                pick = nearest[traced]                # per ray: traced for its nearest hit
+                found = scene.run(np.ascontiguousarray(origins_[pick]),
+                                  np.ascontiguousarray(rays[pick]), query="INTERSECT",
+                                  output=1)
+                got = np.asarray(found["primID"], np.int32)
+                # a hit within a few steps of the origin grazes a surface the point
+                # touches (a room's corner): which side it reads is not known, -2
+                near = np.asarray(found["tfar"]) < 4.0 * np.repeat(
+                    ray_step(pts[start:stop], offset), nearest.sum(axis=1))
+                got[near & (got >= 0)] = -2
+                prim[nearest] = got
+            hits(start, stop, mask, prim)
+            np.logical_xor(traced, mask, out=mask)    # visible: traced and not blocked
+        elif len(rays):
             hit = scene.run(origins_, rays, query="OCCLUDED")
             mask[mask] = hit == -1                    # -1: no hit, the texel is visible
         packed = np.packbits(mask, axis=1)
@@ -308,6 +337,19 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
     if stats is not None:
         stats["rays"] = done[1]
     return out
+
+
+#: texels per face edge whose rays are traced for their nearest hit (the bounce's rows)
+HIT_TEXELS = 8
+
+
+def hit_texels(cube: Cubemap) -> np.ndarray:
+    """(D,) bool: the texels whose blocked rays are traced for their nearest hit -- every
+    s-th row and column of each face, s = N / :data:`HIT_TEXELS` (all of them up to 16^2)."""
+    n = cube.resolution
+    s = max(1, n // HIT_TEXELS)
+    k = np.arange(cube.size)
+    return ((k % n) % s == 0) & (((k // n) % n) % s == 0)
 
 
 def unpack_visibility(bits: np.ndarray, count: int) -> np.ndarray:

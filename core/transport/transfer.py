@@ -1,0 +1,207 @@
+"""Each receiver's transfer row over the gather clusters, from the rays the visibility
+precompute traces (Hasan, Pellacini, Bala 2006: direct-to-indirect transfer; Sloan, Kautz,
+Snyder 2002: interreflected transfer built from the same rays as the shadowed transfer).
+
+A receiver ``p`` traces one ray per cubemap texel ``k`` of its hemisphere.  A ray that
+hits the scene at a surface sees the radiance that surface sends back; a diffuse surface
+sends ``L = rho E / pi``, the same in every direction.  With the hit surface's radiance
+taken as its cluster's (:mod:`.clusters`), the bounced irradiance is
+
+    E_ind(p) = sum_k  L_cluster(hit_k)  max(0, n_p . w_k) dw_k  =  sum_m  T[p, m] L_m,
+
+so ``T[p, m]`` sums ``cos dw`` over the rays of ``p`` that hit cluster ``m`` (the hit
+triangle's side names the cluster; a hit on a surface's back reads its back side, or
+nothing when no back side was traced: a closed mesh's inside, an open surface's back
+that nothing faces).  A row keeps its :data:`ROW_WIDTH` largest
+entries, scaled so the row's sum -- the share of the hemisphere that sees the scene,
+cosine-weighted -- is kept exactly (a uniformly bright scene bounces exactly as much
+light as the full row would).  ``T`` between clusters -- the rows of the clusters' own
+sample points -- carries further bounces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..scene.visibility import hit_texels
+
+#: entries kept per receiver row (cluster id int32 + weight float16 each: 192 bytes a
+#: point before compression)
+ROW_WIDTH = 32
+#: entries kept per cluster row (the cluster-to-cluster transfer of further bounces)
+CLUSTER_ROW_WIDTH = 64
+#: at most this many (receiver, cluster) cells are accumulated densely per chunk of rays
+#: (beyond it the chunk's entries are sorted instead)
+DENSE_CELLS = 4_000_000
+
+
+@dataclass
+class Patches:
+    """The sides of the static meshes' triangles, mesh after mesh: each mesh's triangles'
+    front sides, then (a two-sided mesh) their back sides -- centroid, the side's normal
+    (its corners' shading normals averaged; flipped for a back side), area and material
+    slot.  ``offsets[i]`` is where mesh ``i``'s sides start."""
+
+    centroids: np.ndarray        # (N, 3)
+    normals: np.ndarray          # (N, 3)
+    areas: np.ndarray            # (N,)
+    slots: np.ndarray            # (N,) material slot of the side's triangle
+    offsets: np.ndarray          # (meshes + 1,)
+
+    @classmethod
+    def of_meshes(cls, meshes):
+        from ..scene.mesh import triangle_areas
+        cen, nrm, area, slot, offsets = [], [], [], [], [0]
+        for arrays in meshes:
+            tri = arrays.triangles[:arrays.front_triangles]
+            tp = arrays.positions[arrays.corner_verts[tri]]
+            n = arrays.corner_normals[tri].sum(axis=1)
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+            sides = [n, -n] if arrays.two_sided else [n]
+            for side in sides:
+                cen.append(tp.mean(axis=1))
+                nrm.append(side)
+                area.append(triangle_areas(tp))
+                slot.append(arrays.corner_materials[tri[:, 0]])
+            offsets.append(offsets[-1] + len(tri) * len(sides))
+        cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape))
+        return cls(cat(cen, (0, 3)), cat(nrm, (0, 3)), cat(area, (0,)),
+                   cat(slot, (0,)).astype(np.int64), np.asarray(offsets, np.int64))
+
+    def of_mesh(self, i: int, arrays):
+        """``(front (T,), back (T,) or None)``: where mesh ``i``'s triangles' sides are."""
+        t = arrays.front_triangles
+        a = int(self.offsets[i])
+        return np.arange(a, a + t), (np.arange(a + t, a + 2 * t) if arrays.two_sided else None)
+
+
+@dataclass
+class HitMap:
+    """What a ray hitting occluder triangle ``t`` (in the occluder scene's order) reads:
+    the gather cluster of its front side and of its back side (-1: no back side traced --
+    a closed mesh's inside, an open surface's back that nothing faces), and the
+    triangle's geometric normal turned to its front (the side its shading normals face)."""
+
+    front: np.ndarray            # (T,) int64
+    back: np.ndarray             # (T,) int64
+    normal: np.ndarray           # (T, 3) float32
+
+    @classmethod
+    def of_meshes(cls, meshes, patches: Patches, cluster_of_patch: np.ndarray):
+        """The map of several meshes' occluder triangles, concatenated in order
+        (``core.scene.mesh.occluder_index`` of each), their sides' clusters given per
+        patch of ``patches``."""
+        from ..scene.mesh import occluder_index
+        front, back, normal = [], [], []
+        cl = np.asarray(cluster_of_patch, np.int64)
+        for i, arrays in enumerate(meshes):
+            t = occluder_index(arrays)
+            f, b = patches.of_mesh(i, arrays)
+            front.append(cl[f[t]])
+            back.append(cl[b[t]] if b is not None else np.full(len(t), -1, np.int64))
+            tri = arrays.triangles[t]
+            tp = arrays.positions[arrays.corner_verts[tri]]
+            g = np.cross(tp[:, 1] - tp[:, 0], tp[:, 2] - tp[:, 0])
+            g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+            turn = np.einsum("ij,ij->i", g, arrays.corner_normals[tri].sum(axis=1)) < 0.0
+            g[turn] *= -1.0
+            normal.append(g.astype(np.float32))
+        cat = (lambda xs, shape, dtype: np.concatenate(xs) if xs else np.zeros(shape, dtype))
+        return cls(cat(front, (0,), np.int64), cat(back, (0,), np.int64),
+                   cat(normal, (0, 3), np.float32))
+
+
+def top_entries(acc: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(columns (N, width) int32, weights (N, width) float32)``: each row's ``width``
+    largest entries of the dense ``acc`` (N, K), scaled to keep the row's sum."""
+    n, k = acc.shape
+    width = min(width, k)
+    if width == 0:
+        return np.zeros((n, 0), np.int32), np.zeros((n, 0), np.float32)
+    cols = np.argpartition(-acc, width - 1, axis=1)[:, :width] if width < k else \
+        np.broadcast_to(np.arange(k), (n, k)).copy()
+    kept = np.take_along_axis(acc, cols, axis=1)
+    total = acc.sum(axis=1)
+    scale = np.where(kept.sum(axis=1) > 0.0, total / np.maximum(kept.sum(axis=1), 1e-300), 0.0)
+    return cols.astype(np.int32), (kept * scale[:, None]).astype(np.float32)
+
+
+def sparse_top(rows: np.ndarray, cols: np.ndarray, weights: np.ndarray, n: int, width: int):
+    """:func:`top_entries` of the sparse matrix with entries ``(rows, cols, weights)``
+    (duplicates summed) and ``n`` rows."""
+    out_c = np.zeros((n, width), np.int32)
+    out_w = np.zeros((n, width), np.float32)
+    if len(rows) == 0:
+        return out_c, out_w
+    key = rows.astype(np.int64) * (int(cols.max()) + 1) + cols
+    uniq, inverse = np.unique(key, return_inverse=True)
+    sums = np.bincount(inverse, weights=weights)
+    r, c = uniq // (int(cols.max()) + 1), uniq % (int(cols.max()) + 1)
+    order = np.lexsort((-sums, r))
+    r, c, s = r[order], c[order], sums[order]
+    start = np.searchsorted(r, np.arange(n))
+    rank = np.arange(len(r)) - start[r]
+    total = np.bincount(r, weights=s, minlength=n)
+    keep = rank < width
+    kept = np.bincount(r[keep], weights=s[keep], minlength=n)
+    scale = np.where(kept > 0.0, total / np.maximum(kept, 1e-300), 0.0)
+    out_c[r[keep], rank[keep]] = c[keep]
+    out_w[r[keep], rank[keep]] = s[keep] * scale[r[keep]]
+    return out_c, out_w
+
+
+class TransferRows:
+    """Receiver rows accumulated as the trace hands on its chunks of rays (any thread:
+    each chunk writes its own rows)."""
+
+    def __init__(self, count: int, clusters: int, hits: HitMap, cube,
+                 width: int = ROW_WIDTH):
+        self.clusters = int(clusters)
+        self.hits = hits
+        self.dirs = np.asarray(cube.directions, np.float64)
+        self.solid = np.asarray(cube.solid_angles, np.float64)
+        self.subset = hit_texels(cube)
+        #: (3, D) float32 texel directions times their solid angles: ``n . w dw``
+        self.dirs_solid = np.ascontiguousarray((self.dirs * self.solid[:, None]).T, np.float32)
+        self.width = int(width)
+        self.columns = np.zeros((count, self.width), np.int32)
+        self.weights = np.zeros((count, self.width), np.float32)
+
+    def add(self, start: int, stop: int, normals: np.ndarray, blocked: np.ndarray,
+            prim: np.ndarray):
+        """Rows ``start:stop`` from their traced rays: ``blocked`` (n, D) the texels whose
+        ray is blocked, ``prim`` (n, D) the occluder triangle the blocked rays of the hit
+        texels (``core.scene.visibility.hit_texels``) hit first (-1: not traced, -2: a
+        graze of a touching surface, side unknown).  The hits stand for every blocked ray
+        of their receiver: scaled by all its blocked rays' ``cos dw`` over the hits' (a
+        ratio estimate: a row's sum stays the blocked share)."""
+        n = stop - start
+        nrm = np.asarray(normals, np.float32).reshape(-1, 3)
+        cosw = nrm @ self.dirs_solid                                   # (n, D) cos dw
+        np.maximum(cosw, 0.0, out=cosw)
+        cosw[~blocked] = 0.0                                           # blocked rays only
+        full = cosw.sum(axis=1, dtype=np.float64)
+        part = np.where(prim >= 0, cosw, 0.0).sum(axis=1, dtype=np.float64)
+        scale = np.where(part > 0.0, full / np.maximum(part, 1e-300), 0.0)
+        i, k = np.nonzero(prim >= 0)
+        if len(i) == 0 or self.clusters == 0:
+            self.columns[start:stop] = 0
+            self.weights[start:stop] = 0.0
+            return
+        t = prim[i, k].astype(np.int64)
+        front = np.einsum("ij,ij->i", self.dirs[k], self.hits.normal[t]) < 0.0
+        m = np.where(front, self.hits.front[t], self.hits.back[t])
+        ok = m >= 0
+        i, m, w = i[ok], m[ok], (cosw[i, k].astype(np.float64) * scale[i])[ok]
+        if n * self.clusters <= DENSE_CELLS:
+            acc = np.bincount(i * self.clusters + m, weights=w,
+                              minlength=n * self.clusters).reshape(n, self.clusters)
+            cols, wts = top_entries(acc, self.width)
+            self.columns[start:stop, :cols.shape[1]] = cols
+            self.weights[start:stop, :wts.shape[1]] = wts
+        else:
+            cols, wts = sparse_top(i, m, w, n, self.width)
+            self.columns[start:stop] = cols
+            self.weights[start:stop] = wts

@@ -1,0 +1,1 @@
+"""Blender-free tests of core/, one folder per core package."""

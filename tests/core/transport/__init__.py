@@ -1,0 +1,1 @@
+"""core/transport: gather clusters, transfer rows, the frame's bounce."""

@@ -1,0 +1,69 @@
+"""core.transport.bounce: the bounces' series, the lamps' direct light at gather points."""
+
+import math
+
+import numpy as np
+import pytest
+
+from prt_relight.core.shading.brdf import diffuse_view_weight
+from prt_relight.core.shading.materials import Material, principled_material
+from prt_relight.core.sg.lamp_lobes import Lamp
+from prt_relight.core.transport import bounce
+
+
+def test_bounces_sum_the_series_of_an_enclosure():
+    """Two clusters that see only each other (rows of pi: a closed enclosure's cosine
+    integral) and albedo rho: the radiance sent is L0 (1 + rho + ... + rho^(B-1))."""
+    cols = np.array([[1], [0]], np.int32)
+    w = np.full((2, 1), math.pi, np.float32)
+    direct = np.array([[math.pi, math.pi, math.pi], [math.pi, math.pi, math.pi]])
+    rho = np.full((2, 3), 0.5)
+    for b in (1, 2, 4):
+        got = bounce.bounce(direct, rho, cols, w, b)
+        assert got[0, 0] == pytest.approx(sum(0.5 ** (j + 1) for j in range(b)))
+    np.testing.assert_allclose(bounce.receive(cols, w, np.array([[1.0] * 3, [2.0] * 3])),
+                               [[2 * math.pi] * 3, [math.pi] * 3], rtol=1e-6)
+
+
+def test_point_and_sun_lamps_light_as_cycles_does():
+    x = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    n = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    point = Lamp("POINT", color=(100.0, 100.0, 100.0), position=(0.0, 0.0, 2.0), radius=0.0)
+    E = bounce.lamp_irradiance([point], x, n)
+    d2 = np.array([4.0, 5.0])
+    cos = np.array([1.0, 2.0 / math.sqrt(5.0)])
+    np.testing.assert_allclose(E[:, 0], 100.0 / (4 * math.pi * d2) * cos, rtol=1e-9)
+    sun = Lamp("SUN", color=(3.0, 3.0, 3.0), direction=(0.0, -0.6, -0.8), angle=0.0)
+    np.testing.assert_allclose(bounce.lamp_irradiance([sun], x, n)[:, 0], 2.4, rtol=1e-9)
+    blocked = bounce.lamp_irradiance([sun], x, n, occluded=lambda o, d, t: np.ones(len(o), bool))
+    assert not blocked.any()
+
+
+def test_area_lamp_matches_its_surface_integral():
+    """Four points on the lamp against a fine quadrature of its surface (a point 1.5 m
+    below a 0.5 m square lamp facing down, and one off to the side)."""
+    lamp = Lamp("AREA", color=(50.0, 50.0, 50.0), position=(0.0, 0.0, 1.5),
+                direction=(0.0, 0.0, -1.0), half_x=(0.25, 0.0, 0.0), half_y=(0.0, 0.25, 0.0))
+    x = np.array([[0.0, 0.0, 0.0], [1.0, 0.3, 0.0]])
+    n = np.tile([0.0, 0.0, 1.0], (2, 1))
+    g = (np.arange(64) + 0.5) / 64 * 2 - 1
+    sx, sy = np.meshgrid(g, g)
+    pts = np.column_stack([0.25 * sx.ravel(), 0.25 * sy.ravel(), np.full(sx.size, 1.5)])
+    L = 50.0 / (math.pi * lamp.area)
+    truth = []
+    for p in x:
+        v = pts - p
+        d = np.linalg.norm(v, axis=1)
+        truth.append(np.sum(L * (lamp.area / len(pts)) * (v[:, 2] / d) ** 2 / d ** 2))
+    np.testing.assert_allclose(bounce.lamp_irradiance([lamp], x, n)[:, 0], truth, rtol=0.02)
+
+
+def test_diffuse_reflectance_of_a_principled_base():
+    plain = Material(diffuse_albedo=(0.5, 0.4, 0.3))
+    np.testing.assert_allclose(bounce.diffuse_reflectance(plain, diffuse_view_weight),
+                               (0.5, 0.4, 0.3))
+    metal = principled_material(base_color=(0.8, 0.8, 0.8), metallic=1.0)
+    assert bounce.diffuse_reflectance(metal, diffuse_view_weight).max() == 0.0
+    dielectric = principled_material(base_color=(0.8, 0.8, 0.8))
+    r = bounce.diffuse_reflectance(dielectric, diffuse_view_weight)
+    assert 0.6 < r[0] < 0.8                       # the specular layer keeps a few percent
