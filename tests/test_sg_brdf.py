@@ -316,7 +316,7 @@ def _run_glsl(frag_main: str, inputs: np.ndarray, out_slots: int, extra_samplers
         scene.render.engine = "BLENDER_WORKBENCH"
         bpy.ops.render.render()                 # gives the gpu module a context in -b
         _run_glsl.context_ready = True
-    common = (sg_brdf.__file__.rsplit("/core/", 1)[0] + "/shaders/sg_common.glsl")
+    common = (sg_brdf.__file__.rsplit("/core/", 1)[0] + "/shaders/lib/sg.glsl")
     with open(common) as fh:
         src = fh.read()
     N, k, _ = inputs.shape

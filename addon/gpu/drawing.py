@@ -124,8 +124,8 @@ def _shader(name, push_constants, vertex_inputs, varyings, samplers=()):
             iface.smooth(kind, ident)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(_source(f"{name}_vert.glsl"))
-        info.fragment_source(_source(f"{name}_frag.glsl"))
+        info.vertex_source(_source(f"passes/{name}_vert.glsl"))
+        info.fragment_source(_source(f"passes/{name}_frag.glsl"))
         _SHADERS[name] = gpu.shader.create_from_info(info)
     return _SHADERS[name]
 
@@ -153,8 +153,8 @@ def textured_shader():
             iface.smooth(kind, ident)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(_source("surface_tex_vert.glsl"))
-        info.fragment_source(glsl_source("texture_lib.glsl", "surface_tex_frag.glsl"))
+        info.vertex_source(_source("passes/surface_tex_vert.glsl"))
+        info.fragment_source(glsl_source("lib/texture.glsl", "passes/surface_tex_frag.glsl"))
         _SHADERS["surface_tex"] = gpu.shader.create_from_info(info)
     return _SHADERS["surface_tex"]
 

@@ -67,10 +67,10 @@ def _shader(features=FEATURES):
             iface.smooth(kind, ident)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(drawing.glsl_source("lights_vert.glsl"))
+        info.vertex_source(drawing.glsl_source("passes/lights_vert.glsl"))
         defines = "".join(f"#define {f}\n" for f in features)
         info.fragment_source("#define COS_VIEW_MIN 1e-4\n" + defines + drawing.glsl_source(
-            "brdf_lib.glsl", "texture_lib.glsl", "lights_frag.glsl"))
+            "lib/microfacet.glsl", "lib/texture.glsl", "passes/lights_frag.glsl"))
         sh = _GPU[("shader", features)] = gpu.shader.create_from_info(info)
     return sh
 

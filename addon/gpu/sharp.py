@@ -61,8 +61,8 @@ def _shader():
             iface.flat("VEC3", "vTriN%d" % k)
         info.vertex_out(iface)
         info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source((drawing.SHADER_DIR / "sharp_lobe_vert.glsl").read_text())
-        info.fragment_source(drawing.glsl_source("brdf_lib.glsl", "sharp_lobe_frag.glsl"))
+        info.vertex_source((drawing.SHADER_DIR / "passes/sharp_lobe_vert.glsl").read_text())
+        info.fragment_source(drawing.glsl_source("lib/microfacet.glsl", "passes/sharp_lobe_frag.glsl"))
         sh = _GPU["shader"] = gpu.shader.create_from_info(info)
     return sh
 

@@ -360,8 +360,8 @@ def _make_shader():
     info.vertex_in(0, "VEC2", "ndc")
     info.fragment_out(0, "VEC4", "fragColor")
     info.define("MAX_TERMS", str(MAX_TERMS))
-    info.vertex_source(drawing.glsl_source("rsl_vertex_vert.glsl"))
-    info.fragment_source(drawing.glsl_source("rsl_vertex_frag.glsl"))
+    info.vertex_source(drawing.glsl_source("passes/fullscreen_vert.glsl"))
+    info.fragment_source(drawing.glsl_source("methods/rsl_vertex_frag.glsl"))
     return gpu.shader.create_from_info(info)
 
 

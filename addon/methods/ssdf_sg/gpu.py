@@ -42,7 +42,7 @@ def _fragment_source(main: str) -> str:
     """sg_common.glsl (the SG algebra, BRDF factors and cube-face lookup shared with the
     material helpers' GLSL twin, tested against numpy there), texture_lib.glsl (the slot's
     textured inputs, a mapped normal's terminator factor), ssdf_sg_lib.glsl, ``main``."""
-    return drawing.glsl_source("sg_common.glsl", "texture_lib.glsl", "ssdf_sg_lib.glsl", main)
+    return drawing.glsl_source("lib/sg.glsl", "lib/texture.glsl", "methods/ssdf_sg_lib.glsl", main)
 
 
 def _gpu_shader(flat: bool = False):
@@ -79,8 +79,8 @@ def _make_shader(flat: bool):
         iface.flat("VEC3", "vFlat")
     info.vertex_out(iface)
     info.fragment_out(0, "VEC4", "fragColor")
-    info.vertex_source(drawing.glsl_source("ssdf_sg_vert.glsl"))
-    info.fragment_source(_fragment_source("ssdf_sg_frag.glsl"))
+    info.vertex_source(drawing.glsl_source("methods/ssdf_sg_vert.glsl"))
+    info.fragment_source(_fragment_source("methods/ssdf_sg_frag.glsl"))
     return gpu.shader.create_from_info(info)
 
 
@@ -99,7 +99,7 @@ def _make_pairs_shader():
     info.vertex_in(0, "VEC2", "ndc")
     info.fragment_out(0, "VEC4", "fragColor")
     info.vertex_source("void main() { gl_Position = vec4(ndc, 0.0, 1.0); }")
-    info.fragment_source(_fragment_source("ssdf_sg_pairs_frag.glsl"))
+    info.fragment_source(_fragment_source("methods/ssdf_sg_pairs_frag.glsl"))
     return gpu.shader.create_from_info(info)
 
 
