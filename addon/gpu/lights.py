@@ -18,7 +18,7 @@ import numpy as np
 from ...core.shading import brdf as core_brdf
 from ...core.shading.materials import Material
 from ...core.scene import textures
-from . import drawing
+from . import drawing, shaders
 from ..blender import texture_export
 from ..frame.sources import lamp_sources
 
@@ -38,41 +38,14 @@ _SHADOW_TARGET = drawing.gpu_cache({}, limit=1)
 
 # --------------------------------------------------------------------------- shaders
 
-#: every optional feature of lights_frag.glsl (a #define each)
-FEATURES = ("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "LOCAL_LAMPS", "AREA_LAMPS")
+#: every optional feature of lights_frag.glsl (a #define each; shaders.SPECS["lights"])
+FEATURES = shaders.SPECS["lights"].switches
 
 
 def _shader(features=FEATURES):
     """The pass compiled with ``features`` (lights_frag.glsl: what a draw lacks is left
     out of its shader, not branched around)."""
-    import gpu
-    features = tuple(sorted(features))
-    sh = _GPU.get(("shader", features))
-    if sh is None:
-        info = gpu.types.GPUShaderCreateInfo()
-        # 128 bytes of push constants at most (the closed side rides in paramTex, the
-        # source count is srcTex's height)
-        for kind, ident in (("MAT4", "viewProjection"), ("VEC4", "texInfo"),
-                            ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
-            info.push_constant(kind, ident)
-        for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex", "albedoTex",
-                                      "cubeTex", "roughTex", "normalTex")):
-            info.sampler(slot, "FLOAT_2D", ident)
-        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"), ("VEC2", "uv"),
-                                              ("VEC4", "attr"), ("VEC4", "tng"))):
-            info.vertex_in(slot, kind, ident)
-        iface = gpu.types.GPUStageInterfaceInfo("prt_lights_iface")
-        for kind, ident in (("VEC3", "vPos"), ("VEC3", "vNrm"), ("VEC2", "vUv"),
-                            ("VEC4", "vAttr"), ("VEC4", "vTng")):
-            iface.smooth(kind, ident)
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(drawing.glsl_source("passes/lights_vert.glsl"))
-        defines = "".join(f"#define {f}\n" for f in features)
-        info.fragment_source("#define COS_VIEW_MIN 1e-4\n" + defines + drawing.glsl_source(
-            "lib/microfacet.glsl", "lib/texture.glsl", "passes/lights_frag.glsl"))
-        sh = _GPU[("shader", features)] = gpu.shader.create_from_info(info)
-    return sh
+    return shaders.shader("lights", features)
 
 
 def slot_features(params: np.ndarray, albedo_source) -> tuple:
@@ -126,36 +99,11 @@ def _surface_batch(pos, nrm, uv, attr, tng):
 
 def _distance_shader():
     """Writes each fragment's distance to ``lamp`` (a local lamp's shadow faces)."""
-    import gpu
-    sh = _GPU.get("distance")
-    if sh is None:
-        info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant("MAT4", "viewProjection")
-        info.push_constant("VEC3", "lamp")
-        info.vertex_in(0, "VEC3", "pos")
-        iface = gpu.types.GPUStageInterfaceInfo("prt_lights_distance_iface")
-        iface.smooth("VEC3", "vPos")
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source("void main() { vPos = pos; "
-                           "gl_Position = viewProjection * vec4(pos, 1.0); }")
-        info.fragment_source("void main() { fragColor = vec4(length(vPos - lamp)); }")
-        sh = _GPU["distance"] = gpu.shader.create_from_info(info)
-    return sh
+    return shaders.shader("shadow_distance")
 
 
 def _depth_shader():
-    import gpu
-    sh = _GPU.get("depth")
-    if sh is None:
-        info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant("MAT4", "viewProjection")
-        info.vertex_in(0, "VEC3", "pos")
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source("void main() { gl_Position = viewProjection * vec4(pos, 1.0); }")
-        info.fragment_source("void main() { fragColor = vec4(0.0); }")
-        sh = _GPU["depth"] = gpu.shader.create_from_info(info)
-    return sh
+    return shaders.shader("shadow_depth")
 
 
 # --------------------------------------------------------------------------- geometry

@@ -20,7 +20,7 @@ import numpy as np
 from ...core.shading import brdf as core_brdf
 from ...core.sphere import envmap
 from ...core.scene import visibility as core_visibility
-from . import drawing
+from . import drawing, shaders
 from ..frame import keys
 
 #: NDF samples per pixel for a lobe of non-zero roughness (one for a mirror)
@@ -28,9 +28,6 @@ SAMPLES = 32
 #: visibility texture width (texels); a point's texels run on across rows
 VIS_WIDTH = 4096
 
-_SAMPLERS = (("FLOAT_2D", "envTex"), ("FLOAT_2D", "mipTex"), ("FLOAT_2D", "visTex"),
-             ("FLOAT_2D", "paramTex"))
-_GPU = drawing.gpu_cache({})
 # per object: (geometry fingerprint, sharp slots) -> batch; visibility textures per bits
 _BATCHES = drawing.gpu_cache({})
 _VISIBILITY = drawing.gpu_cache({})
@@ -38,33 +35,7 @@ _MIPS = drawing.gpu_cache({})
 
 
 def _shader():
-    import gpu
-    sh = _GPU.get("shader")
-    if sh is None:
-        info = gpu.types.GPUShaderCreateInfo()
-        for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
-                            ("FLOAT", "closedSide")):
-            info.push_constant(kind, ident)
-        for slot, (kind, ident) in enumerate(_SAMPLERS):
-            info.sampler(slot, kind, ident)
-        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"),
-                                              ("VEC3", "triPoints"), ("VEC3", "bary"),
-                                              ("VEC3", "triN0"), ("VEC3", "triN1"),
-                                              ("VEC3", "triN2"))):
-            info.vertex_in(slot, kind, ident)
-        iface = gpu.types.GPUStageInterfaceInfo("prt_sharp_lobe_iface")
-        iface.smooth("VEC3", "vPos")
-        iface.smooth("VEC3", "vNrm")
-        iface.smooth("VEC3", "vBary")
-        iface.flat("VEC3", "vTri")
-        for k in range(3):
-            iface.flat("VEC3", "vTriN%d" % k)
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source((drawing.SHADER_DIR / "passes/sharp_lobe_vert.glsl").read_text())
-        info.fragment_source(drawing.glsl_source("lib/microfacet.glsl", "passes/sharp_lobe_frag.glsl"))
-        sh = _GPU["shader"] = gpu.shader.create_from_info(info)
-    return sh
+    return shaders.shader("sharp_lobe")
 
 
 def sharp_slots(st) -> list:

@@ -16,12 +16,12 @@ from ....core.sg import albedo
 from ....core.sg import ggx_warp
 from ....core.shading.materials import slot_material
 from ....core.methods.ssdf_sg.scene import cosine_amplitudes, diffuse_slots, flat_triangles, is_glossy, sg_materials
-from ...gpu import drawing
+from ...gpu import drawing, shaders
 from ...frame import keys
 from ...blender.texture_export import shader_inputs, shader_normal, slot_uvs
 
-# shaders ("shader", "shader_flat", "pairs"), the pair pass's "quad", the prefiltered
-# environment's "atlas" (per pyramid) and the light-lobe texture per cosine lobe count
+# the pair pass's "quad", the prefiltered environment's "atlas" (per pyramid) and the
+# light-lobe texture per cosine lobe count
 _GPU = drawing.gpu_cache({}, limit=8)
 # (coefficient texture, eigen-image texture array, texels per point) per field
 _FIELD_TEXTURES = drawing.gpu_cache({}, limit=64)
@@ -31,76 +31,20 @@ _BATCHES = drawing.gpu_cache({}, limit=64)
 PAIR_TABLES = drawing.gpu_cache({}, limit=8)
 
 
-_SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"), ("FLOAT_2D", "envTex"),
-             ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
-#: the main pass's textured inputs (texture_lib.glsl)
-_INPUT_SAMPLERS = (("FLOAT_2D", "albedoTex"), ("FLOAT_2D", "roughTex"), ("FLOAT_2D", "metalTex"),
-                   ("FLOAT_2D", "levelTex"), ("FLOAT_2D", "normalTex"))
-
-
-def _fragment_source(main: str) -> str:
-    """sg_common.glsl (the SG algebra, BRDF factors and cube-face lookup shared with the
-    material helpers' GLSL twin, tested against numpy there), texture_lib.glsl (the slot's
-    textured inputs, a mapped normal's terminator factor), ssdf_sg_lib.glsl, ``main``."""
-    return drawing.glsl_source("lib/sg.glsl", "lib/texture.glsl", "methods/ssdf_sg_lib.glsl", main)
+#: the main pass's textured input samplers, in :data:`INPUTS` order and the normal map's last
+_INPUT_SAMPLERS = tuple(name for _, name in shaders.SPECS["ssdf_sg"].samplers[5:])
 
 
 def _gpu_shader(flat: bool = False):
     """The per-pixel shader; ``flat``: its variant for flat triangles (FLAT_PAIRS: eq. 39
     from the pair table, see :func:`pair_table`)."""
-    return keys.held(_GPU, "shader_flat" if flat else "shader", (), lambda: _make_shader(flat))
-
-
-def _make_shader(flat: bool):
-    import gpu
-    info = gpu.types.GPUShaderCreateInfo()
-    if flat:
-        info.define("FLAT_PAIRS", "1")
-    for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
-                        ("FLOAT", "closedSide")):
-        info.push_constant(kind, ident)
-    for slot, (kind, ident) in enumerate(_SAMPLERS + _INPUT_SAMPLERS
-                                         + ((("FLOAT_2D", "pairTex"),) if flat else ())):
-        info.sampler(slot, kind, ident)
-    inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"),
-              ("VEC2", "uv"), ("VEC4", "attr"), ("VEC4", "tng"))
-    for slot, (kind, ident) in enumerate(inputs + ((("VEC3", "triFlat"),) if flat else ())):
-        info.vertex_in(slot, kind, ident)
-    iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_flat_iface" if flat
-                                            else "prt_ssdf_sg_iface")
-    iface.smooth("VEC3", "vPos")
-    iface.smooth("VEC3", "vNrm")
-    iface.smooth("VEC3", "vBary")
-    iface.flat("VEC3", "vTri")
-    iface.smooth("VEC2", "vUv")
-    iface.smooth("VEC4", "vAttr")
-    iface.smooth("VEC4", "vTng")
-    if flat:
-        iface.flat("VEC3", "vFlat")
-    info.vertex_out(iface)
-    info.fragment_out(0, "VEC4", "fragColor")
-    info.vertex_source(drawing.glsl_source("methods/ssdf_sg_vert.glsl"))
-    info.fragment_source(_fragment_source("methods/ssdf_sg_frag.glsl"))
-    return gpu.shader.create_from_info(info)
+    return shaders.shader("ssdf_sg_flat" if flat else "ssdf_sg")
 
 
 def _pairs_shader():
-    """The pair pass (``shaders/ssdf_sg_pairs_frag.glsl``) over a full-screen quad."""
-    return keys.held(_GPU, "pairs", (), _make_pairs_shader)
-
-
-def _make_pairs_shader():
-    import gpu
-    info = gpu.types.GPUShaderCreateInfo()
-    info.push_constant("MAT3", "envRot")
-    info.push_constant("INT", "flatCount")
-    for slot, (kind, ident) in enumerate(_SAMPLERS + (("FLOAT_2D", "flatTex"),)):
-        info.sampler(slot, kind, ident)
-    info.vertex_in(0, "VEC2", "ndc")
-    info.fragment_out(0, "VEC4", "fragColor")
-    info.vertex_source("void main() { gl_Position = vec4(ndc, 0.0, 1.0); }")
-    info.fragment_source(_fragment_source("methods/ssdf_sg_pairs_frag.glsl"))
-    return gpu.shader.create_from_info(info)
+    """The pair pass (``shaders/methods/ssdf_sg_pairs_frag.glsl``) over a full-screen
+    triangle."""
+    return shaders.shader("ssdf_sg_pairs")
 
 
 def _texture(rgba, layers=0):
@@ -527,7 +471,7 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
                     sh.uniform_sampler("pairTex", pair_tex)
                 for slot, batch in todo:
                     sh.uniform_sampler("paramTex", params[slot])
-                    for (_, name), tex in zip(_INPUT_SAMPLERS, inputs[slot]):
+                    for name, tex in zip(_INPUT_SAMPLERS, inputs[slot]):
                         sh.uniform_sampler(name, tex)
                     batch.draw(sh)
 
