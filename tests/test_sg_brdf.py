@@ -64,7 +64,7 @@ def _table_fits_as_well_as_a_refit(model, table, refit, fit):
     (another BLAS may stop the fit a little elsewhere). Errors, not digits: a flat optimum's
     parameters (a lobe without amplitude, a sharpness -> 0) may land anywhere on any machine."""
     for i, a in enumerate(sg_ndf.ISO_TABLE_ALPHA):
-        a = max(float(a), sg_ndf.ALPHA_MIN)
+        a = max(float(a), sg_ndf.SG_ALPHA_MIN)
         scale_lam, scale_mu = 2.0 / (a * a), 1.0 / (math.pi * a * a)
         stored = sg_ndf.coaxial_ndf_error(model, a, np.atleast_1d(table[0][i]) * scale_lam,
                                           np.atleast_1d(table[1][i]) * scale_mu, fit)
@@ -119,8 +119,8 @@ def test_ndf_fit_error_by_independent_quadrature(model, params, max_err):
 
 
 def test_sharp_ndf_lobe_normalised_like_the_analytic_ndf():
-    # alpha = ALPHA_MIN -> lam ~ 8e4: int D (n.h) dh = 1 (Beckmann), and the lobe integral agrees
-    for a in (sg_brdf.ALPHA_MIN, 0.01, 0.03):
+    # alpha = SG_ALPHA_MIN -> lam ~ 8e4: int D (n.h) dh = 1 (Beckmann), and the lobe integral agrees
+    for a in (sg_brdf.SG_ALPHA_MIN, 0.01, 0.03):
         lam, mu = sg_brdf.iso_ndf_sg("COOK_TORRANCE", a)
         # int G (n.h) dh over the hemisphere, closed form in 1-D: 2 pi mu int_0^1 e^{lam(c-1)} c dc
         x, w = np.polynomial.legendre.leggauss(200)
@@ -565,7 +565,7 @@ def _cap(axis, theta_max, n_theta=128, n_phi=128):
     return d.reshape(-1, 3), np.repeat(wt, n_phi) * (2 * math.pi / n_phi)
 
 
-@pytest.mark.parametrize("alpha", [sg_brdf.ALPHA_MIN, 0.01, 0.03])
+@pytest.mark.parametrize("alpha", [sg_brdf.SG_ALPHA_MIN, 0.01, 0.03])
 def test_sharp_lobes_lambda_1e4_to_1e5_by_cap_quadrature(alpha):
     """Near-mirror Cook-Torrance (NDF sharpness 2/a^2 = 8e4 .. 2e3; warped lobes up to
     the 1e5 cap at grazing): SG view slice vs the analytic BRDF, both integrated

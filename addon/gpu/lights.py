@@ -316,7 +316,7 @@ def slot_texels(st, slot, eye4) -> np.ndarray:
     nodes = [material_texels(textures.material_at(material, {"Roughness": i / (n - 1)}),
                              eye4, st.closed_side) for i in range(n)]
     u = drawing.source_uniforms(got[0].source)
-    p[0, 11] = (n, core_brdf.ALPHA_MIN, 0.0, 0.0)
+    p[0, 11] = (n, core_brdf.MICROFACET_ALPHA_MIN, 0.0, 0.0)
     p[0, 12], p[0, 15] = u["texInfo"], u["mixColor"]
     p[0, 13, :3], p[0, 14, :3] = u["texMap0"], u["texMap1"]
     return np.concatenate([p] + nodes, axis=0)
@@ -331,7 +331,7 @@ def material_texels(material, eye4, closed_side=0) -> np.ndarray:
         p[0, 0, 3] = 1.0
     lobes = [] if material.is_diffuse_only else core_brdf.sharp_lobes(material)
     r = material.table_roughness
-    p[0, 1] = (max(r * r, core_brdf.ALPHA_MIN), 0.0 if material.lobe_distribution == "BECKMANN"
+    p[0, 1] = (max(r * r, core_brdf.MICROFACET_ALPHA_MIN), 0.0 if material.lobe_distribution == "BECKMANN"
                else 1.0, len(lobes), 1.0 if lobes else 0.0)
     for j, (kind, weight, f0, B, eta) in enumerate(lobes[:2]):
         p[0, 2 + 3 * j] = (kind, weight, eta, 0.0)

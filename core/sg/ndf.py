@@ -23,8 +23,9 @@ MODEL_INDEX = {m: i for i, m in enumerate(MODELS)}
 FRESNEL_INDEX = {m: i for i, m in enumerate(FRESNEL_MODES)}
 #: most lobes :func:`specular_lobes` returns per point.
 MAX_LOBES = 8
-#: smallest slope parameter (NDF lobe sharpness 2/a^2 = 8e4).
-ALPHA_MIN = 0.005
+#: smallest slope parameter an SG NDF lobe is fitted for (sharpness 2/a^2 = 8e4); the
+#: microfacet lobes' floor is core.shading.microfacet.MICROFACET_ALPHA_MIN.
+SG_ALPHA_MIN = 0.005
 #: cosines inside ``M_o`` are floored here (view and light at the horizon).
 COS_MIN = 1e-4
 #: Ward / Ashikhmin-Shirley ``M`` diverges like 1/sqrt(cos) at the horizon; its
@@ -52,7 +53,7 @@ def ndf_value(model, h_local, roughness=0.3, aniso=(0.3, 0.1)):
     tan2 = s2 / c2
     with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
         if model in ISOTROPIC_MODELS:
-            a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)
+            a = np.maximum(np.asarray(roughness, dtype=np.float64), SG_ALPHA_MIN)
             a2 = a * a
             if model == "COOK_TORRANCE":
                 d = np.exp(-tan2 / a2) / (math.pi * a2 * c2 * c2)
@@ -84,7 +85,7 @@ def ndf_value(model, h_local, roughness=0.3, aniso=(0.3, 0.1)):
 
 def _iso_support_cos(model, a):
     """cos(theta) below which the isotropic NDF is < e^-40 of its peak."""
-    a = max(float(a), ALPHA_MIN)
+    a = max(float(a), SG_ALPHA_MIN)
     if model == "BLINN_PHONG":
         e = max(2.0 / (a * a) - 2.0, 0.0)
         return 0.0 if e <= 40.0 else math.exp(-40.0 / e)
@@ -121,7 +122,7 @@ def fit_isotropic_ndf(model, roughness):
     """
     if model not in ISOTROPIC_MODELS:
         raise ValueError(f"{model} is not isotropic")
-    a = max(float(roughness), ALPHA_MIN)
+    a = max(float(roughness), SG_ALPHA_MIN)
     th, wt = _iso_quadrature(model, a)
     h = np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1)
     d = ndf_value(model, h, a)
@@ -160,10 +161,10 @@ ISO_TABLE_ALPHA = np.linspace(0.0, 1.0, 21)
 def iso_table_fit(model):
     """``(c_lam, c_mu)`` on :data:`ISO_TABLE_ALPHA` from :func:`fit_isotropic_ndf`
     (``lam = c_lam 2/a^2``, ``mu = c_mu/(pi a^2)``; node 0 is the a -> 0 limit,
-    fitted at ``a = ALPHA_MIN``).  This is how :data:`ISO_NDF_TABLE` was made."""
+    fitted at ``a = SG_ALPHA_MIN``).  This is how :data:`ISO_NDF_TABLE` was made."""
     cl, cm = [], []
     for a in ISO_TABLE_ALPHA:
-        a = max(float(a), ALPHA_MIN)
+        a = max(float(a), SG_ALPHA_MIN)
         lam, mu, _ = fit_isotropic_ndf(model, a)
         cl.append(lam * a * a / 2.0)
         cm.append(mu * math.pi * a * a)
@@ -173,7 +174,7 @@ def iso_table_fit(model):
 def graded_theta_quadrature(a, per_panel=24):
     """Gauss-Legendre in theta on [0, pi/2], panels growing geometrically from ``a / 4``
     (a heavy-tailed NDF: its peak and its tails both resolved); weights ``2 pi sin dtheta``."""
-    edges = np.concatenate([[0.0], np.geomspace(max(a, ALPHA_MIN) / 4.0, 0.5 * math.pi, 28)])
+    edges = np.concatenate([[0.0], np.geomspace(max(a, SG_ALPHA_MIN) / 4.0, 0.5 * math.pi, 28)])
     x, w = np.polynomial.legendre.leggauss(per_panel)
     lo, hi = edges[:-1, None], edges[1:, None]
     th = ((lo + hi) / 2 + (hi - lo) / 2 * x).ravel()
@@ -187,7 +188,7 @@ def coaxial_ndf_error(model, roughness, lam, mu, fit="COAXIAL"):
     on the quadrature of the fit named by ``fit``: ``"COAXIAL"`` (:func:`fit_coaxial_ndf`,
     graded panels) or ``"ISOTROPIC"`` (:func:`fit_isotropic_ndf`).  The error the fits
     report, and how any other lobes (e.g. a table's) compare with them."""
-    a = max(float(roughness), ALPHA_MIN)
+    a = max(float(roughness), SG_ALPHA_MIN)
     th, wt = graded_theta_quadrature(a) if fit == "COAXIAL" else _iso_quadrature(model, a)
     d = ndf_value(model, np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1), a)
     lam, mu = np.asarray(lam, dtype=np.float64), np.asarray(mu, dtype=np.float64)
@@ -202,7 +203,7 @@ def fit_coaxial_ndf(model, roughness, lobes):
     amplitudes solved by linear least squares.  For GGX, whose tails one lobe cannot
     follow (from ``a ~ 0.8`` the second lobe is the constant ``lam -> 0``).
     Returns ``(lam (K,), mu (K,), rel_error)``, sharpest lobe first."""
-    a = max(float(roughness), ALPHA_MIN)
+    a = max(float(roughness), SG_ALPHA_MIN)
     th, wt = graded_theta_quadrature(a)
     h = np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1)
     d = ndf_value(model, h, a)
@@ -231,7 +232,7 @@ def ggx_table_fit(lobes=GGX_LOBES):
     the previous one's so the lobes vary smoothly.  How :data:`GGX_NDF_TABLE` was made."""
     cl, cm = [], []
     for a in ISO_TABLE_ALPHA:
-        a = max(float(a), ALPHA_MIN)
+        a = max(float(a), SG_ALPHA_MIN)
         lam, mu, _ = fit_coaxial_ndf("GGX", a, lobes)
         cl.append(lam * a * a / 2.0)
         cm.append(mu * math.pi * a * a)
@@ -271,7 +272,7 @@ def iso_ndf_lobes(model, roughness):
     if model != "GGX":
         lam, mu = iso_ndf_sg(model, roughness)
         return lam[..., None], mu[..., None]
-    a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)[..., None]
+    a = np.maximum(np.asarray(roughness, dtype=np.float64), SG_ALPHA_MIN)[..., None]
     c_lam, c_mu = GGX_NDF_TABLE
     x = np.clip(a, 0.0, 1.0) * (len(c_lam) - 1)
     i = np.minimum(x.astype(np.int64), len(c_lam) - 2)
@@ -284,11 +285,11 @@ def iso_ndf_lobes(model, roughness):
 
 def iso_ndf_sg(model, roughness):
     """Single-lobe SG of an isotropic NDF from the correction table:
-    ``(lam, mu)`` arrays of the shape of ``roughness`` (floored at ALPHA_MIN).
+    ``(lam, mu)`` arrays of the shape of ``roughness`` (floored at SG_ALPHA_MIN).
     GGX has several lobes: :func:`iso_ndf_lobes`."""
     if model == "GGX":
         raise ValueError("GGX is fitted by several lobes: use iso_ndf_lobes")
-    a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)
+    a = np.maximum(np.asarray(roughness, dtype=np.float64), SG_ALPHA_MIN)
     c_lam, c_mu = ISO_NDF_TABLE[model]
     lam = _table_lookup(c_lam, a) * 2.0 / (a * a)
     mu = _table_lookup(c_mu, a) / (math.pi * a * a)
