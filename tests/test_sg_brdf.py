@@ -288,22 +288,16 @@ def test_diffuse_albedo_split():
 
 # --------------------------------------------------------------------------- GLSL twin
 
-_GLSL_VERT = """
-void main()
-{
-  gl_Position = vec4(pos, 0.0, 1.0);
-}
-"""
-
-
 def _run_glsl(frag_main: str, inputs: np.ndarray, out_slots: int, extra_samplers=()):
-    """Evaluate ``frag_main`` (GLSL body after shaders/sg_common.glsl) for every row of
+    """Evaluate ``frag_main`` (GLSL body after shaders/lib/sg.glsl) for every row of
     ``inputs`` (N, k, 4) float32 (texture ``inp``: width k, height N).  The fragment
     at pixel (x = i, y = slot) writes output ``slot`` of input ``i``.  Returns
     (N, out_slots, 4)."""
     import bpy
     import gpu
     from gpu_extras.batch import batch_for_shader
+
+    from prt_relight.addon.gpu import shaders
 
     from . import blender_scene as bs
 
@@ -316,23 +310,17 @@ def _run_glsl(frag_main: str, inputs: np.ndarray, out_slots: int, extra_samplers
         scene.render.engine = "BLENDER_WORKBENCH"
         bpy.ops.render.render()                 # gives the gpu module a context in -b
         _run_glsl.context_ready = True
-    common = (sg_brdf.__file__.rsplit("/core/", 1)[0] + "/shaders/lib/sg.glsl")
-    with open(common) as fh:
-        src = fh.read()
     N, k, _ = inputs.shape
-    info = gpu.types.GPUShaderCreateInfo()
-    info.sampler(0, "FLOAT_2D", "inp")
-    for slot, (kind, name) in enumerate(extra_samplers, start=1):
-        info.sampler(slot, kind, name[0])
-    info.vertex_in(0, "VEC2", "pos")
-    info.fragment_out(0, "VEC4", "fragColor")
-    info.vertex_source(_GLSL_VERT)
-    info.fragment_source(src + "\nvoid main()\n{\n  int idx = int(gl_FragCoord.x);\n"
-                         "  int slot = int(gl_FragCoord.y);\n" + frag_main + "\n}\n")
-    shader = gpu.shader.create_from_info(info)
+    spec = shaders.Spec(vertex=("passes/fullscreen_vert.glsl",), fragment=shaders.SG_LIBRARY,
+                        samplers=(("FLOAT_2D", "inp"),) + tuple(
+                            (kind, name[0]) for kind, name in extra_samplers),
+                        vertex_inputs=(("VEC2", "ndc"),))
+    shader = gpu.shader.create_from_info(shaders.create_info(
+        spec, name="sg_twin", tail="\nvoid main()\n{\n  int idx = int(gl_FragCoord.x);\n"
+        "  int slot = int(gl_FragCoord.y);\n" + frag_main + "\n}\n"))
     flat = np.ascontiguousarray(inputs, dtype=np.float32).reshape(-1)
     tex = gpu.types.GPUTexture((k, N), format="RGBA32F", data=gpu.types.Buffer("FLOAT", flat.size, flat))
-    batch = batch_for_shader(shader, "TRIS", {"pos": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+    batch = batch_for_shader(shader, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
                              indices=[(0, 1, 2), (0, 2, 3)])
     off = gpu.types.GPUOffScreen(N, out_slots, format="RGBA32F")
     try:

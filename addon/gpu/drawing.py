@@ -18,6 +18,10 @@ from gpu_extras.batch import batch_for_shader
 from ...core.common.cache import Cache, clear_all
 from . import shaders
 
+#: width of the data textures whose texels run on across rows (a shading point's stored
+#: visibility, SSDF_SG's coefficients and pair table): texel i is (i % ROW_TEXELS, i // ROW_TEXELS)
+ROW_TEXELS = 4096
+
 
 def gpu_cache(initial: dict | None = None, limit: int = 64, name: str = "") -> Cache:
     """A cache of GPU objects (shaders, batches, textures; ``addon.frame.keys``' policy: at most

@@ -26,8 +26,8 @@ from ..frame.sources import lamp_sources
 SHADOW_TILE = 2048
 #: sources drawn per frame at most (the extracted ones plus sun lamps)
 MAX_DRAWN = 8
-#: view-cosine nodes of the per-material tables (lights_frag.glsl TABLE)
-TABLE = 32
+#: view-cosine nodes of the per-material tables (lights_frag.glsl table)
+TABLE_NODES = 32
 
 _GPU = drawing.gpu_cache({})
 _BATCHES = drawing.gpu_cache({})
@@ -63,9 +63,9 @@ def slot_features(params: np.ndarray, albedo_source) -> tuple:
     return tuple(out)
 
 
-#: shadow-map taps per source and sample with one sample per pixel (blocker search, filter;
-#: lights_frag.glsl's defaults)
-TAPS = (16, 24)
+#: shadow-map taps per source and sample with one sample per pixel: the blocker search's and
+#: the filter's (lights_frag.glsl's PCF_TAPS unless a frame defines fewer)
+BLOCKER_TAPS, FILTER_TAPS = 16, 24
 
 
 def frame_features(sources, supersampling: int = 1) -> tuple:
@@ -75,7 +75,7 @@ def frame_features(sources, supersampling: int = 1) -> tuple:
     one sample per pixel.  The blocker search keeps its taps: fewer miss blockers, a bias
     the pixel's average does not remove."""
     s = max(1, int(supersampling))
-    out = [] if s == 1 else [f"PCF_TAPS {max(4, -(-TAPS[1] // s))}"]
+    out = [] if s == 1 else [f"PCF_TAPS {max(4, -(-FILTER_TAPS // s))}"]
     if any(s.local and s.area is None for s in sources):
         out.append("LOCAL_LAMPS")
     if any(s.area is not None for s in sources):
@@ -324,7 +324,7 @@ def slot_texels(st, slot, eye4) -> np.ndarray:
 
 def material_texels(material, eye4, closed_side=0) -> np.ndarray:
     """The paramTex rows of one material slot of an object (layout in lights_frag.glsl)."""
-    p = np.zeros((4, max(TABLE, 10), 4), np.float32)
+    p = np.zeros((4, max(TABLE_NODES, 10), 4), np.float32)
     p[0, 9, 0] = closed_side
     if material.has_diffuse:
         p[0, 0, :3] = np.asarray(material.diffuse_albedo) / math.pi
@@ -338,16 +338,17 @@ def material_texels(material, eye4, closed_side=0) -> np.ndarray:
         p[0, 3 + 3 * j, :3] = f0
         p[0, 4 + 3 * j, :3] = B
     p[0, 8] = eye4
-    mu = np.linspace(0.0, 1.0, TABLE)
-    views = np.stack([np.sqrt(np.maximum(1.0 - mu * mu, 0.0)), np.zeros(TABLE), mu], axis=1)
-    normals = np.tile([0.0, 0.0, 1.0], (TABLE, 1))
-    p[1, :TABLE, :3] = core_brdf.diffuse_view_weight(material, normals, views)
-    p[1, :TABLE, 3] = 1.0
+    mu = np.linspace(0.0, 1.0, TABLE_NODES)
+    views = np.stack([np.sqrt(np.maximum(1.0 - mu * mu, 0.0)), np.zeros(TABLE_NODES), mu],
+                     axis=1)
+    normals = np.tile([0.0, 0.0, 1.0], (TABLE_NODES, 1))
+    p[1, :TABLE_NODES, :3] = core_brdf.diffuse_view_weight(material, normals, views)
+    p[1, :TABLE_NODES, 3] = 1.0
     cos_o = np.maximum(mu, core_brdf.COS_VIEW_MIN)
     which = ["metal" if (material.fresnel == "DIELECTRIC" and kind == core_brdf.SHARP_F82)
              else "main" for kind, *_ in lobes[:2]]
     for j, w in enumerate(which):
-        p[2 + j, :TABLE, :3] = core_brdf.multiscatter_factor(material, cos_o, w)
+        p[2 + j, :TABLE_NODES, :3] = core_brdf.multiscatter_factor(material, cos_o, w)
     return p
 
 

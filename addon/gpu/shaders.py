@@ -47,7 +47,9 @@ _VIEW = (("MAT4", "viewProjection"),)
 _TEXTURED = (("VEC4", "texInfo"), ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor"))
 _SSDF_SG_SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"),
                      ("FLOAT_2D", "envTex"), ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
-_SSDF_SG_LIBS = ("lib/sg.glsl", "lib/texture.glsl", "methods/ssdf_sg_lib.glsl")
+#: lib/sg.glsl with the libraries it calls, in order (tests/test_sg_brdf.py's twin builds it too)
+SG_LIBRARY = ("lib/constants.glsl", "lib/sg.glsl")
+_SSDF_SG_LIBS = SG_LIBRARY + ("lib/texture.glsl", "methods/ssdf_sg_lib.glsl")
 
 _SSDF_SG = Spec(
     vertex=("methods/ssdf_sg_vert.glsl",),
@@ -71,7 +73,7 @@ SPECS: dict[str, Spec] = {
     # per-vertex radiance times a slot's colour per pixel (drawing.textured_draws)
     "surface_tex": Spec(
         vertex=("passes/surface_tex_vert.glsl",),
-        fragment=("lib/texture.glsl", "passes/surface_tex_frag.glsl"),
+        fragment=("lib/constants.glsl", "lib/texture.glsl", "passes/surface_tex_frag.glsl"),
         push_constants=_VIEW + _TEXTURED, samplers=(("FLOAT_2D", "albedoTex"),),
         vertex_inputs=(("VEC3", "pos"), ("VEC4", "diffuse"), ("VEC3", "specular"),
                        ("VEC2", "uv"), ("VEC4", "attr")),
@@ -79,7 +81,8 @@ SPECS: dict[str, Spec] = {
                   ("smooth", "VEC2", "vUv"), ("smooth", "VEC4", "vAttr"))),
     # the world behind the objects
     "background": Spec(
-        vertex=("passes/background_vert.glsl",), fragment=("passes/background_frag.glsl",),
+        vertex=("passes/background_vert.glsl",),
+        fragment=("lib/constants.glsl", "passes/background_frag.glsl"),
         push_constants=(("MAT4", "invViewProjection"), ("MAT3", "texRotation"),
                         ("FLOAT", "strength")),
         samplers=(("FLOAT_2D", "envMap"),), vertex_inputs=(("VEC2", "ndc"),),
@@ -88,7 +91,8 @@ SPECS: dict[str, Spec] = {
     # (the closed side rides in paramTex, the source count is srcTex's height)
     "lights": Spec(
         vertex=("passes/lights_vert.glsl",),
-        fragment=("lib/microfacet.glsl", "lib/texture.glsl", "passes/lights_frag.glsl"),
+        fragment=("lib/constants.glsl", "lib/microfacet.glsl", "lib/texture.glsl",
+                  "passes/lights_frag.glsl"),
         push_constants=_VIEW + _TEXTURED,
         samplers=tuple(("FLOAT_2D", n) for n in ("paramTex", "srcTex", "shadowTex", "albedoTex",
                                                  "cubeTex", "roughTex", "normalTex")),
@@ -97,7 +101,6 @@ SPECS: dict[str, Spec] = {
         varyings=tuple(("smooth", kind, n) for kind, n in (
             ("VEC3", "vPos"), ("VEC3", "vNrm"), ("VEC2", "vUv"), ("VEC4", "vAttr"),
             ("VEC4", "vTng"))),
-        defines=(("COS_VIEW_MIN", "1e-4"),),
         # what a draw lacks is left out of its shader, not branched around
         switches=("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "LOCAL_LAMPS",
                   "AREA_LAMPS"),
@@ -115,7 +118,7 @@ SPECS: dict[str, Spec] = {
     # glossy lobes too narrow for the cubemap (sharp.py)
     "sharp_lobe": Spec(
         vertex=("passes/sharp_lobe_vert.glsl",),
-        fragment=("lib/microfacet.glsl", "passes/sharp_lobe_frag.glsl"),
+        fragment=("lib/constants.glsl", "lib/microfacet.glsl", "passes/sharp_lobe_frag.glsl"),
         push_constants=_VIEW + (("MAT3", "envRot"), ("FLOAT", "closedSide")),
         samplers=tuple(("FLOAT_2D", n) for n in ("envTex", "mipTex", "visTex", "paramTex")),
         vertex_inputs=tuple(("VEC3", n) for n in ("pos", "nrm", "triPoints", "bary", "triN0",
@@ -141,14 +144,14 @@ SPECS: dict[str, Spec] = {
         vertex_inputs=(("VEC2", "ndc"),)),
     # RSL's per-vertex pass: one texel per shading point (methods/rsl/shading.py)
     "rsl_vertex": Spec(
-        vertex=("passes/fullscreen_vert.glsl",), fragment=("methods/rsl_vertex_frag.glsl",),
+        vertex=("passes/fullscreen_vert.glsl",),
+        fragment=("lib/constants.glsl", "methods/rsl_vertex_frag.glsl"),
         push_constants=tuple(("INT", n) for n in (
             "width", "pointCount", "lightCount", "termCount", "visMode", "visRes", "visTile",
             "brdfRes", "viewNodes")) + (("FLOAT", "viewStep"),),
         samplers=tuple(("FLOAT_2D", n) for n in ("pointData", "weights", "lights", "visTable",
                                                  "brdfTables")),
-        vertex_inputs=(("VEC2", "ndc"),),
-        values=(("MAX_TERMS", ("8",)),)),
+        vertex_inputs=(("VEC2", "ndc"),)),
 }
 
 

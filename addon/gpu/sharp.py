@@ -25,8 +25,6 @@ from ..frame import keys
 
 #: NDF samples per pixel for a lobe of non-zero roughness (one for a mirror)
 SAMPLES = 32
-#: visibility texture width (texels); a point's texels run on across rows
-VIS_WIDTH = 4096
 
 # per object: (geometry fingerprint, sharp slots) -> batch; visibility textures per bits
 _BATCHES = drawing.gpu_cache({})
@@ -79,18 +77,18 @@ def _texture(rgba: np.ndarray):
 
 
 def visibility_texels(bits: np.ndarray):
-    """(rows, VIS_WIDTH, 4) float32 of bit-packed visibility (P, nbytes): three bytes per
-    float (exact below 2^24), point p's floats from texel p * stride; and the stride."""
+    """(rows, drawing.ROW_TEXELS, 4) float32 of bit-packed visibility (P, nbytes): three bytes
+    per float (exact below 2^24), point p's floats from texel p * stride; and the stride."""
     floats = core_visibility.bytes_to_float24(bits)              # (P, nbytes / 3)
     P, F = floats.shape
     stride = -(-F // 4)
     flat = np.zeros((P, stride * 4), np.float32)
     flat[:, :F] = floats
     total = max(P * stride, 1)
-    rows = -(-total // VIS_WIDTH)
-    out = np.zeros(rows * VIS_WIDTH * 4, np.float32)
+    rows = -(-total // drawing.ROW_TEXELS)
+    out = np.zeros(rows * drawing.ROW_TEXELS * 4, np.float32)
     out[:flat.size] = flat.reshape(-1)
-    return out.reshape(rows, VIS_WIDTH, 4), stride
+    return out.reshape(rows, drawing.ROW_TEXELS, 4), stride
 
 
 def _visibility_texture(st):

@@ -74,7 +74,7 @@ taken at the lobe centre, always written as ``F = A + B_d F_eq14(c, eta) + B_s (
 Isotropic NDFs are one SG lobe around ``n`` whose sharpness/amplitude are
 ``lam = c_lam(a) 2/a^2`` and ``mu = c_mu(a)/(pi a^2)``; the corrections
 ``c_lam, c_mu`` are tabulated on ``a = 0, 0.05, ..., 1`` (:data:`ISO_NDF_TABLE`,
-linear interpolation; the same constants are in ``shaders/sg_common.glsl``) and
+linear interpolation; ``shaders/lib/constants.glsl`` is generated from them) and
 come from :func:`fit_isotropic_ndf` (a 1-D least-squares fit of the L2 error
 over the hemisphere of ``h``; the amplitude is solved in closed form for each
 trial sharpness, the sharpness by golden section on ``log lam``).

@@ -2,8 +2,6 @@
  * lights_frag.glsl): Cycles' Beckmann/GGX NDFs and Smith Lambda, the Fresnel kinds of
  * core.shading.brdf.sharp_lobes, NDF sampling and a tangent frame.  GLSL twin of core/shading/brdf.py. */
 
-#define PI 3.14159265358979
-
 /* ---------------------------------------------------------------- microfacet terms */
 
 float ndf(int dist, float a, float c)

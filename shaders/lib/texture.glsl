@@ -95,7 +95,7 @@ vec3 input_colour(sampler2D img, vec2 uv, vec4 attr, vec4 info, vec3 map0, vec3 
 float bump_height(sampler2D img, vec2 uv, vec4 info, vec3 map0, vec3 map1, vec4 mixColor)
 {
   vec3 c = combine_colour(image_texture(img, uv, info, map0, map1).rgb, info.w, mixColor);
-  return dot(c, vec3(0.2126, 0.7152, 0.0722));
+  return dot(c, LUMINANCE);
 }
 
 vec3 mapped_normal(sampler2D img, vec2 uv, vec3 P, vec3 N, vec3 T, float sgn, vec4 nmap,

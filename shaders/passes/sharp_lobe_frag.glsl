@@ -16,7 +16,6 @@
  * (kind, weight, eta, -), (f0 rgb, -), (B rgb, -); kinds: 0 F = f0, 1 Schlick,
  * 2 Principled dielectric, 3 F82-tint (core.shading.brdf.sharp_lobes). */
 
-#define COS_VIEW_MIN 1e-4
 #define LOD_BIAS -2.0
 
 
@@ -98,7 +97,7 @@ float visible_bit(float p, int k)
   int byte_index = k >> 3;
   int fi = byte_index / 3;
   int idx = int(p + 0.5) * stride + fi / 4;
-  vec4 word4 = texelFetch(visTex, ivec2(idx % 4096, idx / 4096), 0);
+  vec4 word4 = texelFetch(visTex, ivec2(idx % ROW_TEXELS, idx / ROW_TEXELS), 0);
   int value = int(word4[fi % 4]);     /* exact integers below 2^24: no rounding offset */
   int octet = (value >> (16 - 8 * (byte_index % 3))) & 255;
   return float((octet >> (7 - (k & 7))) & 1);

@@ -323,6 +323,7 @@ def _groups(st, eye, view_dir, turn=None):
 # GLSL per-vertex pass (§5.2: one texel per vertex, rendered to a float target)
 # --------------------------------------------------------------------------- #
 
+#: most glossy terms the GPU pass sums (its glossy[MAX_TERMS]: shaders/lib/constants.glsl)
 MAX_TERMS = 8
 TEXTURE_WIDTH = 8192
 # cached textures (per object tables, per material SATs)
@@ -344,7 +345,7 @@ def gpu_available() -> bool:
 
 
 def _shader():
-    return shaders.shader("rsl_vertex", (f"MAX_TERMS {MAX_TERMS}",))
+    return shaders.shader("rsl_vertex")
 
 
 def _texture(values: np.ndarray, fmt: str):

@@ -70,14 +70,14 @@ def _field_textures(field):
     weights[:, 0] = 1.0
     weights[:, 1:K + 1] = field.coefficients
     total = len(weights) * kt
-    rows = max(1, -(-total // 4096))
-    data = np.zeros((rows * 4096, 4), np.float32)
+    rows = max(1, -(-total // drawing.ROW_TEXELS))
+    data = np.zeros((rows * drawing.ROW_TEXELS, 4), np.float32)
     data[:total] = weights.reshape(-1, 4)
     images = np.zeros((kt * 4, D), np.float32)
     images[0] = field.mean
     images[1:K + 1] = field.eigen
     layers = images.reshape(kt, 4, n, n).transpose(0, 2, 3, 1)          # (kt, n, n, 4)
-    return (_texture(data.reshape(rows, 4096, 4)), _texture(layers, layers=kt), kt)
+    return (_texture(data.reshape(rows, drawing.ROW_TEXELS, 4)), _texture(layers, layers=kt), kt)
 
 
 def environment_textures(fit, pre, cosine_lobes: int):
@@ -134,18 +134,24 @@ def material_uniforms(material):
                 ggxWarp=warp)
 
 
-#: texel of the first clamped-cosine lobe in the parameter texture
-COSINE_TEXEL = 28
+#: row 0 of the parameter texture: the first of four texels per textured input of
+#: :data:`INPUTS` (texture_lib.glsl's info, mapping rows, mix colour), the table's (roughness
+#: nodes, level nodes, metallic at corners 0 and 1), the normal map's (kind, strength,
+#: distance), the first clamped-cosine lobe
+INPUT_TEXEL, TABLE_TEXEL, NORMAL_TEXEL, COSINE_TEXEL = 10, 26, 27, 28
 #: table nodes over a textured Roughness / Specular IOR Level (values i / (n - 1))
 ROUGHNESS_NODES, LEVEL_NODES = 33, 9
 #: Cycles' mu nodes of E(r, mu) (core.shading.brdf_tables)
 GGX_E_NODES = 32
-#: most GGX view-slice lobes an entry holds (shaders/ssdf_sg_lib.glsl WARP_LOBES)
+#: most GGX view-slice lobes an entry holds (core.sg.ggx_warp.GGX_WARP_LOBES or more)
 WARP_LOBES_MAX = 4
+#: a table entry's GGX texels: (-, -, E_avg, multiscatter), E at the GGX_E_NODES mu nodes (four
+#: a texel), then the metal part of A, F_ss main, F_ss metal at the four corners
+GGX_TEXEL = 17
 #: first texel of the GGX view slice's lobes in an entry (core.sg.ndf.ggx_warp_params at the
 #: entry's roughness and the 21 WARP_MU nodes): per node three texels, the tilts, the
 #: log-sharpness factors and the shares of up to WARP_LOBES_MAX lobes (zero past K)
-WARP_TEXEL = 17 + 1 + GGX_E_NODES // 4 + 12
+WARP_TEXEL = GGX_TEXEL + 1 + GGX_E_NODES // 4 + 3 * 4
 #: first texel of the Lambert base's view ratio (core.sg.brdf.diffuse_view_ratio) at the
 #: 32 mu nodes of E (8 texels)
 LAYER_TEXEL = WARP_TEXEL + 3 * len(ggx_warp.WARP_MU)
@@ -161,12 +167,13 @@ INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
 def parameter_texture(env, mat, res, kt, eye4, cosine, table=None, sources=None, normal=None):
     """The parameter texture read by ``read_parameters`` in ssdf_sg_lib.glsl.  Row 0: 9
     scalar texels, (count, sharpness) of the cosine lobes, four texels per textured input
-    of :data:`INPUTS` (``sources``, core.scene.textures.ColorSource or None: texture_lib.glsl's
-    info, mapping rows, mix colour) from texel 10, the table's (roughness nodes, level
-    nodes, metallic at corner 0 and 1) at 26, (local direction, amplitude) per cosine lobe
-    from :data:`COSINE_TEXEL`.  Rows 1..: ``table`` (:func:`slot_table`), one row per
-    Specular IOR Level node.  ``normal``: a core.scene.textures.NormalSource drawn per pixel
-    (texel 27: kind, strength, distance; its image's four texels after the cosine lobes)."""
+    of :data:`INPUTS` (``sources``, core.scene.textures.ColorSource or None: lib/texture.glsl's
+    info, mapping rows, mix colour) from :data:`INPUT_TEXEL`, the table's (roughness nodes,
+    level nodes, metallic at corner 0 and 1) at :data:`TABLE_TEXEL`, (local direction,
+    amplitude) per cosine lobe from :data:`COSINE_TEXEL`.  Rows 1..: ``table``
+    (:func:`slot_table`), one row per Specular IOR Level node.  ``normal``: a
+    core.scene.textures.NormalSource drawn per pixel (:data:`NORMAL_TEXEL`: kind, strength,
+    distance; its image's four texels after the cosine lobes)."""
     M = len(cosine.amplitudes)
     table = _slot_table_of(mat) if table is None else table
     nl, nr = table["entries"].shape[:2]
@@ -183,14 +190,15 @@ def parameter_texture(env, mat, res, kt, eye4, cosine, table=None, sources=None,
     p[0, 4], p[0, 5], p[0, 6], p[0, 7] = mat["kd"], mat["fresA"], mat["fresBd"], mat["fresBs"]
     for k, name in enumerate(INPUTS):
         tex = drawing.source_uniforms((sources or {}).get(name))
-        p[0, 10 + 4 * k] = tex["texInfo"]
-        p[0, 11 + 4 * k, :3], p[0, 12 + 4 * k, :3] = tex["texMap0"], tex["texMap1"]
-        p[0, 13 + 4 * k] = tex["mixColor"]
-    p[0, 26] = (nr, nl, *table["metallic"])
+        i = INPUT_TEXEL + 4 * k
+        p[0, i] = tex["texInfo"]
+        p[0, i + 1, :3], p[0, i + 2, :3] = tex["texMap0"], tex["texMap1"]
+        p[0, i + 3] = tex["mixColor"]
+    p[0, TABLE_TEXEL] = (nr, nl, *table["metallic"])
     if normal is not None:
         tex = drawing.source_uniforms(normal.source)
-        p[0, 27] = (1.0 if normal.kind == "NORMAL_MAP" else 2.0, normal.strength,
-                    normal.distance, 0.0)
+        p[0, NORMAL_TEXEL] = (1.0 if normal.kind == "NORMAL_MAP" else 2.0, normal.strength,
+                              normal.distance, 0.0)
         k = COSINE_TEXEL + M
         p[0, k], p[0, k + 3] = tex["texInfo"], tex["mixColor"]
         p[0, k + 1, :3], p[0, k + 2, :3] = tex["texMap0"], tex["texMap1"]
@@ -205,9 +213,9 @@ def _entry(uniforms, alpha):
     e[0] = (u["ndfLambda"] * alpha * alpha, u["ndfMu"] * alpha * alpha, u["ior"], 0.0)
     for c, v in enumerate(uniforms):
         e[1 + 4 * c:5 + 4 * c] = (v["kd"], v["fresA"], v["fresBd"], v["fresBs"])
-    e[17] = (0.0, 0.0, u["ggxEavg"], u["multiscatter"])
-    e[18:18 + GGX_E_NODES // 4] = np.asarray(u["ggxE"]).reshape(-1, 4)
-    k = 18 + GGX_E_NODES // 4
+    e[GGX_TEXEL] = (0.0, 0.0, u["ggxEavg"], u["multiscatter"])
+    e[GGX_TEXEL + 1:GGX_TEXEL + 1 + GGX_E_NODES // 4] = np.asarray(u["ggxE"]).reshape(-1, 4)
+    k = GGX_TEXEL + 1 + GGX_E_NODES // 4
     for c, v in enumerate(uniforms):
         e[k + 3 * c:k + 3 * c + 3] = (v["fresAm"], v["fssMain"], v["fssMetal"])
     w = np.asarray(u["ggxWarp"], np.float32)
@@ -384,7 +392,7 @@ def pair_texels(cosine_lobes: int, light_count: int) -> int:
 
 def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_count,
                cosine_lobes, rotation):
-    """Run the pair pass for the object's flat points: a GPUTexture (rows of 4096 texels,
+    """Run the pair pass for the object's flat points: a GPUTexture (rows of ROW_TEXELS texels,
     :func:`pair_texels` per point).  Eq. 39's per-pair work that a flat triangle's pixels
     share, done once per point."""
     import gpu
@@ -392,16 +400,17 @@ def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_coun
     coeff_tex, eigen_tex, _ = field_textures(field)
     normals = st.points.normals[flat_points]
     count = len(flat_points)
-    flat = np.zeros((max(1, -(-count // 4096)) * 4096, 4), np.float32)
+    width = drawing.ROW_TEXELS
+    flat = np.zeros((max(1, -(-count // width)) * width, 4), np.float32)
     flat[:count, :3] = normals
     flat[:count, 3] = flat_points
-    flat_tex = _texture(flat.reshape(-1, 4096, 4))
+    flat_tex = _texture(flat.reshape(-1, width, 4))
     total = count * pair_texels(cosine_lobes, light_count)
-    rows = max(1, -(-total // 4096))
+    rows = max(1, -(-total // width))
     sh = _pairs_shader()
     quad = keys.held(_GPU, "quad", (), lambda: batch_for_shader(
         sh, "TRIS", {"ndc": [(-1, -1), (3, -1), (-1, 3)]}))
-    offscreen = gpu.types.GPUOffScreen(4096, rows, format="RGBA32F")
+    offscreen = gpu.types.GPUOffScreen(width, rows, format="RGBA32F")
     try:
         with offscreen.bind():
             gpu.state.depth_test_set("NONE")
@@ -413,13 +422,13 @@ def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_coun
             sh.uniform_sampler("flatTex", flat_tex)
             quad.draw(sh)
             fb = gpu.state.active_framebuffer_get()
-            buf = fb.read_color(0, 0, 4096, rows, 4, 0, "FLOAT")
+            buf = fb.read_color(0, 0, width, rows, 4, 0, "FLOAT")
     finally:
         offscreen.free()
-    buf.dimensions = 4096 * rows * 4
+    buf.dimensions = width * rows * 4
     # read back and uploaded again (once per lighting change): a plain texture outlives the
     # offscreen and may be drawn from the viewport's and the F12 render's GPU contexts
-    return _texture(np.array(buf, dtype=np.float32).reshape(rows, 4096, 4))
+    return _texture(np.array(buf, dtype=np.float32).reshape(rows, width, 4))
 
 
 def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
