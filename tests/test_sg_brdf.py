@@ -499,7 +499,7 @@ def test_glsl_prefiltered_lookup_matches_numpy():
     rows[:, 0, :3], rows[:, 0, 3] = d, lam
     main = _FETCH.format(j=0) + (
         f"  fragColor = vec4(prefiltered_lookup(env, in0.xyz, in0.w, {cube.resolution}, "
-        f"{pe.n_levels}, {pe.lambda_first!r}, {np.log(pe.ratio)!r}), 1.0);\n")
+        f"{pe.n_levels}, {pe.lambda_first!r}, {np.log(pe.ratio)!r}, {pe.lambdas[-2]!r}), 1.0);\n")
     out = _run_glsl(main, rows.astype(np.float32), 1, extra_samplers=[("FLOAT_2D", ("env", tex))])
     assert np.allclose(out[:, 0, :3], ref, rtol=1e-4, atol=1e-5), np.max(np.abs(out[:, 0, :3] - ref))
 

@@ -47,8 +47,10 @@ _VIEW = (("MAT4", "viewProjection"),)
 _TEXTURED = (("VEC4", "texInfo"), ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor"))
 _SSDF_SG_SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"),
                      ("FLOAT_2D", "envTex"), ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
+#: the libraries every pass's fragment stage starts with (common.glsl reads the constants)
+_COMMON = ("lib/constants.glsl", "lib/common.glsl")
 #: lib/sg.glsl with the libraries it calls, in order (tests/test_sg_brdf.py's twin builds it too)
-SG_LIBRARY = ("lib/constants.glsl", "lib/sg.glsl")
+SG_LIBRARY = _COMMON + ("lib/microfacet.glsl", "lib/sg.glsl")
 _SSDF_SG_LIBS = SG_LIBRARY + ("lib/texture.glsl", "methods/ssdf_sg_lib.glsl")
 
 _SSDF_SG = Spec(
@@ -67,13 +69,13 @@ _SSDF_SG = Spec(
 SPECS: dict[str, Spec] = {
     # per-vertex radiance (every per-vertex method's frame)
     "surface": Spec(
-        vertex=("passes/surface_vert.glsl",), fragment=("passes/surface_frag.glsl",),
+        vertex=("passes/surface_vert.glsl",), fragment=_COMMON + ("passes/surface_frag.glsl",),
         push_constants=_VIEW, vertex_inputs=(("VEC3", "pos"), ("VEC4", "radiance")),
         varyings=(("smooth", "VEC4", "vRadiance"),)),
     # per-vertex radiance times a slot's colour per pixel (drawing.textured_draws)
     "surface_tex": Spec(
         vertex=("passes/surface_tex_vert.glsl",),
-        fragment=("lib/constants.glsl", "lib/texture.glsl", "passes/surface_tex_frag.glsl"),
+        fragment=_COMMON + ("lib/texture.glsl", "passes/surface_tex_frag.glsl"),
         push_constants=_VIEW + _TEXTURED, samplers=(("FLOAT_2D", "albedoTex"),),
         vertex_inputs=(("VEC3", "pos"), ("VEC4", "diffuse"), ("VEC3", "specular"),
                        ("VEC2", "uv"), ("VEC4", "attr")),
@@ -91,8 +93,8 @@ SPECS: dict[str, Spec] = {
     # (the closed side rides in paramTex, the source count is srcTex's height)
     "lights": Spec(
         vertex=("passes/lights_vert.glsl",),
-        fragment=("lib/constants.glsl", "lib/microfacet.glsl", "lib/texture.glsl",
-                  "passes/lights_frag.glsl"),
+        fragment=_COMMON + ("lib/microfacet.glsl", "lib/texture.glsl",
+                            "passes/lights_frag.glsl"),
         push_constants=_VIEW + _TEXTURED,
         samplers=tuple(("FLOAT_2D", n) for n in ("paramTex", "srcTex", "shadowTex", "albedoTex",
                                                  "cubeTex", "roughTex", "normalTex")),
@@ -118,7 +120,7 @@ SPECS: dict[str, Spec] = {
     # glossy lobes too narrow for the cubemap (sharp.py)
     "sharp_lobe": Spec(
         vertex=("passes/sharp_lobe_vert.glsl",),
-        fragment=("lib/constants.glsl", "lib/microfacet.glsl", "passes/sharp_lobe_frag.glsl"),
+        fragment=_COMMON + ("lib/microfacet.glsl", "passes/sharp_lobe_frag.glsl"),
         push_constants=_VIEW + (("MAT3", "envRot"), ("FLOAT", "closedSide")),
         samplers=tuple(("FLOAT_2D", n) for n in ("envTex", "mipTex", "visTex", "paramTex")),
         vertex_inputs=tuple(("VEC3", n) for n in ("pos", "nrm", "triPoints", "bary", "triN0",
@@ -145,7 +147,7 @@ SPECS: dict[str, Spec] = {
     # RSL's per-vertex pass: one texel per shading point (methods/rsl/shading.py)
     "rsl_vertex": Spec(
         vertex=("passes/fullscreen_vert.glsl",),
-        fragment=("lib/constants.glsl", "methods/rsl_vertex_frag.glsl"),
+        fragment=_COMMON + ("methods/rsl_vertex_frag.glsl",),
         push_constants=tuple(("INT", n) for n in (
             "width", "pointCount", "lightCount", "termCount", "visMode", "visRes", "visTile",
             "brdfRes", "viewNodes")) + (("FLOAT", "viewStep"),),

@@ -1,8 +1,9 @@
-/* Spherical-Gaussian helpers of Wang et al. 2009: functions only, no main.
+/* Spherical-Gaussian helpers of Wang et al. 2009: functions only, no main (after
+ * constants.glsl, common.glsl and microfacet.glsl: addon/gpu/shaders.py SG_LIBRARY).
  *
  * GLSL twin of core/sg/algebra.py (product eq. 5, inner product eq. 4 in the stable form),
  * core/sg/brdf.py (specular_lobes: NDF lobe -> spherical warp eq. 17-21 -> M_o at the
- * lobe centre eq. 22, Fresnel eq. 14) and core/sg/lighting.py
+ * lobe centre eq. 22, Fresnel eq. 14) and core/sg/prefilter.py
  * (PrefilteredEnvironment.lookup, eq. 34-35).  Every lobe is mu * exp(lam (dot(i, axis) - 1)).
  * tests/test_sg_brdf.py::test_glsl_matches_numpy renders these functions offscreen and
  * compares with numpy.
@@ -114,21 +115,8 @@ void sg_iso_ndf(int model, float roughness, out float lam, out float mu)
   mu = cm / (PI * a * a);
 }
 
-/* Eq. 14 (Cook-Torrance Fresnel), c = |i.h|, eta the relative IOR. */
-float sg_fresnel_eq14(float c, float eta)
-{
-  c = abs(c);
-  float g2 = eta * eta + c * c - 1.0;
-  if (g2 <= 0.0) {
-    return 1.0;
-  }
-  float g = sqrt(g2);
-  float a = (g - c) / (g + c);
-  float b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
-  return 0.5 * a * a * (1.0 + b * b);
-}
-
-/* ks F(c) = A + B_d F_eq14(c, eta) + B_s (1 - c)^5 (core.sg.brdf.fresnel_coefficients). */
+/* ks F(c) = A + B_d F_eq14(c, eta) + B_s (1 - c)^5 (core.sg.brdf.fresnel_coefficients); eq. 14
+ * is the Cook-Torrance dielectric Fresnel, microfacet.glsl's fresnel_dielectric. */
 vec3 sg_fresnel(int mode, float c, float eta, vec3 ks, float metallic, vec3 base)
 {
   c = clamp(c, 0.0, 1.0);
@@ -139,7 +127,7 @@ vec3 sg_fresnel(int mode, float c, float eta, vec3 ks, float metallic, vec3 base
   if (mode == 1) {
     return ks + (1.0 - ks) * s5;
   }
-  float fd = sg_fresnel_eq14(c, eta);
+  float fd = fresnel_dielectric(c, eta);
   if (mode == 2) {
     return ks * fd;
   }
@@ -152,28 +140,16 @@ vec3 sg_fresnel(int mode, float c, float eta, vec3 ks, float metallic, vec3 base
   return max(A + Bd * fd + Bs * s5, vec3(0.0));
 }
 
-/* Cycles' rational Beckmann Smith Lambda (core.shading.brdf.smith_lambda), a2 = alpha^2. */
-float sg_beckmann_lambda(float a2, float c)
-{
-  c = clamp(c, 1e-12, 1.0);
-  float t2 = a2 * max(1.0 / (c * c) - 1.0, 0.0);
-  if (t2 < 0.39) {
-    return 0.0;
-  }
-  float a = 1.0 / sqrt(t2);
-  return ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a);
-}
-
-/* M_o(i) without Fresnel (core.sg.brdf._m_factor). */
+/* M_o(i) without Fresnel (core.sg.brdf._m_factor): Cook-Torrance and Blinn-Phong take
+ * Cycles' Beckmann Smith Lambda (microfacet.glsl smith_lambda). */
 float sg_m_factor(int model, float roughness, float cos_i, float cos_o, float h_dot_i)
 {
   if (model <= 1) {
     float ci = max(cos_i, SG_COS_MIN);
     float co = max(cos_o, SG_COS_MIN);
     float a = max(roughness, SG_ALPHA_MIN);
-    float a2 = a * a;
-    float li = sg_beckmann_lambda(a2, ci);
-    float lo = sg_beckmann_lambda(a2, co);
+    float li = smith_lambda(0, a, ci);
+    float lo = smith_lambda(0, a, co);
     return 1.0 / ((1.0 + li + lo) * 4.0 * ci * co);
   }
   float ci = max(cos_i, SG_COS_MIN_SINGULAR);
@@ -194,10 +170,8 @@ void sg_frame(vec3 n, vec3 t_in, out vec3 t, out vec3 b)
     t = t0 / len_t;
   }
   else {
-    float sgn = n.z >= 0.0 ? 1.0 : -1.0;
-    float a = -1.0 / (sgn + n.z);
-    float bb = n.x * n.y * a;
-    t = vec3(1.0 + sgn * n.x * n.x * a, sgn * bb, -sgn * n.x);
+    vec3 unused;
+    tangent_frame(n, t, unused);
   }
   b = cross(n, t);
 }
@@ -217,11 +191,8 @@ int specular_lobes(vec4 sgm0, vec4 sgm1, vec4 sgm2, vec3 n, vec3 o, vec3 t_in,
   vec3 t, b;
   sg_frame(n, t_in, t, b);
   int K = model <= 2 ? 1 : min(n_ndf, SG_MAX_LOBES);
+  o = bent_view(n, o);                           /* views below the horizon bent up */
   float cos_o = dot(n, o);
-  if (cos_o < COS_VIEW_MIN) {                   /* bend views below the horizon */
-    o = normalize(o + (COS_VIEW_MIN - cos_o) * n);
-    cos_o = dot(n, o);
-  }
   for (int k = 0; k < SG_MAX_LOBES; k++) {
     axes[k] = n;
     lams[k] = 1.0;
@@ -303,14 +274,14 @@ vec3 sg_atlas_bilinear(sampler2D atlas, int N, int level, int face, float s, flo
 
 /* PrefilteredEnvironment.lookup: kernel-weighted mean radiance around dir (texture space:
  * rotate world directions by the world's R first) for sharpness lam.  N: texels per face
- * edge, n_levels: levels in the atlas, lam1: lambdas[1], log_ratio: log(ratio) of the ladder.
- * The inner product of eq. 35 is mu * sg_integral(lam) * prefiltered_lookup(...). */
+ * edge, n_levels: levels in the atlas, lam1: lambdas[1], log_ratio: log(ratio) of the ladder,
+ * top: lambdas[-2] (the last finite level).  The inner product of eq. 35 is
+ * mu * sg_integral(lam) * prefiltered_lookup(...). */
 vec3 prefiltered_lookup(sampler2D atlas, vec3 dir, float lam, int N, int n_levels, float lam1,
-                        float log_ratio)
+                        float log_ratio, float top)
 {
   lam = max(lam, 0.0);
   int nf = n_levels - 2;
-  float top = lam1 * exp(log_ratio * float(nf - 1));
   float x;
   if (lam < lam1) {
     x = lam / lam1;
@@ -329,11 +300,4 @@ vec3 prefiltered_lookup(sampler2D atlas, vec3 dir, float lam, int N, int n_level
   sg_face_coordinates(dir, face, s, t);
   return sg_atlas_bilinear(atlas, N, l0, face, s, t) * (1.0 - f) +
          sg_atlas_bilinear(atlas, N, l1, face, s, t) * f;
-}
-
-/* Eq. 35: G(i; p, lam, mu) . L. */
-vec3 sg_environment_inner_product(sampler2D atlas, vec3 p, float lam, vec3 mu, int N,
-                                  int n_levels, float lam1, float log_ratio)
-{
-  return mu * sg_integral(lam) * prefiltered_lookup(atlas, p, lam, N, n_levels, lam1, log_ratio);
 }

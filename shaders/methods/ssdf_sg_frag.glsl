@@ -5,7 +5,7 @@
 vec4 pair_fetch(float q, int stride, int c)
 {
   int idx = int(q + 0.5) * stride + c;
-  return texelFetch(pairTex, ivec2(idx % ROW_TEXELS, idx / ROW_TEXELS), 0);
+  return texelFetch(pairTex, row_texel(idx), 0);
 }
 #endif
 
@@ -147,7 +147,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
     vec3 h = normalize(normalize(lams[k] * axes[k] + CLAMPED_COSINE_LAMBDA * nl) + o);
     float cf = clamp(dot(h, o), 0.0, 1.0);
     float s5 = pow(1.0 - cf, 5.0);
-    vec3 fres = fresA.rgb + fresBd.rgb * sg_fresnel_eq14(cf, ior) + fresBs.rgb * s5;
+    vec3 fres = fresA.rgb + fresBd.rgb * fresnel_dielectric(cf, ior) + fresBs.rgb * s5;
     vec3 metal = vec3(0.0);
     if (principled != 0) {
       fres = max(fres, vec3(0.0));
@@ -252,7 +252,7 @@ void main()
   glossN = n;
   glossT = t;
   glossB = b;
-  vec3 view = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+  vec3 view = view_direction(eye, vPos);
   mapped_frame(n, view);
   vec4 W[16];
   bool perPixelSSDF = glossy != 0;
@@ -314,7 +314,8 @@ void main()
     float cos_o = dot(nl, o);
     float m = m_factor(cos_i, cos_o, c) * (c > 0.0 ? 1.0 : 0.0);
     float cf = clamp(c, 0.0, 1.0);
-    vec3 fres = fresA.rgb + fresBd.rgb * sg_fresnel_eq14(cf, ior) + fresBs.rgb * pow(1.0 - cf, 5.0);
+    vec3 fres = fresA.rgb + fresBd.rgb * fresnel_dielectric(cf, ior) +
+                fresBs.rgb * pow(1.0 - cf, 5.0);
     if (principled != 0) {
       fres = max(fres, vec3(0.0));
     }
@@ -330,6 +331,5 @@ void main()
   }
   /* a closed mesh's inner side (core.scene.mesh.closed_side) sees only itself: black, as in
    * Cycles; SG products can ring slightly below zero: clamped */
-  bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
-  fragColor = vec4(inner ? vec3(0.0) : max(color, vec3(0.0)), 1.0);
+  fragColor = vec4(inner_side(closedSide) ? vec3(0.0) : max(color, vec3(0.0)), 1.0);
 }

@@ -218,40 +218,15 @@ float ssdf_value_slopes(vec3 local, vec3 e1, vec3 e2, vec4 W[16], out float d1, 
 vec4 coeff_fetch(float point, int l)
 {
   int idx = int(point + 0.5) * coeffTexels + l;
-  return texelFetch(coeffTex, ivec2(idx % ROW_TEXELS, idx / ROW_TEXELS), 0);
+  return texelFetch(coeffTex, row_texel(idx), 0);
 }
 
 /* ------------------------------------------------------------ prefiltered environment */
-float level_coordinate(float lam)
-{
-  lam = max(lam, 0.0);
-  float nf = float(envLevels - 2);
-  if (lam < envLambdaFirst) {
-    return lam / envLambdaFirst;
-  }
-  if (lam <= envTop) {
-    return 1.0 + log(lam / envLambdaFirst) / log(envRatio);
-  }
-  return nf + 1.0 - envTop / lam;
-}
-
-vec3 env_level(int level, int face, float s, float t)
-{
-  return sg_atlas_bilinear(envTex, envRes, level, face, s, t);
-}
-
 /* kernel-weighted mean radiance of the (unrotated, unit strength) environment */
 vec3 env_lookup(vec3 world_dir, float lam)
 {
-  vec3 d = envRot * world_dir;
-  int face;
-  float s, t;
-  sg_face_coordinates(d, face, s, t);
-  float x = level_coordinate(lam);
-  int l0 = min(int(floor(x)), envLevels - 1);
-  int l1 = min(l0 + 1, envLevels - 1);
-  float f = x - float(l0);
-  return env_level(l0, face, s, t) * (1.0 - f) + env_level(l1, face, s, t) * f;
+  return prefiltered_lookup(envTex, envRot * world_dir, lam, envRes, envLevels, envLambdaFirst,
+                            log(envRatio), envTop);
 }
 
 /* Eq. 41's term of one product lobe (p, lam) with unit amplitude, without the world's

@@ -17,7 +17,7 @@ void main()
     fragColor = vec4(0.0);
     return;
   }
-  vec4 fp = texelFetch(flatTex, ivec2(q % ROW_TEXELS, q / ROW_TEXELS), 0);
+  vec4 fp = texelFetch(flatTex, row_texel(q), 0);
   vec3 n = normalize(fp.xyz);
   vec3 t, b;
   ssdf_frame(n, t, b);

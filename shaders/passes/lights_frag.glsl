@@ -441,8 +441,7 @@ void main()
   float texAlpha = textured_alpha();
   float closedSide = param(9, 0).x;
   int sourceCount = textureSize(srcTex, 0).y;
-  bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
-  if (inner || sourceCount == 0) {
+  if (inner_side(closedSide) || sourceCount == 0) {
     fragColor = vec4(0.0);
     return;
   }
@@ -468,15 +467,12 @@ void main()
   mappedN = mapped;
   smoothN = normalize(vNrm);
   vec4 eye = param(8, 0);
-  vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+  vec3 o = view_direction(eye, vPos);
   if (mapped && dot(ng, o) > 0.0) {
     n = valid_reflection_normal(ng, o, n);   /* Cycles' bump map correction: glossy only */
   }
-  float cos_o = dot(n, o);
-  if (cos_o < COS_VIEW_MIN) {
-    o = normalize(o + (COS_VIEW_MIN - cos_o) * n);
-  }
-  cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
+  o = bent_view(n, o);
+  float cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
   vec4 kd = param(0, 0);
 #ifdef ALBEDO_TEX
   if (texInfo.z > -0.5 && kd.w > 0.5) {          /* the slot's colour, per pixel / pi */
@@ -497,8 +493,7 @@ void main()
   float lam_o = smith_lambda(dist, a, cos_o);
   vec3 tx, ty;
   tangent_frame(n, tx, ty);
-  vec2 shift = fract(vec2(0.7548776662, 0.5698402910) *
-                     dot(floor(gl_FragCoord.xy), vec2(1.0, 61.0)));
+  vec2 shift = pixel_shift();
   vec3 color = vec3(0.0);
   for (int s = 0; s < sourceCount; s++) {
     vec4 s0 = source(s, 0);

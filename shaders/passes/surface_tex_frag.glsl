@@ -1,9 +1,5 @@
-/* texInfo.z: 0 an image texture at vUv, 1 a colour attribute (vAttr) (texture_lib.glsl). */
-bool inner_side(float side)
-{
-  return side > 0.5 ? !gl_FrontFacing : (side < -0.5 ? gl_FrontFacing : false);
-}
-
+/* Per-vertex radiance times the slot's colour per pixel: texInfo.z 0 an image texture at
+ * vUv, 1 a colour attribute (vAttr) (texture.glsl); vDiffuse.a the closed side. */
 void main()
 {
   vec3 c = input_colour(albedoTex, vUv, vAttr, texInfo, texMap0, texMap1, mixColor);
