@@ -78,6 +78,13 @@ vec3 combine_colour(vec3 c, float mode_f, vec4 mixColor)
   return (mode == 2 || mode == 4) ? a * (1.0 - f + f * b) : mix(a, b, f);
 }
 
+/* a scalar input's value (Roughness, Metallic, ...): its colour as a float
+ * (core.scene.textures.LUMINANCE), clamped to [0, 1] */
+float scalar_input(vec3 c)
+{
+  return clamp(dot(c, LUMINANCE), 0.0, 1.0);
+}
+
 /* the colour of a textured input at this pixel (texInfo.z: 0 image at uv, 1 attribute) */
 vec3 input_colour(sampler2D img, vec2 uv, vec4 attr, vec4 info, vec3 map0, vec3 map1,
                   vec4 mixColor)

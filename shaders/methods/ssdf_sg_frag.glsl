@@ -25,9 +25,6 @@ bool slot_input(sampler2D img, int k, out vec3 c)
   return true;
 }
 
-/* a scalar input's value: the colour as a float (core.scene.textures.LUMINANCE), clamped */
-float scalar_of(vec3 c) { return clamp(dot(c, LUMINANCE), 0.0, 1.0); }
-
 vec4 table_texel(int i, int j, int k)
 {
   return texelFetch(paramTex, ivec2(i * ENTRY_TEXELS + k, 1 + j), 0);
@@ -177,15 +174,15 @@ void apply_inputs()
   bool coloured = slot_input(albedoTex, 0, c);
   float x = 0.0, y = 0.0, mw = 0.0;
   if (slot_input(roughTex, 1, v)) {
-    float r = scalar_of(v);
+    float r = scalar_input(v);
     x = r * float(nr - 1);
     roughness = max(r * r, SG_ALPHA_MIN);
   }
   if (slot_input(metalTex, 2, v)) {
-    mw = (scalar_of(v) - t.z) / max(t.w - t.z, 1e-6);
+    mw = (scalar_input(v) - t.z) / max(t.w - t.z, 1e-6);
   }
   if (slot_input(levelTex, 3, v)) {
-    y = scalar_of(v) * float(nl - 1);
+    y = scalar_input(v) * float(nl - 1);
   }
   ggx_inputs(x, y, nr, nl, mw, clamp(c, 0.0, 1.0));
   if (!coloured && x == 0.0 && y == 0.0 && mw == 0.0 && nr == 1 && nl == 1) {

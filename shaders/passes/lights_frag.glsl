@@ -79,7 +79,7 @@ float textured_alpha()
   vec3 c = input_colour(roughTex, vUv, vAttr, info, texelFetch(paramTex, ivec2(13, 0), 0).xyz,
                         texelFetch(paramTex, ivec2(14, 0), 0).xyz,
                         texelFetch(paramTex, ivec2(15, 0), 0));
-  float r = clamp(dot(c, LUMINANCE), 0.0, 1.0);
+  float r = scalar_input(c);
   float x = r * float(n - 1);
   int k = min(int(x), n - 2);
   nodeCount = n;
