@@ -127,7 +127,7 @@ def albedo_texture(pixels: np.ndarray):
 
 
 def source_uniforms(source) -> dict:
-    """Push-constant values of a core.scene.textures.ColorSource (texture_lib.glsl); None: a
+    """Push-constant values of a core.scene.textures.ColorSource (texture.glsl); None: a
     slot without one."""
     if source is None:
         return dict(texInfo=(0.0, 0.0, -1.0, 0.0), texMap0=(1.0, 0.0, 0.0),

@@ -3,7 +3,7 @@
 The world's few compact, bright sources (a sun, softboxes, windows: :func:`core.sphere.sources.
 extract_sources`) are split off the environment; every method shades the smooth residual
 from its precomputed transfer, and this pass adds the sources per pixel
-(``shaders/lights_*.glsl``), each with its own shadow map filtered to its angular size.
+(``shaders/passes/lights_*.glsl``), each with its own shadow map filtered to its angular size.
 Blender's sun lamps go through the same path.  The sources are found in the image's
 texture space, so turning the world (a Mapping rotation) moves them with no new
 extraction; the shadow maps follow.
@@ -331,8 +331,9 @@ def material_texels(material, eye4, closed_side=0) -> np.ndarray:
         p[0, 0, 3] = 1.0
     lobes = [] if material.is_diffuse_only else core_brdf.sharp_lobes(material)
     r = material.table_roughness
-    p[0, 1] = (max(r * r, core_brdf.MICROFACET_ALPHA_MIN), 0.0 if material.lobe_distribution == "BECKMANN"
-               else 1.0, len(lobes), 1.0 if lobes else 0.0)
+    p[0, 1] = (max(r * r, core_brdf.MICROFACET_ALPHA_MIN),
+               0.0 if material.lobe_distribution == "BECKMANN" else 1.0, len(lobes),
+               1.0 if lobes else 0.0)
     for j, (kind, weight, f0, B, eta) in enumerate(lobes[:2]):
         p[0, 2 + 3 * j] = (kind, weight, eta, 0.0)
         p[0, 3 + 3 * j, :3] = f0

@@ -5,7 +5,7 @@ roughness below ~0.19 at 6×32²) cannot be integrated texel by texel: sampled a
 centres it renders black with a few bright blobs, and interpolated per vertex it smears.
 FrameState marks such materials (:attr:`core.shading.brdf.Material.per_pixel_lobe`), so every
 method shades their Lambert base only, and this pass adds the lobes per pixel
-(``shaders/sharp_lobe_frag.glsl``): NDF samples, the environment filtered to each
+(``shaders/passes/sharp_lobe_frag.glsl``): NDF samples, the environment filtered to each
 sample's share of the lobe from a mip pyramid of the equirect (level 0 is the
 background's texture), the shading points' stored visibility at each sample direction
 (mixed over the triangle's corners whose normal's hemisphere holds it: only those traced it).

@@ -264,7 +264,7 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None, fitted_w
     * ``GGX``: ``M_o`` is the normalisation to Cycles' ``E(r, n.o)``, ``F`` at each lobe's
       product with the cosine, times the multiscatter factor (module docstring);
       ``fitted_warp``: the slice as the fitted lobes of :data:`GGX_WARP_TABLE`
-      (:func:`ggx_warp_correct`, as ``shaders/ssdf_sg_frag.glsl``; False: the plain warp of
+      (:func:`ggx_warp_correct`, as ``shaders/methods/ssdf_sg_frag.glsl``; False: the plain warp of
       the NDF's lobes);
       ``cosine`` is the clamped-cosine SG mixture the slice will be shaded with
       (``directions`` (M, 3) local to ``cosine_frame = (t, b)``, default the lobes' frame;

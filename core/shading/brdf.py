@@ -252,7 +252,7 @@ def with_sharp_lobe(material: Material, resolution: int) -> Material:
     return replace(material, per_pixel_lobe=True)
 
 
-#: Fresnel kinds of :func:`sharp_lobes` (the GLSL of ``shaders/sharp_lobe_frag.glsl``)
+#: Fresnel kinds of :func:`sharp_lobes` (the GLSL of ``shaders/passes/sharp_lobe_frag.glsl``)
 SHARP_CONSTANT, SHARP_SCHLICK, SHARP_DIELECTRIC, SHARP_F82 = 0, 1, 2, 3
 
 

@@ -96,7 +96,7 @@ vec3 input_colour(sampler2D img, vec2 uv, vec4 attr, vec4 info, vec3 map0, vec3 
 /* core.scene.textures.perturbed_normals: the Normal Map (kind 1, tangent space) or Bump (kind 2)
  * node's normal at this pixel.  N, T: the interpolated (unnormalised) normal and tangent,
  * sgn the bitangent sign; nmap = (kind, strength, distance, -); info, map0/1, mixColor the
- * image's texture_lib parameters.  The bump's height derivative: central differences one
+ * image's texture.glsl parameters.  The bump's height derivative: central differences one
  * texel each way in UV; its surface gradient from the screen derivatives of P and uv (on a
  * triangle exactly core.scene.textures.surface_gradient with its edges). */
 float bump_height(sampler2D img, vec2 uv, vec4 info, vec3 map0, vec3 map1, vec4 mixColor)

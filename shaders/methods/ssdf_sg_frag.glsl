@@ -211,7 +211,7 @@ void apply_inputs()
 /* the glossy lobe's frame: lobeN's, or a mapped normal's after the bump map correction */
 vec3 glossN, glossT, glossB;
 
-/* a normal or bump map (NORMAL_TEXEL: kind, strength, distance; its image's texture_lib
+/* a normal or bump map (NORMAL_TEXEL: kind, strength, distance; its image's texture.glsl
  * parameters after the cosine lobes): the cosine lobes' and the glossy lobe's frame at this
  * pixel (Wang et al. 2009 shade per pixel in the normal map's frame); as Cycles' Principled
  * BSDF, the diffuse lobes take the mapped normal as is (with the terminator factor), the

@@ -252,7 +252,7 @@ vec3 visible_lighting(vec3 p, float lam, vec3 t, vec3 b, vec3 n, vec4 W[16])
 }
 
 /* ------------------------------------------------------------ BRDF view slice (core/sg/brdf.py) */
-/* M_o(i) of the slot's model (sg_common.glsl's sg_m_factor; brdfModel 0 CT/Blinn-Phong,
+/* M_o(i) of the slot's model (sg.glsl's sg_m_factor; brdfModel 0 CT/Blinn-Phong,
  * 1 Ward, 2 Ashikhmin-Shirley -> core.sg.brdf.MODEL_INDEX 0, 2, 4) */
 float m_factor(float cos_i, float cos_o, float h_dot_i)
 {
@@ -267,7 +267,7 @@ float m_factor(float cos_i, float cos_o, float h_dot_i)
  * adds w * fh_hat_slope(theta, k) to R_d.  Everything but theta depends on n alone. */
 /* the cosine lobes' frame: the surface's (n, t, b), or a normal map's at this pixel (the
  * SSDF stays in the surface's frame: visibility is the geometry's); lobeMapped: the
- * latter, each pair then takes Cycles' terminator factor (texture_lib.glsl
+ * latter, each pair then takes Cycles' terminator factor (texture.glsl
  * bump_shadowing) at its product lobe's axis, lobeSmooth the surface's normal */
 vec3 lobeN, lobeT, lobeB;
 bool lobeMapped = false;

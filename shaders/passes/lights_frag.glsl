@@ -19,9 +19,9 @@
  * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
  * weight, eta, -), (f0, -), (B, -) (core.shading.brdf.sharp_lobes), 8 eye (w = 1 perspective),
  * 9 (core.scene.mesh.closed_side of the object, -, -, -), 11 (roughness nodes n, alpha floor),
- * 12-15 a textured Roughness (texture_lib.glsl's info, mapping rows, mix colour);
+ * 12-15 a textured Roughness (texture.glsl's info, mapping rows, mix colour);
  * 16 a normal or bump map (kind 0 none / 1 Normal Map / 2 Bump, strength, distance, -),
- * 17-20 its image (info, mapping rows, mix colour: texture_lib.glsl mapped_normal);
+ * 17-20 its image (info, mapping rows, mix colour: texture.glsl mapped_normal);
  * row 1: the Lambert base's view weight at mu = i / (TABLE_NODES - 1) (Principled layering),
  * rows 2, 3: each lobe's multiscatter factor at mu (core.shading.brdf.multiscatter_factor);
  * with a textured Roughness rows 4k + 4 .. 4k + 7 the same four rows at roughness node
@@ -103,7 +103,7 @@ vec3 table(int row, float mu)
 }
 
 /* a mapped normal: the smooth one (Cycles' sd->N); light below its horizon reaches no
- * closure (texture_lib.glsl bump_shadowing's side rule) */
+ * closure (texture.glsl bump_shadowing's side rule) */
 bool mappedN = false;
 vec3 smoothN = vec3(0.0, 0.0, 1.0);
 

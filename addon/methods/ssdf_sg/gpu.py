@@ -1,4 +1,4 @@
-"""SSDF_SG per pixel on the GPU (``shaders/ssdf_sg_*.glsl``): the shaders, the textures of
+"""SSDF_SG per pixel on the GPU (``shaders/methods/ssdf_sg_*.glsl``): the shaders, the textures of
 the SSDFs, lighting and materials, the per-slot batches and the pair table of flat
 triangles (eq. 39's per-pair SSDF angles, weights and slopes per point, since those are
 exactly linear inside a flat triangle: :func:`pair_table`).  The numerics they mirror are
@@ -135,7 +135,7 @@ def material_uniforms(material):
 
 
 #: row 0 of the parameter texture: the first of four texels per textured input of
-#: :data:`INPUTS` (texture_lib.glsl's info, mapping rows, mix colour), the table's (roughness
+#: :data:`INPUTS` (texture.glsl's info, mapping rows, mix colour), the table's (roughness
 #: nodes, level nodes, metallic at corners 0 and 1), the normal map's (kind, strength,
 #: distance), the first clamped-cosine lobe
 INPUT_TEXEL, TABLE_TEXEL, NORMAL_TEXEL, COSINE_TEXEL = 10, 26, 27, 28
