@@ -10,7 +10,7 @@ constants by ``tools/glsl_constants.py``), ``shaders/passes/`` the passes every 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from itertools import combinations
 from pathlib import Path
 
@@ -37,7 +37,7 @@ class Spec:
     outputs: tuple[tuple[str, str], ...] = (("VEC4", "fragColor"),)
     defines: tuple[tuple[str, str], ...] = ()
     switches: tuple[str, ...] = ()
-    values: tuple[tuple[str, tuple[str, ...]], ...] = field(default=())
+    values: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
 
 # --------------------------------------------------------------------------- the specs
@@ -159,9 +159,10 @@ SPECS: dict[str, Spec] = {
 
 # --------------------------------------------------------------------------- building
 
-#: every built shader per (spec name, defines); a frame uses a few dozen at most (the
-#: lights pass's feature sets per slot and frame)
-_SHADERS = Cache(64, "shaders._SHADERS", gpu=True)
+#: every built shader per (spec name, defines): a frame uses a few dozen at most (the lights
+#: pass's feature sets per slot and frame).  addon/gpu/drawing.gpu_cache's kind of cache, made
+#: here (drawing imports this module)
+_SHADERS = Cache(64, gpu=True)
 
 
 def source(spec: Spec, stage: str) -> str:
@@ -212,7 +213,7 @@ def create_info(spec: Spec, defines=(), name: str = "shader", tail: str = ""):
 def shader(name: str, defines=()):
     """The shader :data:`SPECS` ``[name]`` with a variant's ``defines`` ("NAME" or "NAME VALUE"),
     built once and kept in the GPU cache."""
-    spec = SPECS[name]
+    spec, defines = SPECS[name], tuple(defines)
     key = (name, parse_defines(spec, defines))
     sh = _SHADERS.get(key)
     if sh is None:
