@@ -7,6 +7,7 @@
 #   make test-core  the Blender-free tests of core/ (tests/core, under a minute)
 #   make lint    the house rules (tools/lint.py: file and folder sizes, private names, cycles, core free of bpy)
 #   make docs    write docs/architecture.md's module map from the tree (tools/architecture.py)
+#   make shaders write shaders/lib/constants.glsl from the Python constants (tools/glsl_constants.py)
 #   make demo    render the demo into out/demo
 #   make bench   run the precompute benchmark
 #   make bench-scale  production scale: 25k-500k vertices (time, memory, storage, AUTO)
@@ -36,7 +37,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test test-core lint docs demo bench bench-scale bench-dynamic bench-methods report clean distclean
+.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-methods report clean distclean
 
 setup: apt venv
 
@@ -98,6 +99,10 @@ lint:
 
 docs:
 	python3 tools/architecture.py
+
+# the GLSL's copy of the Python constants (it imports the add-on: the venv's Python)
+shaders: setup
+	$(VENV_PY) tools/glsl_constants.py
 
 demo: setup
 	$(VENV_PY) bench/demo.py --out out/demo

@@ -364,7 +364,7 @@ def test_schlick_and_colour_conventions():
 
 def test_material_validation_and_alpha():
     assert materials.Material(roughness=0.5).alpha == pytest.approx(0.25)
-    assert materials.Material(roughness=0.0).alpha == brdf.ALPHA_MIN
+    assert materials.Material(roughness=0.0).alpha == brdf.MICROFACET_ALPHA_MIN
     assert materials.Material(roughness=3.0).alpha == 1.0
     assert materials.Material(distribution="ggx").distribution == "GGX"
     assert not materials.Material(diffuse_albedo=(0, 0, 0)).has_diffuse

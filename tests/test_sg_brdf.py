@@ -64,7 +64,7 @@ def _table_fits_as_well_as_a_refit(model, table, refit, fit):
     (another BLAS may stop the fit a little elsewhere). Errors, not digits: a flat optimum's
     parameters (a lobe without amplitude, a sharpness -> 0) may land anywhere on any machine."""
     for i, a in enumerate(sg_ndf.ISO_TABLE_ALPHA):
-        a = max(float(a), sg_ndf.ALPHA_MIN)
+        a = max(float(a), sg_ndf.SG_ALPHA_MIN)
         scale_lam, scale_mu = 2.0 / (a * a), 1.0 / (math.pi * a * a)
         stored = sg_ndf.coaxial_ndf_error(model, a, np.atleast_1d(table[0][i]) * scale_lam,
                                           np.atleast_1d(table[1][i]) * scale_mu, fit)
@@ -119,8 +119,8 @@ def test_ndf_fit_error_by_independent_quadrature(model, params, max_err):
 
 
 def test_sharp_ndf_lobe_normalised_like_the_analytic_ndf():
-    # alpha = ALPHA_MIN -> lam ~ 8e4: int D (n.h) dh = 1 (Beckmann), and the lobe integral agrees
-    for a in (sg_brdf.ALPHA_MIN, 0.01, 0.03):
+    # alpha = SG_ALPHA_MIN -> lam ~ 8e4: int D (n.h) dh = 1 (Beckmann), and the lobe integral agrees
+    for a in (sg_brdf.SG_ALPHA_MIN, 0.01, 0.03):
         lam, mu = sg_brdf.iso_ndf_sg("COOK_TORRANCE", a)
         # int G (n.h) dh over the hemisphere, closed form in 1-D: 2 pi mu int_0^1 e^{lam(c-1)} c dc
         x, w = np.polynomial.legendre.leggauss(200)
@@ -288,22 +288,16 @@ def test_diffuse_albedo_split():
 
 # --------------------------------------------------------------------------- GLSL twin
 
-_GLSL_VERT = """
-void main()
-{
-  gl_Position = vec4(pos, 0.0, 1.0);
-}
-"""
-
-
 def _run_glsl(frag_main: str, inputs: np.ndarray, out_slots: int, extra_samplers=()):
-    """Evaluate ``frag_main`` (GLSL body after shaders/sg_common.glsl) for every row of
+    """Evaluate ``frag_main`` (GLSL body after shaders/lib/sg.glsl) for every row of
     ``inputs`` (N, k, 4) float32 (texture ``inp``: width k, height N).  The fragment
     at pixel (x = i, y = slot) writes output ``slot`` of input ``i``.  Returns
     (N, out_slots, 4)."""
     import bpy
     import gpu
     from gpu_extras.batch import batch_for_shader
+
+    from prt_relight.addon.gpu import shaders
 
     from . import blender_scene as bs
 
@@ -316,23 +310,17 @@ def _run_glsl(frag_main: str, inputs: np.ndarray, out_slots: int, extra_samplers
         scene.render.engine = "BLENDER_WORKBENCH"
         bpy.ops.render.render()                 # gives the gpu module a context in -b
         _run_glsl.context_ready = True
-    common = (sg_brdf.__file__.rsplit("/core/", 1)[0] + "/shaders/sg_common.glsl")
-    with open(common) as fh:
-        src = fh.read()
     N, k, _ = inputs.shape
-    info = gpu.types.GPUShaderCreateInfo()
-    info.sampler(0, "FLOAT_2D", "inp")
-    for slot, (kind, name) in enumerate(extra_samplers, start=1):
-        info.sampler(slot, kind, name[0])
-    info.vertex_in(0, "VEC2", "pos")
-    info.fragment_out(0, "VEC4", "fragColor")
-    info.vertex_source(_GLSL_VERT)
-    info.fragment_source(src + "\nvoid main()\n{\n  int idx = int(gl_FragCoord.x);\n"
-                         "  int slot = int(gl_FragCoord.y);\n" + frag_main + "\n}\n")
-    shader = gpu.shader.create_from_info(info)
+    spec = shaders.Spec(vertex=("passes/fullscreen_vert.glsl",), fragment=shaders.SG_LIBRARY,
+                        samplers=(("FLOAT_2D", "inp"),) + tuple(
+                            (kind, name[0]) for kind, name in extra_samplers),
+                        vertex_inputs=(("VEC2", "ndc"),))
+    shader = gpu.shader.create_from_info(shaders.create_info(
+        spec, name="sg_twin", tail="\nvoid main()\n{\n  int idx = int(gl_FragCoord.x);\n"
+        "  int slot = int(gl_FragCoord.y);\n" + frag_main + "\n}\n"))
     flat = np.ascontiguousarray(inputs, dtype=np.float32).reshape(-1)
     tex = gpu.types.GPUTexture((k, N), format="RGBA32F", data=gpu.types.Buffer("FLOAT", flat.size, flat))
-    batch = batch_for_shader(shader, "TRIS", {"pos": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+    batch = batch_for_shader(shader, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
                              indices=[(0, 1, 2), (0, 2, 3)])
     off = gpu.types.GPUOffScreen(N, out_slots, format="RGBA32F")
     try:
@@ -511,7 +499,7 @@ def test_glsl_prefiltered_lookup_matches_numpy():
     rows[:, 0, :3], rows[:, 0, 3] = d, lam
     main = _FETCH.format(j=0) + (
         f"  fragColor = vec4(prefiltered_lookup(env, in0.xyz, in0.w, {cube.resolution}, "
-        f"{pe.n_levels}, {pe.lambda_first!r}, {np.log(pe.ratio)!r}), 1.0);\n")
+        f"{pe.n_levels}, {pe.lambda_first!r}, {np.log(pe.ratio)!r}, {pe.lambdas[-2]!r}), 1.0);\n")
     out = _run_glsl(main, rows.astype(np.float32), 1, extra_samplers=[("FLOAT_2D", ("env", tex))])
     assert np.allclose(out[:, 0, :3], ref, rtol=1e-4, atol=1e-5), np.max(np.abs(out[:, 0, :3] - ref))
 
@@ -565,7 +553,7 @@ def _cap(axis, theta_max, n_theta=128, n_phi=128):
     return d.reshape(-1, 3), np.repeat(wt, n_phi) * (2 * math.pi / n_phi)
 
 
-@pytest.mark.parametrize("alpha", [sg_brdf.ALPHA_MIN, 0.01, 0.03])
+@pytest.mark.parametrize("alpha", [sg_brdf.SG_ALPHA_MIN, 0.01, 0.03])
 def test_sharp_lobes_lambda_1e4_to_1e5_by_cap_quadrature(alpha):
     """Near-mirror Cook-Torrance (NDF sharpness 2/a^2 = 8e4 .. 2e3; warped lobes up to
     the 1e5 cap at grazing): SG view slice vs the analytic BRDF, both integrated

@@ -136,7 +136,7 @@ def test_glsl_equals_numpy_per_pixel(principled):
 
 
 def test_pair_table_holds_eq39_at_the_flat_points():
-    """The pair pass (shaders/ssdf_sg_pairs_frag.glsl) read back from the GPU: per point of
+    """The pair pass (shaders/methods/ssdf_sg_pairs_frag.glsl) read back from the GPU: per point of
     the ground's flat triangles, sum_p w_p sigma(theta_p, k_p) over the (cosine lobe, light
     lobe) pairs equals numpy's eq. 39 (core.methods.ssdf_sg.shading.diffuse_transfer_per_cosine) there."""
     from prt_relight.core.sg import algebra as core_sg

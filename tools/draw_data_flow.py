@@ -54,10 +54,10 @@ BOXES = [
      "per-corner radiance as vertex attributes (white / black split for textured colour) · "
      "float textures: PCA SSDFs, visibility bits, shadow maps, environment mips, albedo "
      "images", "#e8f4f6"),
-    ("shaders", MAIN_X, MAIN_W, "shaders — shaders/*.glsl",
-     "surface(_tex): Gouraud radiance × per-pixel colour · ssdf_sg_*: eq. 39 / 41 per pixel · "
-     "lights_*: compact sources and lamps · sharp_lobe_*: mirror-like lobes · background_*: "
-     "the world as Cycles shows it", "#e8f4f6"),
+    ("shaders", MAIN_X, MAIN_W, "shaders — shaders/{lib,passes,methods}, addon/gpu/shaders.py",
+     "passes/surface(_tex): Gouraud radiance × per-pixel colour · methods/ssdf_sg_*: eq. 39 / 41 "
+     "per pixel · passes/lights_*: compact sources and lamps · passes/sharp_lobe_*: mirror-like "
+     "lobes · passes/background_*: the world as Cycles shows it", "#e8f4f6"),
     ("pixels", MAIN_X, MAIN_W, "pixels — addon/frame/engine.py",
      "Rendered viewport, or F12 drawn at s× resolution and resolved with Cycles' "
      "Blackman-Harris filter (core.shading.pixel_filter) → linear RGBA render result", "#e8eef8"),

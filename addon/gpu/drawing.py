@@ -9,7 +9,6 @@ only the matrices and the target differ.
 from __future__ import annotations
 
 import contextlib
-from pathlib import Path
 
 import bpy  # noqa: F401  (Blender's ``gpu`` module is importable once bpy is)
 import gpu
@@ -17,8 +16,11 @@ import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 from ...core.common.cache import Cache, clear_all
+from . import shaders
 
-SHADER_DIR = Path(__file__).resolve().parents[2] / "shaders"
+#: width of the data textures whose texels run on across rows (a shading point's stored
+#: visibility, SSDF_SG's coefficients and pair table): texel i is (i % ROW_TEXELS, i // ROW_TEXELS)
+ROW_TEXELS = 4096
 
 
 def gpu_cache(initial: dict | None = None, limit: int = 64, name: str = "") -> Cache:
@@ -40,8 +42,8 @@ def free_gpu_resources():
     gc.collect()
 
 
-#: the shaders of this module (per name) and the background's quad ("quad")
-_SHADERS = gpu_cache({}, limit=8)
+#: the background's quad
+_QUAD = gpu_cache({}, limit=1)
 
 
 # whether the gpu module has been readied in -b (:func:`ensure_gpu`)
@@ -100,63 +102,14 @@ def redraw_viewports(self=None, context=None):
                 area.tag_redraw()
 
 
-def _source(name):
-    return (SHADER_DIR / name).read_text()
-
-
-def glsl_source(*names) -> str:
-    """Shader files of ``shaders/`` joined in order (libraries of functions first)."""
-    return "".join(_source(n) for n in names)
-
-
-def _shader(name, push_constants, vertex_inputs, varyings, samplers=()):
-    """Build (once) the shader ``shaders/<name>_vert.glsl`` + ``<name>_frag.glsl``."""
-    if name not in _SHADERS:
-        info = gpu.types.GPUShaderCreateInfo()
-        for kind, ident in push_constants:
-            info.push_constant(kind, ident)
-        for slot, (kind, ident) in enumerate(samplers):
-            info.sampler(slot, kind, ident)
-        for slot, (kind, ident) in enumerate(vertex_inputs):
-            info.vertex_in(slot, kind, ident)
-        iface = gpu.types.GPUStageInterfaceInfo(f"prt_{name}_iface")
-        for kind, ident in varyings:
-            iface.smooth(kind, ident)
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(_source(f"{name}_vert.glsl"))
-        info.fragment_source(_source(f"{name}_frag.glsl"))
-        _SHADERS[name] = gpu.shader.create_from_info(info)
-    return _SHADERS[name]
-
-
 def surface_shader():
-    return _shader("surface", [("MAT4", "viewProjection")],
-                   [("VEC3", "pos"), ("VEC4", "radiance")], [("VEC4", "vRadiance")])
+    """Per-vertex radiance (shaders/passes/surface_*.glsl)."""
+    return shaders.shader("surface")
 
 
 def textured_shader():
-    """Per-vertex radiance times a per-pixel colour (shaders/surface_tex_*.glsl)."""
-    if "surface_tex" not in _SHADERS:
-        info = gpu.types.GPUShaderCreateInfo()
-        for kind, ident in (("MAT4", "viewProjection"), ("VEC4", "texInfo"),
-                            ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
-            info.push_constant(kind, ident)
-        info.sampler(0, "FLOAT_2D", "albedoTex")
-        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC4", "diffuse"),
-                                              ("VEC3", "specular"), ("VEC2", "uv"),
-                                              ("VEC4", "attr"))):
-            info.vertex_in(slot, kind, ident)
-        iface = gpu.types.GPUStageInterfaceInfo("prt_surface_tex_iface")
-        for kind, ident in (("VEC4", "vDiffuse"), ("VEC3", "vSpecular"), ("VEC2", "vUv"),
-                            ("VEC4", "vAttr")):
-            iface.smooth(kind, ident)
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(_source("surface_tex_vert.glsl"))
-        info.fragment_source(glsl_source("texture_lib.glsl", "surface_tex_frag.glsl"))
-        _SHADERS["surface_tex"] = gpu.shader.create_from_info(info)
-    return _SHADERS["surface_tex"]
+    """Per-vertex radiance times a per-pixel colour (shaders/passes/surface_tex_*.glsl)."""
+    return shaders.shader("surface_tex")
 
 
 # GPU textures of colour inputs, per image content (keys.image_key), and "white"
@@ -174,7 +127,7 @@ def albedo_texture(pixels: np.ndarray):
 
 
 def source_uniforms(source) -> dict:
-    """Push-constant values of a core.scene.textures.ColorSource (texture_lib.glsl); None: a
+    """Push-constant values of a core.scene.textures.ColorSource (texture.glsl); None: a
     slot without one."""
     if source is None:
         return dict(texInfo=(0.0, 0.0, -1.0, 0.0), texMap0=(1.0, 0.0, 0.0),
@@ -255,9 +208,8 @@ def textured_draws(positions, radiance, triangles, closed_side, textures, corner
 
 
 def background_shader():
-    return _shader("background",
-                   [("MAT4", "invViewProjection"), ("MAT3", "texRotation"), ("FLOAT", "strength")],
-                   [("VEC2", "ndc")], [("VEC2", "vNdc")], samplers=[("FLOAT_2D", "envMap")])
+    """The world behind the objects (shaders/passes/background_*.glsl)."""
+    return shaders.shader("background")
 
 
 def float_texture(rgba: np.ndarray):
@@ -283,9 +235,9 @@ def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles: np.nda
 
 
 def _quad_batch():
-    quad = _SHADERS.get("quad")
+    quad = _QUAD.get("quad")
     if quad is None:
-        quad = _SHADERS["quad"] = batch_for_shader(
+        quad = _QUAD["quad"] = batch_for_shader(
             background_shader(), "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
             indices=[(0, 1, 2), (0, 2, 3)])
     return quad

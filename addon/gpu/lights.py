@@ -3,7 +3,7 @@
 The world's few compact, bright sources (a sun, softboxes, windows: :func:`core.sphere.sources.
 extract_sources`) are split off the environment; every method shades the smooth residual
 from its precomputed transfer, and this pass adds the sources per pixel
-(``shaders/lights_*.glsl``), each with its own shadow map filtered to its angular size.
+(``shaders/passes/lights_*.glsl``), each with its own shadow map filtered to its angular size.
 Blender's sun lamps go through the same path.  The sources are found in the image's
 texture space, so turning the world (a Mapping rotation) moves them with no new
 extraction; the shadow maps follow.
@@ -18,7 +18,7 @@ import numpy as np
 from ...core.shading import brdf as core_brdf
 from ...core.shading.materials import Material
 from ...core.scene import textures
-from . import drawing
+from . import drawing, shaders
 from ..blender import texture_export
 from ..frame.sources import lamp_sources
 
@@ -26,8 +26,8 @@ from ..frame.sources import lamp_sources
 SHADOW_TILE = 2048
 #: sources drawn per frame at most (the extracted ones plus sun lamps)
 MAX_DRAWN = 8
-#: view-cosine nodes of the per-material tables (lights_frag.glsl TABLE)
-TABLE = 32
+#: view-cosine nodes of the per-material tables (lights_frag.glsl table)
+TABLE_NODES = 32
 
 _GPU = drawing.gpu_cache({})
 _BATCHES = drawing.gpu_cache({})
@@ -38,41 +38,14 @@ _SHADOW_TARGET = drawing.gpu_cache({}, limit=1)
 
 # --------------------------------------------------------------------------- shaders
 
-#: every optional feature of lights_frag.glsl (a #define each)
-FEATURES = ("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "LOCAL_LAMPS", "AREA_LAMPS")
+#: every optional feature of lights_frag.glsl (a #define each; shaders.SPECS["lights"])
+FEATURES = shaders.SPECS["lights"].switches
 
 
 def _shader(features=FEATURES):
     """The pass compiled with ``features`` (lights_frag.glsl: what a draw lacks is left
     out of its shader, not branched around)."""
-    import gpu
-    features = tuple(sorted(features))
-    sh = _GPU.get(("shader", features))
-    if sh is None:
-        info = gpu.types.GPUShaderCreateInfo()
-        # 128 bytes of push constants at most (the closed side rides in paramTex, the
-        # source count is srcTex's height)
-        for kind, ident in (("MAT4", "viewProjection"), ("VEC4", "texInfo"),
-                            ("VEC3", "texMap0"), ("VEC3", "texMap1"), ("VEC4", "mixColor")):
-            info.push_constant(kind, ident)
-        for slot, ident in enumerate(("paramTex", "srcTex", "shadowTex", "albedoTex",
-                                      "cubeTex", "roughTex", "normalTex")):
-            info.sampler(slot, "FLOAT_2D", ident)
-        for slot, (kind, ident) in enumerate((("VEC3", "pos"), ("VEC3", "nrm"), ("VEC2", "uv"),
-                                              ("VEC4", "attr"), ("VEC4", "tng"))):
-            info.vertex_in(slot, kind, ident)
-        iface = gpu.types.GPUStageInterfaceInfo("prt_lights_iface")
-        for kind, ident in (("VEC3", "vPos"), ("VEC3", "vNrm"), ("VEC2", "vUv"),
-                            ("VEC4", "vAttr"), ("VEC4", "vTng")):
-            iface.smooth(kind, ident)
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(drawing.glsl_source("lights_vert.glsl"))
-        defines = "".join(f"#define {f}\n" for f in features)
-        info.fragment_source("#define COS_VIEW_MIN 1e-4\n" + defines + drawing.glsl_source(
-            "brdf_lib.glsl", "texture_lib.glsl", "lights_frag.glsl"))
-        sh = _GPU[("shader", features)] = gpu.shader.create_from_info(info)
-    return sh
+    return shaders.shader("lights", features)
 
 
 def slot_features(params: np.ndarray, albedo_source) -> tuple:
@@ -90,9 +63,9 @@ def slot_features(params: np.ndarray, albedo_source) -> tuple:
     return tuple(out)
 
 
-#: shadow-map taps per source and sample with one sample per pixel (blocker search, filter;
-#: lights_frag.glsl's defaults)
-TAPS = (16, 24)
+#: shadow-map taps per source and sample with one sample per pixel: the blocker search's and
+#: the filter's (lights_frag.glsl's PCF_TAPS unless a frame defines fewer)
+BLOCKER_TAPS, FILTER_TAPS = 16, 24
 
 
 def frame_features(sources, supersampling: int = 1) -> tuple:
@@ -102,7 +75,7 @@ def frame_features(sources, supersampling: int = 1) -> tuple:
     one sample per pixel.  The blocker search keeps its taps: fewer miss blockers, a bias
     the pixel's average does not remove."""
     s = max(1, int(supersampling))
-    out = [] if s == 1 else [f"PCF_TAPS {max(4, -(-TAPS[1] // s))}"]
+    out = [] if s == 1 else [f"PCF_TAPS {max(4, -(-FILTER_TAPS // s))}"]
     if any(s.local and s.area is None for s in sources):
         out.append("LOCAL_LAMPS")
     if any(s.area is not None for s in sources):
@@ -126,36 +99,11 @@ def _surface_batch(pos, nrm, uv, attr, tng):
 
 def _distance_shader():
     """Writes each fragment's distance to ``lamp`` (a local lamp's shadow faces)."""
-    import gpu
-    sh = _GPU.get("distance")
-    if sh is None:
-        info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant("MAT4", "viewProjection")
-        info.push_constant("VEC3", "lamp")
-        info.vertex_in(0, "VEC3", "pos")
-        iface = gpu.types.GPUStageInterfaceInfo("prt_lights_distance_iface")
-        iface.smooth("VEC3", "vPos")
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source("void main() { vPos = pos; "
-                           "gl_Position = viewProjection * vec4(pos, 1.0); }")
-        info.fragment_source("void main() { fragColor = vec4(length(vPos - lamp)); }")
-        sh = _GPU["distance"] = gpu.shader.create_from_info(info)
-    return sh
+    return shaders.shader("shadow_distance")
 
 
 def _depth_shader():
-    import gpu
-    sh = _GPU.get("depth")
-    if sh is None:
-        info = gpu.types.GPUShaderCreateInfo()
-        info.push_constant("MAT4", "viewProjection")
-        info.vertex_in(0, "VEC3", "pos")
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source("void main() { gl_Position = viewProjection * vec4(pos, 1.0); }")
-        info.fragment_source("void main() { fragColor = vec4(0.0); }")
-        sh = _GPU["depth"] = gpu.shader.create_from_info(info)
-    return sh
+    return shaders.shader("shadow_depth")
 
 
 # --------------------------------------------------------------------------- geometry
@@ -368,7 +316,7 @@ def slot_texels(st, slot, eye4) -> np.ndarray:
     nodes = [material_texels(textures.material_at(material, {"Roughness": i / (n - 1)}),
                              eye4, st.closed_side) for i in range(n)]
     u = drawing.source_uniforms(got[0].source)
-    p[0, 11] = (n, core_brdf.ALPHA_MIN, 0.0, 0.0)
+    p[0, 11] = (n, core_brdf.MICROFACET_ALPHA_MIN, 0.0, 0.0)
     p[0, 12], p[0, 15] = u["texInfo"], u["mixColor"]
     p[0, 13, :3], p[0, 14, :3] = u["texMap0"], u["texMap1"]
     return np.concatenate([p] + nodes, axis=0)
@@ -376,30 +324,32 @@ def slot_texels(st, slot, eye4) -> np.ndarray:
 
 def material_texels(material, eye4, closed_side=0) -> np.ndarray:
     """The paramTex rows of one material slot of an object (layout in lights_frag.glsl)."""
-    p = np.zeros((4, max(TABLE, 10), 4), np.float32)
+    p = np.zeros((4, max(TABLE_NODES, 10), 4), np.float32)
     p[0, 9, 0] = closed_side
     if material.has_diffuse:
         p[0, 0, :3] = np.asarray(material.diffuse_albedo) / math.pi
         p[0, 0, 3] = 1.0
     lobes = [] if material.is_diffuse_only else core_brdf.sharp_lobes(material)
     r = material.table_roughness
-    p[0, 1] = (max(r * r, core_brdf.ALPHA_MIN), 0.0 if material.lobe_distribution == "BECKMANN"
-               else 1.0, len(lobes), 1.0 if lobes else 0.0)
+    p[0, 1] = (max(r * r, core_brdf.MICROFACET_ALPHA_MIN),
+               0.0 if material.lobe_distribution == "BECKMANN" else 1.0, len(lobes),
+               1.0 if lobes else 0.0)
     for j, (kind, weight, f0, B, eta) in enumerate(lobes[:2]):
         p[0, 2 + 3 * j] = (kind, weight, eta, 0.0)
         p[0, 3 + 3 * j, :3] = f0
         p[0, 4 + 3 * j, :3] = B
     p[0, 8] = eye4
-    mu = np.linspace(0.0, 1.0, TABLE)
-    views = np.stack([np.sqrt(np.maximum(1.0 - mu * mu, 0.0)), np.zeros(TABLE), mu], axis=1)
-    normals = np.tile([0.0, 0.0, 1.0], (TABLE, 1))
-    p[1, :TABLE, :3] = core_brdf.diffuse_view_weight(material, normals, views)
-    p[1, :TABLE, 3] = 1.0
+    mu = np.linspace(0.0, 1.0, TABLE_NODES)
+    views = np.stack([np.sqrt(np.maximum(1.0 - mu * mu, 0.0)), np.zeros(TABLE_NODES), mu],
+                     axis=1)
+    normals = np.tile([0.0, 0.0, 1.0], (TABLE_NODES, 1))
+    p[1, :TABLE_NODES, :3] = core_brdf.diffuse_view_weight(material, normals, views)
+    p[1, :TABLE_NODES, 3] = 1.0
     cos_o = np.maximum(mu, core_brdf.COS_VIEW_MIN)
     which = ["metal" if (material.fresnel == "DIELECTRIC" and kind == core_brdf.SHARP_F82)
              else "main" for kind, *_ in lobes[:2]]
     for j, w in enumerate(which):
-        p[2 + j, :TABLE, :3] = core_brdf.multiscatter_factor(material, cos_o, w)
+        p[2 + j, :TABLE_NODES, :3] = core_brdf.multiscatter_factor(material, cos_o, w)
     return p
 
 

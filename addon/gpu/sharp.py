@@ -5,7 +5,7 @@ roughness below ~0.19 at 6×32²) cannot be integrated texel by texel: sampled a
 centres it renders black with a few bright blobs, and interpolated per vertex it smears.
 FrameState marks such materials (:attr:`core.shading.brdf.Material.per_pixel_lobe`), so every
 method shades their Lambert base only, and this pass adds the lobes per pixel
-(``shaders/sharp_lobe_frag.glsl``): NDF samples, the environment filtered to each
+(``shaders/passes/sharp_lobe_frag.glsl``): NDF samples, the environment filtered to each
 sample's share of the lobe from a mip pyramid of the equirect (level 0 is the
 background's texture), the shading points' stored visibility at each sample direction
 (mixed over the triangle's corners whose normal's hemisphere holds it: only those traced it).
@@ -22,60 +22,29 @@ import numpy as np
 from ...core.shading import brdf as core_brdf
 from ...core.sphere import envmap
 from ...core.scene import textures, visibility as core_visibility
-from . import drawing
+from . import drawing, shaders
 from ..blender import texture_export
 from ..frame import keys
 
 #: NDF samples per pixel for a lobe of non-zero roughness (one for a mirror)
 SAMPLES = 32
-#: visibility texture width (texels); a point's texels run on across rows
-VIS_WIDTH = 4096
 
-_SAMPLERS = (("FLOAT_2D", "envTex"), ("FLOAT_2D", "mipTex"), ("FLOAT_2D", "visTex"),
-             ("FLOAT_2D", "paramTex"), ("FLOAT_2D", "roughTex"), ("FLOAT_2D", "normalTex"))
 #: roughness nodes of a textured Roughness' multiscatter rows (values i / (n - 1))
 ROUGHNESS_NODES = 17
 #: cos_o nodes of a multiscatter row (values i / (TABLE - 1), sharp_lobe_frag.glsl)
 TABLE = 32
-_GPU = drawing.gpu_cache({})
 # per object: (geometry fingerprint, sharp slots) -> batch; visibility textures per bits
 _BATCHES = drawing.gpu_cache({})
+# the vertex format every feature set of the pass draws
+_FORMAT = drawing.gpu_cache({}, limit=1)
 _VISIBILITY = drawing.gpu_cache({})
 _MIPS = drawing.gpu_cache({})
 
 
 def _shader(features=()):
     """The pass compiled with ``features`` (ROUGH_TEX, NORMAL_MAP: left out of the draws
-    without them, as addon/lights.py does)."""
-    import gpu
-    features = tuple(sorted(features))
-    sh = _GPU.get(("shader", features))
-    if sh is None:
-        info = gpu.types.GPUShaderCreateInfo()
-        for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
-                            ("FLOAT", "closedSide")):
-            info.push_constant(kind, ident)
-        for slot, (kind, ident) in enumerate(_SAMPLERS):
-            info.sampler(slot, kind, ident)
-        for slot, (kind, ident) in enumerate(_ATTRIBUTES):
-            info.vertex_in(slot, kind, ident)
-        iface = gpu.types.GPUStageInterfaceInfo("prt_sharp_lobe_iface")
-        iface.smooth("VEC3", "vPos")
-        iface.smooth("VEC3", "vNrm")
-        iface.smooth("VEC3", "vBary")
-        iface.smooth("VEC2", "vUv")
-        iface.smooth("VEC4", "vTng")
-        iface.flat("VEC3", "vTri")
-        for k in range(3):
-            iface.flat("VEC3", "vTriN%d" % k)
-        info.vertex_out(iface)
-        info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source((drawing.SHADER_DIR / "sharp_lobe_vert.glsl").read_text())
-        defines = "".join(f"#define {f}\n" for f in features)
-        info.fragment_source(defines + drawing.glsl_source("brdf_lib.glsl", "texture_lib.glsl",
-                                                           "sharp_lobe_frag.glsl"))
-        sh = _GPU[("shader", features)] = gpu.shader.create_from_info(info)
-    return sh
+    without them, as the lights pass does)."""
+    return shaders.shader("sharp_lobe", features)
 
 
 _ATTRIBUTES = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"),
@@ -87,9 +56,9 @@ def _batch(attrs):
     """A batch of the pass's vertex layout, which any feature set's shader draws
     (``batch_for_shader`` refuses the UVs a shader without textures compiles out)."""
     import gpu
-    fmt = _GPU.get("format")
+    fmt = _FORMAT.get("format")
     if fmt is None:
-        fmt = _GPU["format"] = gpu.types.GPUVertFormat()
+        fmt = _FORMAT["format"] = gpu.types.GPUVertFormat()
         for kind, ident in _ATTRIBUTES:
             fmt.attr_add(id=ident, comp_type="F32", len=int(kind[-1]), fetch_mode="FLOAT")
     vbo = gpu.types.GPUVertBuf(fmt, len(attrs["pos"]))
@@ -150,18 +119,18 @@ def _texture(rgba: np.ndarray):
 
 
 def visibility_texels(bits: np.ndarray):
-    """(rows, VIS_WIDTH, 4) float32 of bit-packed visibility (P, nbytes): three bytes per
-    float (exact below 2^24), point p's floats from texel p * stride; and the stride."""
+    """(rows, drawing.ROW_TEXELS, 4) float32 of bit-packed visibility (P, nbytes): three bytes
+    per float (exact below 2^24), point p's floats from texel p * stride; and the stride."""
     floats = core_visibility.bytes_to_float24(bits)              # (P, nbytes / 3)
     P, F = floats.shape
     stride = -(-F // 4)
     flat = np.zeros((P, stride * 4), np.float32)
     flat[:, :F] = floats
     total = max(P * stride, 1)
-    rows = -(-total // VIS_WIDTH)
-    out = np.zeros(rows * VIS_WIDTH * 4, np.float32)
+    rows = -(-total // drawing.ROW_TEXELS)
+    out = np.zeros(rows * drawing.ROW_TEXELS * 4, np.float32)
     out[:flat.size] = flat.reshape(-1)
-    return out.reshape(rows, VIS_WIDTH, 4), stride
+    return out.reshape(rows, drawing.ROW_TEXELS, 4), stride
 
 
 def _visibility_texture(st):

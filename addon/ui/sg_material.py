@@ -50,9 +50,9 @@ class PRTSGMaterialSettings(bpy.types.PropertyGroup):
     roughness: FloatProperty(name="Roughness", default=0.3, min=0.0, max=1.0,
                              subtype="FACTOR", update=redraw_viewports,
                              description="Blender roughness r; the microfacet slope is r squared")
-    alpha_x: FloatProperty(name="Alpha X", default=0.3, min=sg_brdf.ALPHA_MIN, max=1.0,
+    alpha_x: FloatProperty(name="Alpha X", default=0.3, min=sg_brdf.SG_ALPHA_MIN, max=1.0,
                            update=redraw_viewports, description="Ward slope along the tangent")
-    alpha_y: FloatProperty(name="Alpha Y", default=0.1, min=sg_brdf.ALPHA_MIN, max=1.0,
+    alpha_y: FloatProperty(name="Alpha Y", default=0.1, min=sg_brdf.SG_ALPHA_MIN, max=1.0,
                            update=redraw_viewports, description="Ward slope along the bitangent")
     nu: FloatProperty(name="nu", default=75.0, min=1.0, max=10000.0, update=redraw_viewports,
                       description="Ashikhmin-Shirley exponent along the tangent")
@@ -114,7 +114,7 @@ def export_sg_material(blender_material, warnings: list | None = None) -> reflec
     s = getattr(blender_material, "prt_sg", None) if blender_material is not None else None
     if uses_blender_material(blender_material):
         return sg_brdf.sg_material_from_brdf(scene_export.export_material(blender_material, warnings))
-    a = max(float(s.roughness) ** 2, sg_brdf.ALPHA_MIN)
+    a = max(float(s.roughness) ** 2, sg_brdf.SG_ALPHA_MIN)
     return reflectance.SGMaterial(model=s.model, diffuse=tuple(s.diffuse_color),
                               specular=tuple(s.specular_color), roughness=a,
                               alpha_x=s.alpha_x, alpha_y=s.alpha_y, nu=s.nu, nv=s.nv,

@@ -1,5 +1,5 @@
 """Spatially varying colour inputs: image textures on UV maps and colour attributes (pure
-numpy; the GLSL twin is ``shaders/texture_lib.glsl``).
+numpy; the GLSL twin is ``shaders/lib/texture.glsl``).
 
 A colour input of a material slot is one :class:`ColorSource`: an :class:`ImageTexture`
 read at the corner's UV (through a Mapping node's 2D transform), or a mesh colour
@@ -18,7 +18,7 @@ quantized into a few material variants (:func:`quantize`).
 
 A surface node's *Normal* input driven by a Normal Map node (tangent space) or a Bump node
 reading an image is a :class:`NormalSource`; :func:`perturbed_normals` is the shaders'
-per-pixel normal (``texture_lib.glsl`` ``mapped_normal``), as Cycles' ``svm_node_normal_map``
+per-pixel normal (``texture.glsl`` ``mapped_normal``), as Cycles' ``svm_node_normal_map``
 and ``svm_node_set_bump`` compute it, except that the bump's height derivative is taken by
 finite differences of the texture in UV space (one texel each way) instead of Cycles'
 screen-space differences.

@@ -55,7 +55,7 @@ With ``c = n . h`` (``theta`` its angle), ``cos_i = n . i``, ``cos_o = n . o``,
 ``ASHIKHMIN_SHIRLEY``: ``D = sqrt((nu+1)(nv+1))/(2 pi) c^(nu cos^2 phi + nv sin^2 phi)``,
   ``M = F / (4 (h . i) max(cos_i, cos_o))`` (Ashikhmin & Shirley 2000).
 
-``roughness`` is floored at :data:`ALPHA_MIN` (NDF sharpness <= ~8e4, inside the
+``roughness`` is floored at :data:`SG_ALPHA_MIN` (NDF sharpness <= ~8e4, inside the
 range where :mod:`.sg` is exact); the Blender slider is the Blender roughness
 ``r`` with ``a = r^2`` (:func:`sg_material_from_brdf`).
 
@@ -74,7 +74,7 @@ taken at the lobe centre, always written as ``F = A + B_d F_eq14(c, eta) + B_s (
 Isotropic NDFs are one SG lobe around ``n`` whose sharpness/amplitude are
 ``lam = c_lam(a) 2/a^2`` and ``mu = c_mu(a)/(pi a^2)``; the corrections
 ``c_lam, c_mu`` are tabulated on ``a = 0, 0.05, ..., 1`` (:data:`ISO_NDF_TABLE`,
-linear interpolation; the same constants are in ``shaders/sg_common.glsl``) and
+linear interpolation; ``shaders/lib/constants.glsl`` is generated from them) and
 come from :func:`fit_isotropic_ndf` (a 1-D least-squares fit of the L2 error
 over the hemisphere of ``h``; the amplitude is solved in closed form for each
 trial sharpness, the sharpness by golden section on ``log lam``).
@@ -110,13 +110,13 @@ from . import algebra as sg
 from ..sphere.directions import orthonormal_frame
 from ..shading.microfacet import lambda_raw
 # the NDFs as SG lobes, their fits and tables, and the model constants
-from .ndf import ALPHA_MIN, COS_MIN, COS_MIN_SINGULAR, FRESNEL_INDEX, FRESNEL_MODES, ISO_NDF_TABLE, ISO_TABLE_ALPHA, ISOTROPIC_MODELS, LAMBDA_MAX, MAX_LOBES, MODEL_INDEX, MODELS, NDFLobes, fit_anisotropic_ndf, fit_isotropic_ndf, iso_ndf_lobes, iso_ndf_sg, iso_table_fit, ndf_lobes, ndf_value
+from .ndf import SG_ALPHA_MIN, COS_MIN, COS_MIN_SINGULAR, FRESNEL_INDEX, FRESNEL_MODES, ISO_NDF_TABLE, ISO_TABLE_ALPHA, ISOTROPIC_MODELS, LAMBDA_MAX, MAX_LOBES, MODEL_INDEX, MODELS, NDFLobes, fit_anisotropic_ndf, fit_isotropic_ndf, iso_ndf_lobes, iso_ndf_sg, iso_table_fit, ndf_lobes, ndf_value
 from .ggx_warp import ggx_warp_correct
 from .reflectance import SGMaterial
 from .albedo import metal_fresnel, ggx_albedo, multiscatter_factors
 
 __all__ = [
-    "MODELS", "ISOTROPIC_MODELS", "FRESNEL_MODES", "MAX_LOBES", "ALPHA_MIN",
+    "MODELS", "ISOTROPIC_MODELS", "FRESNEL_MODES", "MAX_LOBES", "SG_ALPHA_MIN",
     "SGMaterial", "NDFLobes", "ndf_value", "ndf_lobes", "fit_isotropic_ndf",
     "fit_anisotropic_ndf", "iso_ndf_sg", "specular_lobes", "specular_brdf",
     "fresnel_coefficients", "fresnel_eq14",
@@ -188,7 +188,7 @@ def _m_factor(model, roughness, cos_i, cos_o, h_dot_i):
     if model in ("COOK_TORRANCE", "BLINN_PHONG", "GGX"):
         ci = np.maximum(cos_i, COS_MIN)
         co = np.maximum(cos_o, COS_MIN)
-        a2 = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN) ** 2
+        a2 = np.maximum(np.asarray(roughness, dtype=np.float64), SG_ALPHA_MIN) ** 2
         dist = "GGX" if model == "GGX" else "BECKMANN"
         li = lambda_raw(dist, a2, ci)
         lo = lambda_raw(dist, a2, co)
@@ -264,7 +264,7 @@ def specular_lobes(material: SGMaterial, normals, views, tangents=None, fitted_w
     * ``GGX``: ``M_o`` is the normalisation to Cycles' ``E(r, n.o)``, ``F`` at each lobe's
       product with the cosine, times the multiscatter factor (module docstring);
       ``fitted_warp``: the slice as the fitted lobes of :data:`GGX_WARP_TABLE`
-      (:func:`ggx_warp_correct`, as ``shaders/ssdf_sg_frag.glsl``; False: the plain warp of
+      (:func:`ggx_warp_correct`, as ``shaders/methods/ssdf_sg_frag.glsl``; False: the plain warp of
       the NDF's lobes);
       ``cosine`` is the clamped-cosine SG mixture the slice will be shaded with
       (``directions`` (M, 3) local to ``cosine_frame = (t, b)``, default the lobes' frame;
@@ -451,7 +451,7 @@ def sg_material_from_brdf(material: materials.Material, ggx: bool = True) -> SGM
     * Principled (``"DIELECTRIC"``): ``fresnel="PRINCIPLED"`` with the base colour,
       metallic, the dielectric ``f0`` colour and ``eta`` (module docstring).
     """
-    alpha = max(material.alpha, ALPHA_MIN)
+    alpha = max(material.alpha, SG_ALPHA_MIN)
     ggx = ggx and material.lobe_distribution == "GGX"
     common = dict(model="GGX" if ggx else "COOK_TORRANCE", roughness=alpha,
                   multiscatter=ggx and material.distribution == "MULTI_GGX")

@@ -14,7 +14,7 @@ from ..common.fitting import levenberg_marquardt
 from ..shading.microfacet import lambda_raw
 from ..sphere.directions import orthonormal_frame
 from .ndf import (
-    ALPHA_MIN,
+    SG_ALPHA_MIN,
     COS_MIN,
     LAMBDA_MAX,
     graded_theta_quadrature,
@@ -92,7 +92,7 @@ class _Slice(NamedTuple):
 
 
 def _ggx_slice(r, mu_o):
-    a = max(float(r) ** 2, ALPHA_MIN)
+    a = max(float(r) ** 2, SG_ALPHA_MIN)
     mu_o = max(float(mu_o), WARP_MU_MIN)
     _, h, i, wi = _warp_quadrature(a, mu_o)
     a2 = a * a
@@ -287,6 +287,6 @@ def ggx_warp_correct(roughness, n, o, P, table=None):
     u = np.where(un > 1e-9, u / np.maximum(un, 1e-300), fallback)
     el = np.arccos(cos_o)[:, None] + q[:, :K]
     axes = np.cos(el)[..., None] * n[:, None, :] + np.sin(el)[..., None] * u[:, None, :]
-    lam_w = _warp_sharpness(np.maximum(alpha, ALPHA_MIN), cos_o)[:, None]
+    lam_w = _warp_sharpness(np.maximum(alpha, SG_ALPHA_MIN), cos_o)[:, None]
     lam = np.minimum(lam_w * np.exp(q[:, K:2 * K]), LAMBDA_MAX)
     return axes, lam, np.maximum(q[:, 2 * K:], 0.0)

@@ -18,13 +18,14 @@ ISOTROPIC_MODELS = MODELS[:3] + ("GGX",)
 #: coaxial SG lobes of the GGX NDF fit (one lobe loses its long tails: 14-20 % L2 error)
 GGX_LOBES = 2
 FRESNEL_MODES = ("NONE", "SCHLICK", "DIELECTRIC", "PRINCIPLED")
-#: integer codes used by the GLSL twin (``shaders/sg_common.glsl``).
+#: integer codes used by the GLSL twin (``shaders/lib/sg.glsl``).
 MODEL_INDEX = {m: i for i, m in enumerate(MODELS)}
 FRESNEL_INDEX = {m: i for i, m in enumerate(FRESNEL_MODES)}
 #: most lobes :func:`specular_lobes` returns per point.
 MAX_LOBES = 8
-#: smallest slope parameter (NDF lobe sharpness 2/a^2 = 8e4).
-ALPHA_MIN = 0.005
+#: smallest slope parameter an SG NDF lobe is fitted for (sharpness 2/a^2 = 8e4); the
+#: microfacet lobes' floor is core.shading.microfacet.MICROFACET_ALPHA_MIN.
+SG_ALPHA_MIN = 0.005
 #: cosines inside ``M_o`` are floored here (view and light at the horizon).
 COS_MIN = 1e-4
 #: Ward / Ashikhmin-Shirley ``M`` diverges like 1/sqrt(cos) at the horizon; its
@@ -32,6 +33,8 @@ COS_MIN = 1e-4
 COS_MIN_SINGULAR = 0.05
 #: warped lobes are capped at this sharpness (grazing facets, tau -> 0).
 LAMBDA_MAX = 1e5
+#: floor of an NDF lobe's sharpness (Blinn-Phong's fit at a = 1 is a nearly constant lobe).
+LAMBDA_MIN = 1e-4
 
 
 def broadcast_rows(v, P, shape=()):
@@ -52,7 +55,7 @@ def ndf_value(model, h_local, roughness=0.3, aniso=(0.3, 0.1)):
     tan2 = s2 / c2
     with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
         if model in ISOTROPIC_MODELS:
-            a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)
+            a = np.maximum(np.asarray(roughness, dtype=np.float64), SG_ALPHA_MIN)
             a2 = a * a
             if model == "COOK_TORRANCE":
                 d = np.exp(-tan2 / a2) / (math.pi * a2 * c2 * c2)
@@ -84,7 +87,7 @@ def ndf_value(model, h_local, roughness=0.3, aniso=(0.3, 0.1)):
 
 def _iso_support_cos(model, a):
     """cos(theta) below which the isotropic NDF is < e^-40 of its peak."""
-    a = max(float(a), ALPHA_MIN)
+    a = max(float(a), SG_ALPHA_MIN)
     if model == "BLINN_PHONG":
         e = max(2.0 / (a * a) - 2.0, 0.0)
         return 0.0 if e <= 40.0 else math.exp(-40.0 / e)
@@ -121,7 +124,7 @@ def fit_isotropic_ndf(model, roughness):
     """
     if model not in ISOTROPIC_MODELS:
         raise ValueError(f"{model} is not isotropic")
-    a = max(float(roughness), ALPHA_MIN)
+    a = max(float(roughness), SG_ALPHA_MIN)
     th, wt = _iso_quadrature(model, a)
     h = np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1)
     d = ndf_value(model, h, a)
@@ -160,10 +163,10 @@ ISO_TABLE_ALPHA = np.linspace(0.0, 1.0, 21)
 def iso_table_fit(model):
     """``(c_lam, c_mu)`` on :data:`ISO_TABLE_ALPHA` from :func:`fit_isotropic_ndf`
     (``lam = c_lam 2/a^2``, ``mu = c_mu/(pi a^2)``; node 0 is the a -> 0 limit,
-    fitted at ``a = ALPHA_MIN``).  This is how :data:`ISO_NDF_TABLE` was made."""
+    fitted at ``a = SG_ALPHA_MIN``).  This is how :data:`ISO_NDF_TABLE` was made."""
     cl, cm = [], []
     for a in ISO_TABLE_ALPHA:
-        a = max(float(a), ALPHA_MIN)
+        a = max(float(a), SG_ALPHA_MIN)
         lam, mu, _ = fit_isotropic_ndf(model, a)
         cl.append(lam * a * a / 2.0)
         cm.append(mu * math.pi * a * a)
@@ -173,7 +176,7 @@ def iso_table_fit(model):
 def graded_theta_quadrature(a, per_panel=24):
     """Gauss-Legendre in theta on [0, pi/2], panels growing geometrically from ``a / 4``
     (a heavy-tailed NDF: its peak and its tails both resolved); weights ``2 pi sin dtheta``."""
-    edges = np.concatenate([[0.0], np.geomspace(max(a, ALPHA_MIN) / 4.0, 0.5 * math.pi, 28)])
+    edges = np.concatenate([[0.0], np.geomspace(max(a, SG_ALPHA_MIN) / 4.0, 0.5 * math.pi, 28)])
     x, w = np.polynomial.legendre.leggauss(per_panel)
     lo, hi = edges[:-1, None], edges[1:, None]
     th = ((lo + hi) / 2 + (hi - lo) / 2 * x).ravel()
@@ -187,7 +190,7 @@ def coaxial_ndf_error(model, roughness, lam, mu, fit="COAXIAL"):
     on the quadrature of the fit named by ``fit``: ``"COAXIAL"`` (:func:`fit_coaxial_ndf`,
     graded panels) or ``"ISOTROPIC"`` (:func:`fit_isotropic_ndf`).  The error the fits
     report, and how any other lobes (e.g. a table's) compare with them."""
-    a = max(float(roughness), ALPHA_MIN)
+    a = max(float(roughness), SG_ALPHA_MIN)
     th, wt = graded_theta_quadrature(a) if fit == "COAXIAL" else _iso_quadrature(model, a)
     d = ndf_value(model, np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1), a)
     lam, mu = np.asarray(lam, dtype=np.float64), np.asarray(mu, dtype=np.float64)
@@ -202,7 +205,7 @@ def fit_coaxial_ndf(model, roughness, lobes):
     amplitudes solved by linear least squares.  For GGX, whose tails one lobe cannot
     follow (from ``a ~ 0.8`` the second lobe is the constant ``lam -> 0``).
     Returns ``(lam (K,), mu (K,), rel_error)``, sharpest lobe first."""
-    a = max(float(roughness), ALPHA_MIN)
+    a = max(float(roughness), SG_ALPHA_MIN)
     th, wt = graded_theta_quadrature(a)
     h = np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1)
     d = ndf_value(model, h, a)
@@ -231,14 +234,14 @@ def ggx_table_fit(lobes=GGX_LOBES):
     the previous one's so the lobes vary smoothly.  How :data:`GGX_NDF_TABLE` was made."""
     cl, cm = [], []
     for a in ISO_TABLE_ALPHA:
-        a = max(float(a), ALPHA_MIN)
+        a = max(float(a), SG_ALPHA_MIN)
         lam, mu, _ = fit_coaxial_ndf("GGX", a, lobes)
         cl.append(lam * a * a / 2.0)
         cm.append(mu * math.pi * a * a)
     return np.array(cl), np.array(cm)
 
 # Generated by iso_table_fit(model) (rounded to 7 digits); tests refit and compare the errors.
-# Also written, with the same digits, in shaders/sg_common.glsl.
+# shaders/lib/constants.glsl is generated from them (tools/glsl_constants.py).
 ISO_NDF_TABLE = {
     "COOK_TORRANCE": (
         np.array([0.9999875, 0.998759, 0.9951434, 0.9894735, 0.9822715, 0.9742365, 0.9661932, 0.9590131, 0.9535198, 0.9504024, 0.9501555, 0.9530325, 0.9589624, 0.9674702, 0.9777121, 0.9886328, 0.9991382, 1.008208, 1.014945, 1.018575, 1.018442]),
@@ -252,7 +255,6 @@ ISO_NDF_TABLE = {
 }
 
 # Generated by ggx_table_fit() (7 digits, below 1e-6 written 0); tests refit and compare the errors.
-# Also in shaders/sg_common.glsl.
 GGX_NDF_TABLE = (
     np.array([[1.992838, 0.3828076], [1.98416, 0.3794611], [1.957449, 0.3691366], [1.911287, 0.3512051], [1.84205, 0.3240784], [1.740421, 0.2836717], [1.611464, 0.2315964], [1.535449, 0.2018369], [1.501452, 0.1891955], [1.478714, 0.1796236], [1.456021, 0.1679977], [1.427885, 0.1521422], [1.390106, 0.130881], [1.338649, 0.1035195], [1.269413, 0.06974741], [1.178129, 0.02971582], [1.099019, 0], [1.08185, 0], [1.055609, 0], [1.019339, 0], [1.541843, 0]]),
     np.array([[0.7645672, 0.2045907], [0.7653469, 0.2035765], [0.7678104, 0.2003622], [0.7723066, 0.1944554], [0.7796551, 0.1846765], [0.7918028, 0.1680978], [0.8071456, 0.1459605], [0.8093663, 0.1417465], [0.8011657, 0.1528181], [0.7880022, 0.1708359], [0.7715373, 0.1929814], [0.7523974, 0.2180762], [0.7309676, 0.2453626], [0.7076121, 0.2741905], [0.6827244, 0.3039604], [0.6567133, 0.3341347], [0.6114557, 0.3842979], [0.5127084, 0.4888012], [0.3841785, 0.6200544], [0.217368, 0.7863972], [0, 1]]))
@@ -271,7 +273,7 @@ def iso_ndf_lobes(model, roughness):
     if model != "GGX":
         lam, mu = iso_ndf_sg(model, roughness)
         return lam[..., None], mu[..., None]
-    a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)[..., None]
+    a = np.maximum(np.asarray(roughness, dtype=np.float64), SG_ALPHA_MIN)[..., None]
     c_lam, c_mu = GGX_NDF_TABLE
     x = np.clip(a, 0.0, 1.0) * (len(c_lam) - 1)
     i = np.minimum(x.astype(np.int64), len(c_lam) - 2)
@@ -279,20 +281,20 @@ def iso_ndf_lobes(model, roughness):
     k = np.arange(c_lam.shape[1])
     lam = ((1.0 - t) * c_lam[i, k] + t * c_lam[i + 1, k]) * 2.0 / (a * a)
     mu = ((1.0 - t) * c_mu[i, k] + t * c_mu[i + 1, k]) / (math.pi * a * a)
-    return np.maximum(lam, 1e-4), mu
+    return np.maximum(lam, LAMBDA_MIN), mu
 
 
 def iso_ndf_sg(model, roughness):
     """Single-lobe SG of an isotropic NDF from the correction table:
-    ``(lam, mu)`` arrays of the shape of ``roughness`` (floored at ALPHA_MIN).
+    ``(lam, mu)`` arrays of the shape of ``roughness`` (floored at SG_ALPHA_MIN).
     GGX has several lobes: :func:`iso_ndf_lobes`."""
     if model == "GGX":
         raise ValueError("GGX is fitted by several lobes: use iso_ndf_lobes")
-    a = np.maximum(np.asarray(roughness, dtype=np.float64), ALPHA_MIN)
+    a = np.maximum(np.asarray(roughness, dtype=np.float64), SG_ALPHA_MIN)
     c_lam, c_mu = ISO_NDF_TABLE[model]
     lam = _table_lookup(c_lam, a) * 2.0 / (a * a)
     mu = _table_lookup(c_mu, a) / (math.pi * a * a)
-    return np.maximum(lam, 1e-4), mu
+    return np.maximum(lam, LAMBDA_MIN), mu
 
 
 # --------------------------------------------------------------------------- anisotropic fit

@@ -37,7 +37,7 @@ def _downsample(L, N, Ns):
 
 def face_bilinear(level, face, s, t):
     """Bilinear lookup within a face (edge-clamped) of a (6, N, N, C) array --
-    the same arithmetic as ``shaders/sg_common.glsl``'s texelFetch version."""
+    the same arithmetic as ``shaders/lib/sg.glsl``'s texelFetch version."""
     N = level.shape[1]
     x = np.clip((s + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0)
     y = np.clip((t + 1.0) * 0.5 * N - 0.5, 0.0, N - 1.0)

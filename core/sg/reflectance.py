@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .ndf import ALPHA_MIN, FRESNEL_MODES, MODELS
+from .ndf import SG_ALPHA_MIN, FRESNEL_MODES, MODELS
 
 
 def _rgb_array(v, name):
@@ -73,9 +73,9 @@ class SGMaterial:
             raise ValueError(f"fresnel must be one of {FRESNEL_MODES}, got {self.fresnel!r}")
         self.diffuse = np.maximum(_rgb_array(self.diffuse, "diffuse"), 0.0)
         self.specular = np.maximum(_rgb_array(self.specular, "specular"), 0.0)
-        self.roughness = _positive_array(self.roughness, "roughness", ALPHA_MIN)
-        self.alpha_x = float(_positive_array(self.alpha_x, "alpha_x", ALPHA_MIN))
-        self.alpha_y = float(_positive_array(self.alpha_y, "alpha_y", ALPHA_MIN))
+        self.roughness = _positive_array(self.roughness, "roughness", SG_ALPHA_MIN)
+        self.alpha_x = float(_positive_array(self.alpha_x, "alpha_x", SG_ALPHA_MIN))
+        self.alpha_y = float(_positive_array(self.alpha_y, "alpha_y", SG_ALPHA_MIN))
         self.nu = float(_positive_array(self.nu, "nu", 0.0))
         self.nv = float(_positive_array(self.nv, "nv", 0.0))
         self.ior = _positive_array(self.ior, "ior", 1e-3)

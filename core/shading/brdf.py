@@ -67,7 +67,7 @@ Fresnel (``Material.fresnel``)
 
 Roughness mapping: Blender's roughness ``r`` is clamped to ``[0, 1]`` and
 ``alpha = r * r`` (``svm_node_closure_bsdf``: ``roughness = sqr(saturatef(param1))``),
-then ``alpha`` is clamped to ``>= ALPHA_MIN`` here (see below).
+then ``alpha`` is clamped to ``>= MICROFACET_ALPHA_MIN`` here (see below).
 
 What this module follows in Cycles
 ----------------------------------
@@ -151,7 +151,7 @@ Differences from Cycles that callers should know about
 * **Near-mirror lobes.**  Cycles treats ``alpha^2 <= 2e-10``
   (``BSDF_ROUGHNESS_SQ_THRESH``, roughness <~ 0.0038) as a singular (delta)
   reflection that cannot be evaluated at all.  We clamp
-  ``alpha >= ALPHA_MIN = 1e-3`` (roughness ~0.032) instead, so very smooth
+  ``alpha >= MICROFACET_ALPHA_MIN = 1e-3`` (roughness ~0.032) instead, so very smooth
   materials become a narrow but finite lobe.  The NDF peak is then
   ``1 / (pi alpha^2) ~ 3e5``; callers integrating such lobes with a fixed
   direction set will under-sample them.
@@ -184,11 +184,11 @@ from dataclasses import replace
 import numpy as np
 
 from .brdf_tables import dielectric_albedo_s, ggx_E, ggx_E_avg
-from .microfacet import ALPHA_MIN, F0_from_ior, check_distribution, dielectric_s, f82_tint_B, fresnel_dielectric, fresnel_dielectric_Fss, fresnel_f82, ior_from_F0, microfacet_D, roughness_to_alpha, smith_G1, smith_lambda
+from .microfacet import MICROFACET_ALPHA_MIN, F0_from_ior, check_distribution, dielectric_s, f82_tint_B, fresnel_dielectric, fresnel_dielectric_Fss, fresnel_f82, ior_from_F0, microfacet_D, roughness_to_alpha, smith_G1, smith_lambda
 from .materials import Material
 
 __all__ = [
-    "ALPHA_MIN",
+    "MICROFACET_ALPHA_MIN",
     "COS_VIEW_MIN",
     "roughness_to_alpha",
     "microfacet_D",
@@ -252,7 +252,7 @@ def with_sharp_lobe(material: Material, resolution: int) -> Material:
     return replace(material, per_pixel_lobe=True)
 
 
-#: Fresnel kinds of :func:`sharp_lobes` (the GLSL of ``shaders/sharp_lobe_frag.glsl``)
+#: Fresnel kinds of :func:`sharp_lobes` (the GLSL of ``shaders/passes/sharp_lobe_frag.glsl``)
 SHARP_CONSTANT, SHARP_SCHLICK, SHARP_DIELECTRIC, SHARP_F82 = 0, 1, 2, 3
 
 

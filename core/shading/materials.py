@@ -39,7 +39,7 @@ class Material:
         :attr:`is_diffuse_only`).
     roughness:
         Blender roughness ``r``; ``alpha = clamp(r, 0, 1)**2``, floored at
-        :data:`ALPHA_MIN` for the lobe (the tables use ``clamp(r, 0, 1)``).
+        :data:`MICROFACET_ALPHA_MIN` for the lobe (the tables use ``clamp(r, 0, 1)``).
     distribution:
         ``"BECKMANN"``, ``"GGX"`` or ``"MULTI_GGX"`` (GGX lobe with Cycles'
         multiple-scattering energy compensation).
@@ -123,7 +123,7 @@ class Material:
 
     @property
     def alpha(self) -> float:
-        """Microfacet alpha actually used: ``max(clamp(r,0,1)^2, ALPHA_MIN)``."""
+        """Microfacet alpha actually used: ``max(clamp(r,0,1)^2, MICROFACET_ALPHA_MIN)``."""
         return roughness_to_alpha(self.roughness)
 
     @property

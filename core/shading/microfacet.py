@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Smallest microfacet alpha used anywhere (roughness ~ 0.0316).
-ALPHA_MIN = 1e-3
+#: Smallest alpha of the microfacet lobes that match Cycles (roughness ~ 0.0316; Cycles' own
+#: singular threshold is lower).  The SG fits have their own floor, core.sg.ndf.SG_ALPHA_MIN.
+MICROFACET_ALPHA_MIN = 1e-3
 
 DISTRIBUTIONS = ("BECKMANN", "GGX", "MULTI_GGX")
 # Floor for cosines inside Lambda (keeps tan^2 finite: <= 1e24).
@@ -19,12 +20,12 @@ _COS2_FLOOR = 1e-30
 
 
 def roughness_to_alpha(roughness: float) -> float:
-    """Blender roughness -> microfacet alpha: ``max(clamp(r, 0, 1)**2, ALPHA_MIN)``."""
+    """Blender roughness -> microfacet alpha: ``max(clamp(r, 0, 1)**2, MICROFACET_ALPHA_MIN)``."""
     r = float(roughness)
     if not np.isfinite(r):
         r = 0.0
     r = min(max(r, 0.0), 1.0)
-    return max(r * r, ALPHA_MIN)
+    return max(r * r, MICROFACET_ALPHA_MIN)
 
 
 def check_distribution(distribution: str) -> str:
@@ -38,7 +39,7 @@ def check_distribution(distribution: str) -> str:
 
 def _clamp_alpha(alpha) -> np.ndarray:
     a = np.asarray(alpha, dtype=np.float64)
-    return np.clip(np.nan_to_num(a, nan=ALPHA_MIN), ALPHA_MIN, None)
+    return np.clip(np.nan_to_num(a, nan=MICROFACET_ALPHA_MIN), MICROFACET_ALPHA_MIN, None)
 
 
 def microfacet_D(distribution, alpha, cos_theta_m) -> np.ndarray:
@@ -50,7 +51,7 @@ def microfacet_D(distribution, alpha, cos_theta_m) -> np.ndarray:
         BECKMANN: D = exp(-(1 - c^2) / (c^2 a2)) / (pi a2 c^4)
         GGX:      D = a2 / (pi ((1 - c^2) + a2 c^2)^2)
 
-    (Cycles ``bsdf_D``.)  ``alpha`` is floored at :data:`ALPHA_MIN`; ``D = 0``
+    (Cycles ``bsdf_D``.)  ``alpha`` is floored at :data:`MICROFACET_ALPHA_MIN`; ``D = 0``
     for ``c <= 0``.  Returns ``float64`` with the broadcast shape of the inputs.
     """
     dist = check_distribution(distribution)
@@ -82,7 +83,7 @@ def lambda_of_t2(dist: str, t2) -> np.ndarray:
 
 
 def lambda_raw(dist: str, a2, cos_theta) -> np.ndarray:
-    """Smith Lambda for ``a2 = alpha^2`` *without* the ALPHA_MIN floor."""
+    """Smith Lambda for ``a2 = alpha^2`` *without* the MICROFACET_ALPHA_MIN floor."""
     c = np.maximum(np.nan_to_num(np.asarray(cos_theta, dtype=np.float64), nan=0.0), _COS_FLOOR)
     c = np.minimum(c, 1.0)
     return lambda_of_t2(dist, a2 * np.maximum(1.0 / (c * c) - 1.0, 0.0))

@@ -16,7 +16,7 @@ from ....core.sphere import directions, envmap
 from ....core.methods.reference import shading as reference
 from ....core.scene import rigid, shadow_fields
 from ....core.scene import occluder_fields
-from ...gpu import drawing
+from ...gpu import drawing, shaders
 from ...frame import dynamic, keys
 from ...blender import storage
 from ..contract import Shading, glossy_or_layered
@@ -323,9 +323,10 @@ def _groups(st, eye, view_dir, turn=None):
 # GLSL per-vertex pass (§5.2: one texel per vertex, rendered to a float target)
 # --------------------------------------------------------------------------- #
 
+#: most glossy terms the GPU pass sums (its glossy[MAX_TERMS]: shaders/lib/constants.glsl)
 MAX_TERMS = 8
 TEXTURE_WIDTH = 8192
-# shader, cached textures (per object tables, per material SATs)
+# cached textures (per object tables, per material SATs)
 _GPU = drawing.gpu_cache({}, limit=64)
 # view-independent GPU results per (object, material, lighting)
 _GPU_DIFFUSE = drawing.gpu_cache({}, limit=16)
@@ -344,25 +345,7 @@ def gpu_available() -> bool:
 
 
 def _shader():
-    return keys.held(_GPU, "shader", (), _make_shader)
-
-
-def _make_shader():
-    import gpu
-    info = gpu.types.GPUShaderCreateInfo()
-    for ident in ("width", "pointCount", "lightCount", "termCount", "visMode", "visRes",
-                  "visTile", "brdfRes", "viewNodes"):
-        info.push_constant("INT", ident)
-    info.push_constant("FLOAT", "viewStep")
-    for slot, ident in enumerate(("pointData", "weights", "lights", "visTable",
-                                  "brdfTables")):
-        info.sampler(slot, "FLOAT_2D", ident)
-    info.vertex_in(0, "VEC2", "ndc")
-    info.fragment_out(0, "VEC4", "fragColor")
-    info.define("MAX_TERMS", str(MAX_TERMS))
-    info.vertex_source(drawing.glsl_source("rsl_vertex_vert.glsl"))
-    info.fragment_source(drawing.glsl_source("rsl_vertex_frag.glsl"))
-    return gpu.shader.create_from_info(info)
+    return shaders.shader("rsl_vertex")
 
 
 def _texture(values: np.ndarray, fmt: str):

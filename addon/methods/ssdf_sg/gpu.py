@@ -1,4 +1,4 @@
-"""SSDF_SG per pixel on the GPU (``shaders/ssdf_sg_*.glsl``): the shaders, the textures of
+"""SSDF_SG per pixel on the GPU (``shaders/methods/ssdf_sg_*.glsl``): the shaders, the textures of
 the SSDFs, lighting and materials, the per-slot batches and the pair table of flat
 triangles (eq. 39's per-pair SSDF angles, weights and slopes per point, since those are
 exactly linear inside a flat triangle: :func:`pair_table`).  The numerics they mirror are
@@ -16,12 +16,12 @@ from ....core.sg import albedo
 from ....core.sg import ggx_warp
 from ....core.shading.materials import slot_material
 from ....core.methods.ssdf_sg.scene import cosine_amplitudes, diffuse_slots, flat_triangles, is_glossy, sg_materials
-from ...gpu import drawing
+from ...gpu import drawing, shaders
 from ...frame import keys
 from ...blender.texture_export import shader_inputs, shader_normal, slot_uvs
 
-# shaders ("shader", "shader_flat", "pairs"), the pair pass's "quad", the prefiltered
-# environment's "atlas" (per pyramid) and the light-lobe texture per cosine lobe count
+# the pair pass's "quad", the prefiltered environment's "atlas" (per pyramid) and the
+# light-lobe texture per cosine lobe count
 _GPU = drawing.gpu_cache({}, limit=8)
 # (coefficient texture, eigen-image texture array, texels per point) per field
 _FIELD_TEXTURES = drawing.gpu_cache({}, limit=64)
@@ -31,76 +31,20 @@ _BATCHES = drawing.gpu_cache({}, limit=64)
 PAIR_TABLES = drawing.gpu_cache({}, limit=8)
 
 
-_SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"), ("FLOAT_2D", "envTex"),
-             ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
-#: the main pass's textured inputs (texture_lib.glsl)
-_INPUT_SAMPLERS = (("FLOAT_2D", "albedoTex"), ("FLOAT_2D", "roughTex"), ("FLOAT_2D", "metalTex"),
-                   ("FLOAT_2D", "levelTex"), ("FLOAT_2D", "normalTex"))
-
-
-def _fragment_source(main: str) -> str:
-    """sg_common.glsl (the SG algebra, BRDF factors and cube-face lookup shared with the
-    material helpers' GLSL twin, tested against numpy there), texture_lib.glsl (the slot's
-    textured inputs, a mapped normal's terminator factor), ssdf_sg_lib.glsl, ``main``."""
-    return drawing.glsl_source("sg_common.glsl", "texture_lib.glsl", "ssdf_sg_lib.glsl", main)
+#: the main pass's textured input samplers, in :data:`INPUTS` order and the normal map's last
+_INPUT_SAMPLERS = tuple(name for _, name in shaders.SPECS["ssdf_sg"].samplers[5:])
 
 
 def _gpu_shader(flat: bool = False):
     """The per-pixel shader; ``flat``: its variant for flat triangles (FLAT_PAIRS: eq. 39
     from the pair table, see :func:`pair_table`)."""
-    return keys.held(_GPU, "shader_flat" if flat else "shader", (), lambda: _make_shader(flat))
-
-
-def _make_shader(flat: bool):
-    import gpu
-    info = gpu.types.GPUShaderCreateInfo()
-    if flat:
-        info.define("FLAT_PAIRS", "1")
-    for kind, ident in (("MAT4", "viewProjection"), ("MAT3", "envRot"),
-                        ("FLOAT", "closedSide")):
-        info.push_constant(kind, ident)
-    for slot, (kind, ident) in enumerate(_SAMPLERS + _INPUT_SAMPLERS
-                                         + ((("FLOAT_2D", "pairTex"),) if flat else ())):
-        info.sampler(slot, kind, ident)
-    inputs = (("VEC3", "pos"), ("VEC3", "nrm"), ("VEC3", "triPoints"), ("VEC3", "bary"),
-              ("VEC2", "uv"), ("VEC4", "attr"), ("VEC4", "tng"))
-    for slot, (kind, ident) in enumerate(inputs + ((("VEC3", "triFlat"),) if flat else ())):
-        info.vertex_in(slot, kind, ident)
-    iface = gpu.types.GPUStageInterfaceInfo("prt_ssdf_sg_flat_iface" if flat
-                                            else "prt_ssdf_sg_iface")
-    iface.smooth("VEC3", "vPos")
-    iface.smooth("VEC3", "vNrm")
-    iface.smooth("VEC3", "vBary")
-    iface.flat("VEC3", "vTri")
-    iface.smooth("VEC2", "vUv")
-    iface.smooth("VEC4", "vAttr")
-    iface.smooth("VEC4", "vTng")
-    if flat:
-        iface.flat("VEC3", "vFlat")
-    info.vertex_out(iface)
-    info.fragment_out(0, "VEC4", "fragColor")
-    info.vertex_source(drawing.glsl_source("ssdf_sg_vert.glsl"))
-    info.fragment_source(_fragment_source("ssdf_sg_frag.glsl"))
-    return gpu.shader.create_from_info(info)
+    return shaders.shader("ssdf_sg_flat" if flat else "ssdf_sg")
 
 
 def _pairs_shader():
-    """The pair pass (``shaders/ssdf_sg_pairs_frag.glsl``) over a full-screen quad."""
-    return keys.held(_GPU, "pairs", (), _make_pairs_shader)
-
-
-def _make_pairs_shader():
-    import gpu
-    info = gpu.types.GPUShaderCreateInfo()
-    info.push_constant("MAT3", "envRot")
-    info.push_constant("INT", "flatCount")
-    for slot, (kind, ident) in enumerate(_SAMPLERS + (("FLOAT_2D", "flatTex"),)):
-        info.sampler(slot, kind, ident)
-    info.vertex_in(0, "VEC2", "ndc")
-    info.fragment_out(0, "VEC4", "fragColor")
-    info.vertex_source("void main() { gl_Position = vec4(ndc, 0.0, 1.0); }")
-    info.fragment_source(_fragment_source("ssdf_sg_pairs_frag.glsl"))
-    return gpu.shader.create_from_info(info)
+    """The pair pass (``shaders/methods/ssdf_sg_pairs_frag.glsl``) over a full-screen
+    triangle."""
+    return shaders.shader("ssdf_sg_pairs")
 
 
 def _texture(rgba, layers=0):
@@ -126,14 +70,14 @@ def _field_textures(field):
     weights[:, 0] = 1.0
     weights[:, 1:K + 1] = field.coefficients
     total = len(weights) * kt
-    rows = max(1, -(-total // 4096))
-    data = np.zeros((rows * 4096, 4), np.float32)
+    rows = max(1, -(-total // drawing.ROW_TEXELS))
+    data = np.zeros((rows * drawing.ROW_TEXELS, 4), np.float32)
     data[:total] = weights.reshape(-1, 4)
     images = np.zeros((kt * 4, D), np.float32)
     images[0] = field.mean
     images[1:K + 1] = field.eigen
     layers = images.reshape(kt, 4, n, n).transpose(0, 2, 3, 1)          # (kt, n, n, 4)
-    return (_texture(data.reshape(rows, 4096, 4)), _texture(layers, layers=kt), kt)
+    return (_texture(data.reshape(rows, drawing.ROW_TEXELS, 4)), _texture(layers, layers=kt), kt)
 
 
 def environment_textures(fit, pre, cosine_lobes: int):
@@ -190,18 +134,24 @@ def material_uniforms(material):
                 ggxWarp=warp)
 
 
-#: texel of the first clamped-cosine lobe in the parameter texture
-COSINE_TEXEL = 28
+#: row 0 of the parameter texture: the first of four texels per textured input of
+#: :data:`INPUTS` (texture.glsl's info, mapping rows, mix colour), the table's (roughness
+#: nodes, level nodes, metallic at corners 0 and 1), the normal map's (kind, strength,
+#: distance), the first clamped-cosine lobe
+INPUT_TEXEL, TABLE_TEXEL, NORMAL_TEXEL, COSINE_TEXEL = 10, 26, 27, 28
 #: table nodes over a textured Roughness / Specular IOR Level (values i / (n - 1))
 ROUGHNESS_NODES, LEVEL_NODES = 33, 9
 #: Cycles' mu nodes of E(r, mu) (core.shading.brdf_tables)
 GGX_E_NODES = 32
-#: most GGX view-slice lobes an entry holds (shaders/ssdf_sg_lib.glsl WARP_LOBES)
+#: most GGX view-slice lobes an entry holds (core.sg.ggx_warp.GGX_WARP_LOBES or more)
 WARP_LOBES_MAX = 4
+#: a table entry's GGX texels: (-, -, E_avg, multiscatter), E at the GGX_E_NODES mu nodes (four
+#: a texel), then the metal part of A, F_ss main, F_ss metal at the four corners
+GGX_TEXEL = 17
 #: first texel of the GGX view slice's lobes in an entry (core.sg.ndf.ggx_warp_params at the
 #: entry's roughness and the 21 WARP_MU nodes): per node three texels, the tilts, the
 #: log-sharpness factors and the shares of up to WARP_LOBES_MAX lobes (zero past K)
-WARP_TEXEL = 17 + 1 + GGX_E_NODES // 4 + 12
+WARP_TEXEL = GGX_TEXEL + 1 + GGX_E_NODES // 4 + 3 * 4
 #: first texel of the Lambert base's view ratio (core.sg.brdf.diffuse_view_ratio) at the
 #: 32 mu nodes of E (8 texels)
 LAYER_TEXEL = WARP_TEXEL + 3 * len(ggx_warp.WARP_MU)
@@ -217,12 +167,13 @@ INPUTS = ("colour", "Roughness", "Metallic", "Specular IOR Level")
 def parameter_texture(env, mat, res, kt, eye4, cosine, table=None, sources=None, normal=None):
     """The parameter texture read by ``read_parameters`` in ssdf_sg_lib.glsl.  Row 0: 9
     scalar texels, (count, sharpness) of the cosine lobes, four texels per textured input
-    of :data:`INPUTS` (``sources``, core.scene.textures.ColorSource or None: texture_lib.glsl's
-    info, mapping rows, mix colour) from texel 10, the table's (roughness nodes, level
-    nodes, metallic at corner 0 and 1) at 26, (local direction, amplitude) per cosine lobe
-    from :data:`COSINE_TEXEL`.  Rows 1..: ``table`` (:func:`slot_table`), one row per
-    Specular IOR Level node.  ``normal``: a core.scene.textures.NormalSource drawn per pixel
-    (texel 27: kind, strength, distance; its image's four texels after the cosine lobes)."""
+    of :data:`INPUTS` (``sources``, core.scene.textures.ColorSource or None: lib/texture.glsl's
+    info, mapping rows, mix colour) from :data:`INPUT_TEXEL`, the table's (roughness nodes,
+    level nodes, metallic at corner 0 and 1) at :data:`TABLE_TEXEL`, (local direction,
+    amplitude) per cosine lobe from :data:`COSINE_TEXEL`.  Rows 1..: ``table``
+    (:func:`slot_table`), one row per Specular IOR Level node.  ``normal``: a
+    core.scene.textures.NormalSource drawn per pixel (:data:`NORMAL_TEXEL`: kind, strength,
+    distance; its image's four texels after the cosine lobes)."""
     M = len(cosine.amplitudes)
     table = _slot_table_of(mat) if table is None else table
     nl, nr = table["entries"].shape[:2]
@@ -239,14 +190,15 @@ def parameter_texture(env, mat, res, kt, eye4, cosine, table=None, sources=None,
     p[0, 4], p[0, 5], p[0, 6], p[0, 7] = mat["kd"], mat["fresA"], mat["fresBd"], mat["fresBs"]
     for k, name in enumerate(INPUTS):
         tex = drawing.source_uniforms((sources or {}).get(name))
-        p[0, 10 + 4 * k] = tex["texInfo"]
-        p[0, 11 + 4 * k, :3], p[0, 12 + 4 * k, :3] = tex["texMap0"], tex["texMap1"]
-        p[0, 13 + 4 * k] = tex["mixColor"]
-    p[0, 26] = (nr, nl, *table["metallic"])
+        i = INPUT_TEXEL + 4 * k
+        p[0, i] = tex["texInfo"]
+        p[0, i + 1, :3], p[0, i + 2, :3] = tex["texMap0"], tex["texMap1"]
+        p[0, i + 3] = tex["mixColor"]
+    p[0, TABLE_TEXEL] = (nr, nl, *table["metallic"])
     if normal is not None:
         tex = drawing.source_uniforms(normal.source)
-        p[0, 27] = (1.0 if normal.kind == "NORMAL_MAP" else 2.0, normal.strength,
-                    normal.distance, 0.0)
+        p[0, NORMAL_TEXEL] = (1.0 if normal.kind == "NORMAL_MAP" else 2.0, normal.strength,
+                              normal.distance, 0.0)
         k = COSINE_TEXEL + M
         p[0, k], p[0, k + 3] = tex["texInfo"], tex["mixColor"]
         p[0, k + 1, :3], p[0, k + 2, :3] = tex["texMap0"], tex["texMap1"]
@@ -261,9 +213,9 @@ def _entry(uniforms, alpha):
     e[0] = (u["ndfLambda"] * alpha * alpha, u["ndfMu"] * alpha * alpha, u["ior"], 0.0)
     for c, v in enumerate(uniforms):
         e[1 + 4 * c:5 + 4 * c] = (v["kd"], v["fresA"], v["fresBd"], v["fresBs"])
-    e[17] = (0.0, 0.0, u["ggxEavg"], u["multiscatter"])
-    e[18:18 + GGX_E_NODES // 4] = np.asarray(u["ggxE"]).reshape(-1, 4)
-    k = 18 + GGX_E_NODES // 4
+    e[GGX_TEXEL] = (0.0, 0.0, u["ggxEavg"], u["multiscatter"])
+    e[GGX_TEXEL + 1:GGX_TEXEL + 1 + GGX_E_NODES // 4] = np.asarray(u["ggxE"]).reshape(-1, 4)
+    k = GGX_TEXEL + 1 + GGX_E_NODES // 4
     for c, v in enumerate(uniforms):
         e[k + 3 * c:k + 3 * c + 3] = (v["fresAm"], v["fssMain"], v["fssMetal"])
     w = np.asarray(u["ggxWarp"], np.float32)
@@ -440,7 +392,7 @@ def pair_texels(cosine_lobes: int, light_count: int) -> int:
 
 def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_count,
                cosine_lobes, rotation):
-    """Run the pair pass for the object's flat points: a GPUTexture (rows of 4096 texels,
+    """Run the pair pass for the object's flat points: a GPUTexture (rows of ROW_TEXELS texels,
     :func:`pair_texels` per point).  Eq. 39's per-pair work that a flat triangle's pixels
     share, done once per point."""
     import gpu
@@ -448,16 +400,17 @@ def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_coun
     coeff_tex, eigen_tex, _ = field_textures(field)
     normals = st.points.normals[flat_points]
     count = len(flat_points)
-    flat = np.zeros((max(1, -(-count // 4096)) * 4096, 4), np.float32)
+    width = drawing.ROW_TEXELS
+    flat = np.zeros((max(1, -(-count // width)) * width, 4), np.float32)
     flat[:count, :3] = normals
     flat[:count, 3] = flat_points
-    flat_tex = _texture(flat.reshape(-1, 4096, 4))
+    flat_tex = _texture(flat.reshape(-1, width, 4))
     total = count * pair_texels(cosine_lobes, light_count)
-    rows = max(1, -(-total // 4096))
+    rows = max(1, -(-total // width))
     sh = _pairs_shader()
     quad = keys.held(_GPU, "quad", (), lambda: batch_for_shader(
         sh, "TRIS", {"ndc": [(-1, -1), (3, -1), (-1, 3)]}))
-    offscreen = gpu.types.GPUOffScreen(4096, rows, format="RGBA32F")
+    offscreen = gpu.types.GPUOffScreen(width, rows, format="RGBA32F")
     try:
         with offscreen.bind():
             gpu.state.depth_test_set("NONE")
@@ -469,13 +422,13 @@ def pair_table(st, field, flat_points, env_tex, light_tex, param_tex, light_coun
             sh.uniform_sampler("flatTex", flat_tex)
             quad.draw(sh)
             fb = gpu.state.active_framebuffer_get()
-            buf = fb.read_color(0, 0, 4096, rows, 4, 0, "FLOAT")
+            buf = fb.read_color(0, 0, width, rows, 4, 0, "FLOAT")
     finally:
         offscreen.free()
-    buf.dimensions = 4096 * rows * 4
+    buf.dimensions = width * rows * 4
     # read back and uploaded again (once per lighting change): a plain texture outlives the
     # offscreen and may be drawn from the viewport's and the F12 render's GPU contexts
-    return _texture(np.array(buf, dtype=np.float32).reshape(rows, 4096, 4))
+    return _texture(np.array(buf, dtype=np.float32).reshape(rows, width, 4))
 
 
 def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
@@ -527,7 +480,7 @@ def gpu_draws(state, fields, sg_tables, fit, pre, cosine, eye, view_dir):
                     sh.uniform_sampler("pairTex", pair_tex)
                 for slot, batch in todo:
                     sh.uniform_sampler("paramTex", params[slot])
-                    for (_, name), tex in zip(_INPUT_SAMPLERS, inputs[slot]):
+                    for name, tex in zip(_INPUT_SAMPLERS, inputs[slot]):
                         sh.uniform_sampler(name, tex)
                     batch.draw(sh)
 

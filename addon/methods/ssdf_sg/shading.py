@@ -271,7 +271,7 @@ class SSDFSGShading(Shading):
         return out
 
     def draw_objects(self, state, eye, view_dir):
-        """Per-pixel eq. 39 + 41 on the GPU (``shaders/ssdf_sg_*.glsl``); None (per-vertex
+        """Per-pixel eq. 39 + 41 on the GPU (``shaders/methods/ssdf_sg_*.glsl``); None (per-vertex
         ``shade``) when an object has a material the shader does not model."""
         if not state.objects:
             return None

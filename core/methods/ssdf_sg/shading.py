@@ -1,5 +1,5 @@
 """SSDF_SG shading: eq. 39, 41, 42, 43 of Wang, Ren, Gong, Snyder, Guo 2009
-evaluated in numpy -- the reference for ``shaders/ssdf_sg_frag.glsl``.
+evaluated in numpy -- the reference for ``shaders/methods/ssdf_sg_frag.glsl``.
 
 Per shading point with normal ``n`` (SSDF frame ``t, b, n`` from
 :func:`.ssdf.ssdf_frames`) and view ``o``:

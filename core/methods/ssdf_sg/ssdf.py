@@ -38,7 +38,7 @@ which needs frames that vary continuously with the normal.  Duff et al.'s frame
 flips its tangent where ``n_z`` changes sign; ours is
 ``t = normalize(REF x n)`` with a fixed oblique axis ``REF`` and is continuous
 except within 2.6 degrees of ``+-REF`` (switches to a second axis there).
-The GLSL twin is ``ssdf_frame`` in ``shaders/ssdf_sg_frag.glsl``.
+The GLSL twin is ``ssdf_frame`` in ``shaders/methods/ssdf_sg_lib.glsl``.
 
 PCA (eq. 24): ``SSDF_x ~ mean + sum_j w_xj E_j``.  The covariance
 ``sum (x - m)(x - m)^T`` (``D = n^2`` squared, float64) is accumulated over
@@ -310,7 +310,7 @@ def bilinear(images, u, v, n: int, gradient: bool = False):
 
     ``images`` (P, C, n*n) or (C, n*n); ``u``, ``v`` (P, L) -> (P, L, C) (or (L, C)).
     ``gradient``: also the derivatives of the bilinear patch with respect to ``u`` and
-    ``v`` (the slope of the cell the lookup falls in, as ``shaders/ssdf_sg_lib.glsl``)."""
+    ``v`` (the slope of the cell the lookup falls in, as ``shaders/methods/ssdf_sg_lib.glsl``)."""
     xr = np.asarray(u) * n - 0.5
     yr = np.asarray(v) * n - 0.5
     x = np.clip(xr, 0.0, n - 1.0)

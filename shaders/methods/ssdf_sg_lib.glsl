@@ -4,10 +4,10 @@
  *   R_s(o) = sum   ((C* (x) rho*_s(i; o)) (x) V^d) . L   eq. 41 (eq. 31, Gamma_L of eq. 35)
  * GLSL twin of core/methods/ssdf_sg/shading.py (same formulas and the same texel arithmetic:
  * bilinear SSDF lookups by texelFetch in the Shirley-Chiu square, the prefiltered
- * pyramid's level/face interpolation of core/sg_lighting.PrefilteredEnvironment).
+ * pyramid's level/face interpolation of core/sg/prefilter.py PrefilteredEnvironment).
  *
  * Textures: coeffTex  per point (1, w_1..w_K) packed 4 per texel, coeffTexels texels
- *                     per point, rows of 4096 texels;
+ *                     per point, rows of ROW_TEXELS texels;
  *           eigenTex  2D array, layer l = SSDF images 4l..4l+3 (mean, E_1, ..., E_K);
  *           envTex    prefiltered atlas, row (level * 6 + face) * envRes + row;
  *           lightTex  per diffuse lobe j: texel (0, j) = (axis, lam), (1 + m, j) = (mu, 0) as
@@ -17,27 +17,23 @@
  *           flatTex   (pair pass) per flat point (normal, point index);
  *           paramTex  9 texels of scalar parameters (environment, SSDF, material slot),
  *                     read into the globals below (push constants are kept to 128 bytes),
- *                     texel 9 = (cosine lobe count, sharpness), 10-25 the slot's textured
- *                     inputs (colour, roughness, metallic, specular IOR level; four texels
- *                     each: texture_lib.glsl's info, mapping rows, mix colour), 26 the
- *                     table's (roughness nodes, level nodes, metallic at its corners 0, 1),
- *                     texels COS_TEXEL.. = (local direction, amplitude) of the clamped-cosine
- *                     SG mixture C*; rows 1..: the slot's table (ssdf_sg_gpu.slot_table):
- *                     per level node a row, per roughness node ENTRY texels: (lambda a^2,
- *                     mu a^2, eta, -), kd, A, B_d, B_s at the (metallic, base colour)
- *                     corners 00, 01, 10, 11. */
-
-const int COS_TEXEL = 28;   /* addon/methods/ssdf_sg/gpu.py COSINE_TEXEL */
-const int ENTRY = 109;      /* ENTRY_TEXELS */
-const int LAYER_TEXEL = 101; /* LAYER_TEXEL: the Lambert base's view ratio at the 32 mu nodes */
-const int WARP_TEXEL = 38;  /* WARP_TEXEL: the GGX view slice's lobes (core.sg.ndf.ggx_warp_params)
-                             * at 21 n.o nodes, three texels a node: the WARP_LOBES lobes'
-                             * tilts, log-sharpness factors, shares */
-const int WARP_LOBES = 4;   /* WARP_LOBES_MAX (core.sg.ndf.GGX_WARP_LOBES, zero shares past it) */
-const float WARP_MU_MIN = 0.02;
-const int GGX_TEXEL = 17;   /* GGX: (-, -, E_avg, multiscatter), E(r, mu) at 32
-                             * mu nodes (8 texels), then (metal part of A, F_ss main, F_ss metal)
-                             * per corner */
+ *                     texel 9 = (cosine lobe count, sharpness), from INPUT_TEXEL the slot's
+ *                     textured inputs (colour, roughness, metallic, specular IOR level; four
+ *                     texels each: texture.glsl's info, mapping rows, mix colour), TABLE_TEXEL
+ *                     the table's (roughness nodes, level nodes, metallic at its corners 0, 1),
+ *                     NORMAL_TEXEL a normal map's (kind, strength, distance),
+ *                     texels COSINE_TEXEL.. = (local direction, amplitude) of the
+ *                     clamped-cosine SG mixture C*; rows 1..: the slot's table
+ *                     (addon/methods/ssdf_sg/gpu.py slot_table): per level node a row, per
+ *                     roughness node ENTRY_TEXELS texels: (lambda a^2, mu a^2, eta, -), kd, A,
+ *                     B_d, B_s at the (metallic, base colour) corners 00, 01, 10, 11; from
+ *                     GGX_TEXEL (-, -, E_avg, multiscatter), E(r, mu) at GGX_E_NODES mu nodes,
+ *                     (metal part of A, F_ss main, F_ss metal) per corner; from WARP_TEXEL the
+ *                     GGX view slice's lobes (core.sg.ggx_warp.ggx_warp_params) at WARP_MU_NODES
+ *                     n.o nodes, three texels a node: the WARP_LOBES_MAX lobes' tilts,
+ *                     log-sharpness factors, shares; from LAYER_TEXEL the Lambert base's view
+ *                     ratio at the GGX_E_NODES mu nodes.  The texel layout and the numerics'
+ *                     constants are in constants.glsl, generated from the Python. */
 
 int cosLobes;
 float cosLambda;
@@ -83,28 +79,13 @@ void read_parameters()
   cosLambda = p9.y;   /* (position, 1) or (direction to camera, 0) */
 }
 
-const float PI = 3.14159265358979;
-const float TWO_PI = 6.28318530717959;
-/* core.sg.algebra.FH_COEFFS */
-const vec3 FH_COEFFS = vec3(0.0046413591658328954, 1.4672958011923942, 3.6002488734472657);
-const vec3 FRAME_REF = vec3(0.2672612419124244, 0.5345224838248488, 0.8017837257372732);
-const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.5345224838248488);
-const float FRAME_SWITCH = 0.999;
-const float COS_MIN = 1e-4;
-const float LAMBDA_MAX = 1e5;
-/* core.methods.ssdf_sg.shading: SLOPE_STEP, SHIFT_MAX, SPREAD_MIN, Z_RANGE (visible_lobe) */
-const float SLOPE_STEP = 1e-3;
-const float SHIFT_MAX = 1.2;
-const float SPREAD_MIN = 0.02;
-const vec2 Z_RANGE = vec2(-4.0, 6.0);
-
 /* ------------------------------------------------------------ SG helpers (core/sg/algebra.py) */
 float one_minus_exp_neg_over(float lam, float x)   /* (1 - exp(-lam x)) / lam */
 {
   return lam > 1e-6 ? (1.0 - exp(-lam * x)) / lam : x;
 }
 
-float sg_hemisphere_integral(float lam) { return TWO_PI * one_minus_exp_neg_over(lam, 1.0); }
+float sg_hemisphere_integral(float lam) { return 2.0 * PI * one_minus_exp_neg_over(lam, 1.0); }
 
 /* standard normal CDF (core.sg.algebra.normal_cdf: erfc of Abramowitz & Stegun 7.1.26) */
 float normal_cdf(float z)
@@ -237,40 +218,15 @@ float ssdf_value_slopes(vec3 local, vec3 e1, vec3 e2, vec4 W[16], out float d1, 
 vec4 coeff_fetch(float point, int l)
 {
   int idx = int(point + 0.5) * coeffTexels + l;
-  return texelFetch(coeffTex, ivec2(idx % 4096, idx / 4096), 0);
+  return texelFetch(coeffTex, row_texel(idx), 0);
 }
 
 /* ------------------------------------------------------------ prefiltered environment */
-float level_coordinate(float lam)
-{
-  lam = max(lam, 0.0);
-  float nf = float(envLevels - 2);
-  if (lam < envLambdaFirst) {
-    return lam / envLambdaFirst;
-  }
-  if (lam <= envTop) {
-    return 1.0 + log(lam / envLambdaFirst) / log(envRatio);
-  }
-  return nf + 1.0 - envTop / lam;
-}
-
-vec3 env_level(int level, int face, float s, float t)
-{
-  return sg_atlas_bilinear(envTex, envRes, level, face, s, t);
-}
-
 /* kernel-weighted mean radiance of the (unrotated, unit strength) environment */
 vec3 env_lookup(vec3 world_dir, float lam)
 {
-  vec3 d = envRot * world_dir;
-  int face;
-  float s, t;
-  sg_face_coordinates(d, face, s, t);
-  float x = level_coordinate(lam);
-  int l0 = min(int(floor(x)), envLevels - 1);
-  int l1 = min(l0 + 1, envLevels - 1);
-  float f = x - float(l0);
-  return env_level(l0, face, s, t) * (1.0 - f) + env_level(l1, face, s, t) * f;
+  return prefiltered_lookup(envTex, envRot * world_dir, lam, envRes, envLevels, envLambdaFirst,
+                            log(envRatio), envTop);
 }
 
 /* Eq. 41's term of one product lobe (p, lam) with unit amplitude, without the world's
@@ -296,7 +252,7 @@ vec3 visible_lighting(vec3 p, float lam, vec3 t, vec3 b, vec3 n, vec4 W[16])
 }
 
 /* ------------------------------------------------------------ BRDF view slice (core/sg/brdf.py) */
-/* M_o(i) of the slot's model (sg_common.glsl's sg_m_factor; brdfModel 0 CT/Blinn-Phong,
+/* M_o(i) of the slot's model (sg.glsl's sg_m_factor; brdfModel 0 CT/Blinn-Phong,
  * 1 Ward, 2 Ashikhmin-Shirley -> core.sg.brdf.MODEL_INDEX 0, 2, 4) */
 float m_factor(float cos_i, float cos_o, float h_dot_i)
 {
@@ -311,7 +267,7 @@ float m_factor(float cos_i, float cos_o, float h_dot_i)
  * adds w * fh_hat_slope(theta, k) to R_d.  Everything but theta depends on n alone. */
 /* the cosine lobes' frame: the surface's (n, t, b), or a normal map's at this pixel (the
  * SSDF stays in the surface's frame: visibility is the geometry's); lobeMapped: the
- * latter, each pair then takes Cycles' terminator factor (texture_lib.glsl
+ * latter, each pair then takes Cycles' terminator factor (texture.glsl
  * bump_shadowing) at its product lobe's axis, lobeSmooth the surface's normal */
 vec3 lobeN, lobeT, lobeB;
 bool lobeMapped = false;
@@ -327,7 +283,7 @@ bool diffuse_pair(int m, int j, vec3 n, vec3 t, vec3 b, vec4 W[16], bool withThe
   if (mu.r == 0.0 && mu.g == 0.0 && mu.b == 0.0) {
     return false;
   }
-  vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
+  vec4 cl = texelFetch(paramTex, ivec2(COSINE_TEXEL + m, 0), 0);
   vec3 cw = cl.x * lobeT + cl.y * lobeB + cl.z * lobeN;
   vec4 al = texelFetch(lightTex, ivec2(0, j), 0);
   vec3 axis = al.xyz * envRot;                 /* R^T a: texture -> world */

@@ -25,8 +25,6 @@
  * lobe j's multiscatter factor at roughness node k, over cos_o = i / (TABLE - 1). */
 
 #define TABLE 32
-
-#define COS_VIEW_MIN 1e-4
 #define LOD_BIAS -2.0
 
 
@@ -108,7 +106,7 @@ float visible_bit(float p, int k)
   int byte_index = k >> 3;
   int fi = byte_index / 3;
   int idx = int(p + 0.5) * stride + fi / 4;
-  vec4 word4 = texelFetch(visTex, ivec2(idx % 4096, idx / 4096), 0);
+  vec4 word4 = texelFetch(visTex, row_texel(idx), 0);
   int value = int(word4[fi % 4]);     /* exact integers below 2^24: no rounding offset */
   int octet = (value >> (16 - 8 * (byte_index % 3))) & 255;
   return float((octet >> (7 - (k & 7))) & 1);
@@ -215,16 +213,15 @@ vec3 multiscatter(int j, float r, float cos_o)
 
 void main()
 {
-  if (closedSide > 1.5 && !gl_FrontFacing) discard;   /* a two-sided mesh: its other copy */
-  bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
-  if (inner) {
+  if (other_copy(closedSide)) discard;
+  if (inner_side(closedSide)) {
     fragColor = vec4(0.0);
     return;
   }
   vec3 n = normalize(vNrm);
   vec3 smoothN = n;
   vec4 eye = param(0);
-  vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+  vec3 o = view_direction(eye, vPos);
 #ifdef NORMAL_MAP
   /* the mapped normal, corrected as Cycles' glossy closures take it; the visibility and
    * the horizon tests stay the surface's */
@@ -242,12 +239,8 @@ void main()
 #else
   const bool mapped = false;
 #endif
-  float cos_o = dot(n, o);
-  if (cos_o < COS_VIEW_MIN) {          /* core.shading.brdf._bend_views */
-    o = normalize(o + (COS_VIEW_MIN - cos_o) * n);
-    cos_o = COS_VIEW_MIN;
-  }
-  cos_o = clamp(cos_o, COS_VIEW_MIN, 1.0);
+  float cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
+  o = bent_view(n, o);
   vec4 lobe = param(1);
   float rough = pixel_roughness();
   float a = rough * rough;
@@ -262,9 +255,7 @@ void main()
   tangent_frame(n, tx, ty);
   float lam_o = smith_lambda(dist, a, cos_o);
   vec3 color = vec3(0.0);
-  /* the sample set turned per pixel (Cranley-Patterson): neighbouring pixels and F12's
-   * supersamples see other parts of the lobe, so the pattern averages out as noise */
-  vec2 shift = fract(vec2(0.7548776662, 0.5698402910) * dot(floor(gl_FragCoord.xy), vec2(1.0, 61.0)));
+  vec2 shift = pixel_shift();      /* the sample set turned per pixel */
   for (int s = 0; s < K; s++) {
     vec3 h = n;
     if (a > 0.0) {

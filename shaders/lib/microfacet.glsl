@@ -1,8 +1,7 @@
-/* Microfacet BRDF pieces shared by the per-pixel passes (sharp_lobe_frag.glsl,
- * lights_frag.glsl): Cycles' Beckmann/GGX NDFs and Smith Lambda, the Fresnel kinds of
- * core.shading.brdf.sharp_lobes, NDF sampling and a tangent frame.  GLSL twin of core/shading/brdf.py. */
-
-#define PI 3.14159265358979
+/* Microfacet BRDF pieces (after constants.glsl): Cycles' Beckmann/GGX NDFs and Smith Lambda,
+ * the dielectric Fresnel, the Fresnel kinds of core.shading.brdf.sharp_lobes, NDF sampling.
+ * GLSL twin of core/shading/microfacet.py and core/shading/brdf.py, read by the per-pixel
+ * passes (sharp_lobe_frag.glsl, lights_frag.glsl) and by sg.glsl's SG BRDFs. */
 
 /* ---------------------------------------------------------------- microfacet terms */
 
@@ -61,16 +60,6 @@ vec3 lobe_fresnel(int kind, vec3 f0, vec3 B, float eta, float c)
     return f0 + (1.0 - f0) * r;
   }
   return clamp(f0 + (1.0 - f0) * s5 - B * c * s5 * s, 0.0, 1.0);
-}
-
-/* Duff et al. 2017: tangent and bitangent completing a unit normal */
-void tangent_frame(vec3 n, out vec3 tx, out vec3 ty)
-{
-  float sgn = n.z >= 0.0 ? 1.0 : -1.0;
-  float q = -1.0 / (sgn + n.z);
-  float r = n.x * n.y * q;
-  tx = vec3(1.0 + sgn * n.x * n.x * q, sgn * r, -sgn * n.x);
-  ty = vec3(r, sgn + n.y * n.y * q, -n.y);
 }
 
 /* a half vector drawn with density D(h) (n.h) from uniform u in [0, 1)^2 */

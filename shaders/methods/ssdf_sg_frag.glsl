@@ -5,7 +5,7 @@
 vec4 pair_fetch(float q, int stride, int c)
 {
   int idx = int(q + 0.5) * stride + c;
-  return texelFetch(pairTex, ivec2(idx % 4096, idx / 4096), 0);
+  return texelFetch(pairTex, row_texel(idx), 0);
 }
 #endif
 
@@ -13,21 +13,22 @@ vec4 pair_fetch(float q, int stride, int c)
  * at this pixel; false when it has none */
 bool slot_input(sampler2D img, int k, out vec3 c)
 {
-  vec4 info = texelFetch(paramTex, ivec2(10 + 4 * k, 0), 0);
+  int i = INPUT_TEXEL + 4 * k;
+  vec4 info = texelFetch(paramTex, ivec2(i, 0), 0);
   c = vec3(1.0);
   if (info.z < -0.5) {
     return false;
   }
-  c = input_colour(img, vUv, vAttr, info, texelFetch(paramTex, ivec2(11 + 4 * k, 0), 0).xyz,
-                   texelFetch(paramTex, ivec2(12 + 4 * k, 0), 0).xyz,
-                   texelFetch(paramTex, ivec2(13 + 4 * k, 0), 0));
+  c = input_colour(img, vUv, vAttr, info, texelFetch(paramTex, ivec2(i + 1, 0), 0).xyz,
+                   texelFetch(paramTex, ivec2(i + 2, 0), 0).xyz,
+                   texelFetch(paramTex, ivec2(i + 3, 0), 0));
   return true;
 }
 
-/* a scalar input's value: the colour as a float (core.scene.textures.LUMINANCE), clamped */
-float scalar_of(vec3 c) { return clamp(dot(c, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0); }
-
-vec4 table_texel(int i, int j, int k) { return texelFetch(paramTex, ivec2(i * ENTRY + k, 1 + j), 0); }
+vec4 table_texel(int i, int j, int k)
+{
+  return texelFetch(paramTex, ivec2(i * ENTRY_TEXELS + k, 1 + j), 0);
+}
 
 /* texel k of the table entry at fractional roughness node x and level node y */
 vec4 table_entry(float x, float y, int nr, int nl, int k)
@@ -52,7 +53,7 @@ void ggx_inputs(float x, float y, int nr, int nl, float mw, vec3 cf)
   }
   vec4 e = table_entry(x, y, nr, nl, GGX_TEXEL);
   vec3 q[3];
-  int k0 = GGX_TEXEL + 1 + 8;
+  int k0 = GGX_TEXEL + 1 + GGX_E_NODES / 4;
   for (int j = 0; j < 3; j++) {
     vec3 lo = mix(table_entry(x, y, nr, nl, k0 + j).rgb, table_entry(x, y, nr, nl, k0 + 6 + j).rgb, mw);
     vec3 hi = mix(table_entry(x, y, nr, nl, k0 + 3 + j).rgb, table_entry(x, y, nr, nl, k0 + 9 + j).rgb, mw);
@@ -65,20 +66,20 @@ void ggx_inputs(float x, float y, int nr, int nl, float mw, vec3 cf)
   fmsMetal = e.w > 0.5 ? q[2] * ea / max(1.0 - q[2] * (1.0 - ea), vec3(1e-12)) : vec3(0.0);
 }
 
-/* a curve of the pixel's table entry at the 32 mu nodes from texel `first` (four a texel),
+/* a curve of the pixel's table entry at the GGX_E_NODES mu nodes from texel `first` (four a texel),
  * linear in mu between them: Cycles' GGX albedo E(r, mu) (as core.shading.brdf_tables.ggx_E), or
  * the Lambert base's view ratio (core.sg.brdf.diffuse_view_ratio) */
 float entry_mu_curve(int first, float mu)
 {
-  float x = clamp(mu, 0.0, 1.0) * 31.0;
-  int i = min(int(x), 31);
-  int j = min(i + 1, 31);
+  float x = clamp(mu, 0.0, 1.0) * float(GGX_E_NODES - 1);
+  int i = min(int(x), GGX_E_NODES - 1);
+  int j = min(i + 1, GGX_E_NODES - 1);
   vec4 ti = table_entry(entryX, entryY, tableNr, tableNl, first + i / 4);
   vec4 tj = table_entry(entryX, entryY, tableNr, tableNl, first + j / 4);
   return mix(ti[i % 4], tj[j % 4], x - float(i));
 }
 
-/* Eq. 41 for the GGX model (core.sg.brdf.specular_lobes): the view slice as WARP_LOBES
+/* Eq. 41 for the GGX model (core.sg.brdf.specular_lobes): the view slice as WARP_LOBES_MAX
  * fitted lobes, scaled together so the slice has Cycles' albedo E(r, n.o) against the
  * cosine mixture it is shaded with, in the glossy frame (nl, gt, gb: the bump-corrected
  * normal's), each with the Fresnel at the half vector of its product with the cosine,
@@ -91,9 +92,10 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
   }
   /* the fitted lobes (core.sg.ndf.ggx_warp_correct): the mirror direction tilted in the
    * plane of nl and o, the plain warp's sharpness of the NDF's 2 / a^2 scaled, the shares
-   * of the amplitude; the table's three texels a node linear between its 21 n.o nodes */
-  float wx = clamp(c, 0.0, 1.0) * 20.0;
-  int wi = min(int(wx), 19);
+   * of the amplitude; the table's three texels a node linear between its WARP_MU_NODES n.o
+   * nodes */
+  float wx = clamp(c, 0.0, 1.0) * float(WARP_MU_NODES - 1);
+  int wi = min(int(wx), WARP_MU_NODES - 2);
   float wf = wx - float(wi);
   vec4 q[3];
   for (int j = 0; j < 3; j++) {
@@ -105,24 +107,24 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
   u = ul > 1e-9 ? u / ul : gt;
   float el0 = acos(clamp(c, 0.0, 1.0));
   float a = max(roughness, SG_ALPHA_MIN);
-  float lamW = min(2.0 / (a * a) / (4.0 * max(c, WARP_MU_MIN)), LAMBDA_MAX);
-  vec3 axes[WARP_LOBES];
-  float lams[WARP_LOBES];
-  float mus[WARP_LOBES];
-  for (int k = 0; k < WARP_LOBES; k++) {
+  float lamW = min(2.0 / (a * a) / (4.0 * max(c, WARP_MU_MIN)), SG_LAMBDA_MAX);
+  vec3 axes[WARP_LOBES_MAX];
+  float lams[WARP_LOBES_MAX];
+  float mus[WARP_LOBES_MAX];
+  for (int k = 0; k < WARP_LOBES_MAX; k++) {
     axes[k] = cos(el0 + q[0][k]) * nl + sin(el0 + q[0][k]) * u;
-    lams[k] = min(lamW * exp(q[1][k]), LAMBDA_MAX);
+    lams[k] = min(lamW * exp(q[1][k]), SG_LAMBDA_MAX);
     mus[k] = max(q[2][k], 0.0);
   }
-  float E = entry_mu_curve(GGX_TEXEL + 1, max(c, SG_COS_VIEW_MIN));
+  float E = entry_mu_curve(GGX_TEXEL + 1, max(c, COS_VIEW_MIN));
   /* E against the cosine mixture the lobes are shaded with, each product weighted by the
    * visibility factor of the open hemisphere over nl (its elevation), as a flat open
    * surface is drawn below (core.sg.brdf._ggx_normalisation) */
   float asg = 0.0;
   for (int m = 0; m < cosLobes; m++) {
-    vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
+    vec4 cl = texelFetch(paramTex, ivec2(COSINE_TEXEL + m, 0), 0);
     vec3 cw = cl.x * gt + cl.y * gb + cl.z * nl;
-    for (int k = 0; k < WARP_LOBES; k++) {
+    for (int k = 0; k < WARP_LOBES_MAX; k++) {
       vec3 p;
       float lam;
       float amp = sg_product(cw, cosLambda, axes[k], lams[k], p, lam);
@@ -135,14 +137,14 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
   vec3 kmain = 1.0 + missing * fmsMain;
   vec3 kmetal = 1.0 + missing * fmsMetal;
   vec3 color = vec3(0.0);
-  for (int k = 0; k < WARP_LOBES; k++) {
+  for (int k = 0; k < WARP_LOBES_MAX; k++) {
     if (mus[k] <= 0.0) {
       continue;
     }
-    vec3 h = normalize(normalize(lams[k] * axes[k] + SG_COSINE_LAMBDA * nl) + o);
+    vec3 h = normalize(normalize(lams[k] * axes[k] + CLAMPED_COSINE_LAMBDA * nl) + o);
     float cf = clamp(dot(h, o), 0.0, 1.0);
     float s5 = pow(1.0 - cf, 5.0);
-    vec3 fres = fresA.rgb + fresBd.rgb * sg_fresnel_eq14(cf, ior) + fresBs.rgb * s5;
+    vec3 fres = fresA.rgb + fresBd.rgb * fresnel_dielectric(cf, ior) + fresBs.rgb * s5;
     vec3 metal = vec3(0.0);
     if (principled != 0) {
       fres = max(fres, vec3(0.0));
@@ -150,7 +152,7 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
     }
     vec3 mu = mus[k] * norm * (fres * kmain + metal * (kmetal - kmain));
     for (int m = 0; m < cosLobes; m++) {
-      vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + m, 0), 0);
+      vec4 cl = texelFetch(paramTex, ivec2(COSINE_TEXEL + m, 0), 0);
       vec3 cw = cl.x * gt + cl.y * gb + cl.z * nl;
       vec3 p;
       float lam;
@@ -166,21 +168,21 @@ vec3 ggx_specular(vec3 o, vec3 nl, vec3 gt, vec3 gb, vec3 t, vec3 b, vec3 n, vec
  * colour) between the table's corners (exact: they are bilinear in the two) */
 void apply_inputs()
 {
-  vec4 t = texelFetch(paramTex, ivec2(26, 0), 0);
+  vec4 t = texelFetch(paramTex, ivec2(TABLE_TEXEL, 0), 0);
   int nr = int(t.x + 0.5), nl = int(t.y + 0.5);
   vec3 c, v;
   bool coloured = slot_input(albedoTex, 0, c);
   float x = 0.0, y = 0.0, mw = 0.0;
   if (slot_input(roughTex, 1, v)) {
-    float r = scalar_of(v);
+    float r = scalar_input(v);
     x = r * float(nr - 1);
     roughness = max(r * r, SG_ALPHA_MIN);
   }
   if (slot_input(metalTex, 2, v)) {
-    mw = (scalar_of(v) - t.z) / max(t.w - t.z, 1e-6);
+    mw = (scalar_input(v) - t.z) / max(t.w - t.z, 1e-6);
   }
   if (slot_input(levelTex, 3, v)) {
-    y = scalar_of(v) * float(nl - 1);
+    y = scalar_input(v) * float(nl - 1);
   }
   ggx_inputs(x, y, nr, nl, mw, clamp(c, 0.0, 1.0));
   if (!coloured && x == 0.0 && y == 0.0 && mw == 0.0 && nr == 1 && nl == 1) {
@@ -189,7 +191,7 @@ void apply_inputs()
   if (nr > 1 || nl > 1) {
     vec4 e0 = table_entry(x, y, nr, nl, 0);
     float a2 = roughness * roughness;
-    ndfLambda = max(e0.x / a2, 1e-4);
+    ndfLambda = max(e0.x / a2, SG_LAMBDA_MIN);
     ndfMu = e0.y / a2;
     ior = e0.z;
   }
@@ -209,18 +211,18 @@ void apply_inputs()
 /* the glossy lobe's frame: lobeN's, or a mapped normal's after the bump map correction */
 vec3 glossN, glossT, glossB;
 
-/* a normal or bump map (texel 27: kind, strength, distance; its image's texture_lib
+/* a normal or bump map (NORMAL_TEXEL: kind, strength, distance; its image's texture.glsl
  * parameters after the cosine lobes): the cosine lobes' and the glossy lobe's frame at this
  * pixel (Wang et al. 2009 shade per pixel in the normal map's frame); as Cycles' Principled
  * BSDF, the diffuse lobes take the mapped normal as is (with the terminator factor), the
  * glossy lobe its bump map correction toward the surface normal n */
 void mapped_frame(vec3 n, vec3 o)
 {
-  vec4 nmap = texelFetch(paramTex, ivec2(27, 0), 0);
+  vec4 nmap = texelFetch(paramTex, ivec2(NORMAL_TEXEL, 0), 0);
   if (nmap.x < 0.5) {
     return;
   }
-  int base = COS_TEXEL + cosLobes;
+  int base = COSINE_TEXEL + cosLobes;
   vec3 m = mapped_normal(normalTex, vUv, vPos, vNrm, vTng.xyz, vTng.w, nmap,
                          texelFetch(paramTex, ivec2(base, 0), 0),
                          texelFetch(paramTex, ivec2(base + 1, 0), 0).xyz,
@@ -247,7 +249,7 @@ void main()
   glossN = n;
   glossT = t;
   glossB = b;
-  vec3 view = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+  vec3 view = view_direction(eye, vPos);
   mapped_frame(n, view);
   vec4 W[16];
   bool perPixelSSDF = glossy != 0;
@@ -303,19 +305,20 @@ void main()
     float c = dot(o, nl);
     vec3 pw = 2.0 * c * nl - o;
     pw = pw / max(length(pw), 1e-30);
-    float tau = max(4.0 * abs(c), 4.0 * COS_MIN);
-    float lam_w = min(ndfLambda / tau, LAMBDA_MAX);
+    float tau = max(4.0 * abs(c), 4.0 * SG_COS_MIN);
+    float lam_w = min(ndfLambda / tau, SG_LAMBDA_MAX);
     float cos_i = dot(nl, pw);
     float cos_o = dot(nl, o);
     float m = m_factor(cos_i, cos_o, c) * (c > 0.0 ? 1.0 : 0.0);
     float cf = clamp(c, 0.0, 1.0);
-    vec3 fres = fresA.rgb + fresBd.rgb * sg_fresnel_eq14(cf, ior) + fresBs.rgb * pow(1.0 - cf, 5.0);
+    vec3 fres = fresA.rgb + fresBd.rgb * fresnel_dielectric(cf, ior) +
+                fresBs.rgb * pow(1.0 - cf, 5.0);
     if (principled != 0) {
       fres = max(fres, vec3(0.0));
     }
     vec3 mu = ndfMu * m * fres;
     for (int k = 0; k < cosLobes; k++) {
-      vec4 cl = texelFetch(paramTex, ivec2(COS_TEXEL + k, 0), 0);
+      vec4 cl = texelFetch(paramTex, ivec2(COSINE_TEXEL + k, 0), 0);
       vec3 cw = cl.x * glossT + cl.y * glossB + cl.z * nl;
       vec3 p;
       float lam, amp;
@@ -323,9 +326,8 @@ void main()
       color += cl.w * amp * mu * visible_lighting(p, lam, t, b, n, W) * envStrength;
     }
   }
-  if (closedSide > 1.5 && !gl_FrontFacing) discard;   /* a two-sided mesh: its other copy */
+  if (other_copy(closedSide)) discard;
   /* a closed mesh's inner side (core.scene.mesh.closed_side) sees only itself: black, as in
    * Cycles; SG products can ring slightly below zero: clamped */
-  bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
-  fragColor = vec4(inner ? vec3(0.0) : max(color, vec3(0.0)), 1.0);
+  fragColor = vec4(inner_side(closedSide) ? vec3(0.0) : max(color, vec3(0.0)), 1.0);
 }

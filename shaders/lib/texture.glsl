@@ -78,6 +78,13 @@ vec3 combine_colour(vec3 c, float mode_f, vec4 mixColor)
   return (mode == 2 || mode == 4) ? a * (1.0 - f + f * b) : mix(a, b, f);
 }
 
+/* a scalar input's value (Roughness, Metallic, ...): its colour as a float
+ * (core.scene.textures.LUMINANCE), clamped to [0, 1] */
+float scalar_input(vec3 c)
+{
+  return clamp(dot(c, LUMINANCE), 0.0, 1.0);
+}
+
 /* the colour of a textured input at this pixel (texInfo.z: 0 image at uv, 1 attribute) */
 vec3 input_colour(sampler2D img, vec2 uv, vec4 attr, vec4 info, vec3 map0, vec3 map1,
                   vec4 mixColor)
@@ -89,13 +96,13 @@ vec3 input_colour(sampler2D img, vec2 uv, vec4 attr, vec4 info, vec3 map0, vec3 
 /* core.scene.textures.perturbed_normals: the Normal Map (kind 1, tangent space) or Bump (kind 2)
  * node's normal at this pixel.  N, T: the interpolated (unnormalised) normal and tangent,
  * sgn the bitangent sign; nmap = (kind, strength, distance, -); info, map0/1, mixColor the
- * image's texture_lib parameters.  The bump's height derivative: central differences one
+ * image's texture.glsl parameters.  The bump's height derivative: central differences one
  * texel each way in UV; its surface gradient from the screen derivatives of P and uv (on a
  * triangle exactly core.scene.textures.surface_gradient with its edges). */
 float bump_height(sampler2D img, vec2 uv, vec4 info, vec3 map0, vec3 map1, vec4 mixColor)
 {
   vec3 c = combine_colour(image_texture(img, uv, info, map0, map1).rgb, info.w, mixColor);
-  return dot(c, vec3(0.2126, 0.7152, 0.0722));
+  return dot(c, LUMINANCE);
 }
 
 vec3 mapped_normal(sampler2D img, vec2 uv, vec3 P, vec3 N, vec3 T, float sgn, vec4 nmap,

@@ -1,5 +1,5 @@
 /* SSDF_SG pair pass (flat triangles, see ssdf_sg_frag.glsl's FLAT_PAIRS): one fragment per
- * texel of the pair table, row-major in rows of 4096 texels, stride = T + P texels per flat
+ * texel of the pair table, row-major in rows of ROW_TEXELS texels, stride = T + P texels per flat
  * point for P = cosine lobes x light lobes pairs and T = ceil(P / 4):
  *   texel c < T       : the SSDF angle theta of pairs 4c..4c+3 (diffuse_pair),
  *   texel T + p       : (w, k) of pair p = m * lightCount + j.
@@ -10,14 +10,14 @@ void main()
   int pairs = cosLobes * lightCount;
   int thetaTexels = (pairs + 3) / 4;
   int stride = thetaTexels + pairs;
-  int idx = int(gl_FragCoord.y) * 4096 + int(gl_FragCoord.x);
+  int idx = int(gl_FragCoord.y) * ROW_TEXELS + int(gl_FragCoord.x);
   int q = idx / stride;
   int c = idx - q * stride;
   if (q >= flatCount) {
     fragColor = vec4(0.0);
     return;
   }
-  vec4 fp = texelFetch(flatTex, ivec2(q % 4096, q / 4096), 0);
+  vec4 fp = texelFetch(flatTex, row_texel(q), 0);
   vec3 n = normalize(fp.xyz);
   vec3 t, b;
   ssdf_frame(n, t, b);

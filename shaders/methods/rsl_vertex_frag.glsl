@@ -114,12 +114,8 @@ void main()
   int rows = (pointCount + width - 1) / width;
   vec3 n = texelFetch(pointData, pix, 0).xyz;
   vec3 v = texelFetch(pointData, pix + ivec2(0, rows), 0).xyz;
-  /* Duff et al. 2017 frame, as core.sphere.directions.orthonormal_frame */
-  float s = n.z >= 0.0 ? 1.0 : -1.0;
-  float a = -1.0 / (s + n.z);
-  float bb = n.x * n.y * a;
-  vec3 t = vec3(1.0 + s * n.x * n.x * a, s * bb, -s * n.x);
-  vec3 b = vec3(bb, s + n.y * n.y * a, -n.y);
+  vec3 t, b;
+  tangent_frame(n, t, b);
   /* view frame: x axis = view projected on the tangent plane */
   float cos_o = dot(n, v);
   vec3 tp = v - cos_o * n;

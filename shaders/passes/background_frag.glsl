@@ -5,7 +5,6 @@
  * Negative light (a negative Strength) is drawn as zero; the export warns. */
 void main()
 {
-  const float PI = 3.14159265358979;
   vec4 a = invViewProjection * vec4(vNdc, -1.0, 1.0);
   vec4 b = invViewProjection * vec4(vNdc, 1.0, 1.0);
   vec3 d = normalize(b.xyz / b.w - a.xyz / a.w);

@@ -19,10 +19,10 @@
  * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
  * weight, eta, -), (f0, -), (B, -) (core.shading.brdf.sharp_lobes), 8 eye (w = 1 perspective),
  * 9 (core.scene.mesh.closed_side of the object, -, -, -), 11 (roughness nodes n, alpha floor),
- * 12-15 a textured Roughness (texture_lib.glsl's info, mapping rows, mix colour);
+ * 12-15 a textured Roughness (texture.glsl's info, mapping rows, mix colour);
  * 16 a normal or bump map (kind 0 none / 1 Normal Map / 2 Bump, strength, distance, -),
- * 17-20 its image (info, mapping rows, mix colour: texture_lib.glsl mapped_normal);
- * row 1: the Lambert base's view weight at mu = i / (TABLE - 1) (Principled layering),
+ * 17-20 its image (info, mapping rows, mix colour: texture.glsl mapped_normal);
+ * row 1: the Lambert base's view weight at mu = i / (TABLE_NODES - 1) (Principled layering),
  * rows 2, 3: each lobe's multiscatter factor at mu (core.shading.brdf.multiscatter_factor);
  * with a textured Roughness rows 4k + 4 .. 4k + 7 the same four rows at roughness node
  * k / (n - 1), interpolated at the pixel's roughness (addon/gpu/lights.py slot_texels).
@@ -43,14 +43,10 @@
 
 #define NL 8
 #define NB 8
-#define TABLE 32
-/* most shadow-map taps per source and sample (addon/gpu/lights.py defines fewer filter taps
- * when each pixel has several samples) */
-#ifndef BLOCKER_TAPS
-#define BLOCKER_TAPS 16
-#endif
+/* shadow-map filter taps per source and sample: FILTER_TAPS (addon/gpu/lights.py), or fewer
+ * when each pixel has several samples; the blocker search takes BLOCKER_TAPS */
 #ifndef PCF_TAPS
-#define PCF_TAPS 24
+#define PCF_TAPS FILTER_TAPS
 #endif
 
 /* the roughness nodes the pixel lies between (nodeCount 1: the slot's own rows) */
@@ -83,7 +79,7 @@ float textured_alpha()
   vec3 c = input_colour(roughTex, vUv, vAttr, info, texelFetch(paramTex, ivec2(13, 0), 0).xyz,
                         texelFetch(paramTex, ivec2(14, 0), 0).xyz,
                         texelFetch(paramTex, ivec2(15, 0), 0));
-  float r = clamp(dot(c, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0);
+  float r = scalar_input(c);
   float x = r * float(n - 1);
   int k = min(int(x), n - 2);
   nodeCount = n;
@@ -101,13 +97,13 @@ vec4 source(int s, int i)
 
 vec3 table(int row, float mu)
 {
-  float x = clamp(mu, 0.0, 1.0) * float(TABLE - 1);
-  int i0 = min(int(x), TABLE - 2);
+  float x = clamp(mu, 0.0, 1.0) * float(TABLE_NODES - 1);
+  int i0 = min(int(x), TABLE_NODES - 2);
   return mix(param(i0, row).rgb, param(i0 + 1, row).rgb, x - float(i0));
 }
 
 /* a mapped normal: the smooth one (Cycles' sd->N); light below its horizon reaches no
- * closure (texture_lib.glsl bump_shadowing's side rule) */
+ * closure (texture.glsl bump_shadowing's side rule) */
 bool mappedN = false;
 vec3 smoothN = vec3(0.0, 0.0, 1.0);
 
@@ -184,7 +180,7 @@ vec2 step_tap(vec2 dir)
 /* taps for a disc of `radius` texels: about one per texel it covers, 4 to `most` */
 int tap_count(float radius, int most)
 {
-  return clamp(int(ceil(3.14159265 * radius * radius)), 4, most);
+  return clamp(int(ceil(PI * radius * radius)), 4, most);
 }
 
 /* depth at uv in [0, 1]^2 of a tile (origin x, y and size in texels of the atlas) */
@@ -224,7 +220,7 @@ float visibility(int s, vec3 p, vec3 ng, float radius, vec2 shift)
   float spread = 2.0 * tan(radius);                    /* penumbra per unit of distance */
   /* blocker search over the largest penumbra a blocker up to the light could cast */
   float search = clamp(z * depth_range * spread / texel, 1.0, 48.0);
-  vec2 turn = vec2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x));
+  vec2 turn = vec2(cos(2.0 * PI * shift.x), sin(2.0 * PI * shift.x));
   float blockers = 0.0, sum = 0.0;
   float uv_texel = 1.0 / tile.z;
   int nb = tap_count(search, BLOCKER_TAPS);
@@ -280,7 +276,7 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
    * k texel tan(incidence) nearer the lamp (grazing receivers must not shadow themselves) */
   float cos_l = max(dot(ng, -v / max(length(v), 1e-12)), 0.1);
   float slope = texel * sqrt(1.0 - cos_l * cos_l) / cos_l;
-  vec2 turn = vec2(cos(6.2831853 * shift.x), sin(6.2831853 * shift.x));
+  vec2 turn = vec2(cos(2.0 * PI * shift.x), sin(2.0 * PI * shift.x));
   float uv_texel = 1.0 / tile.z;
   float search = clamp(lamp_radius / texel, 1.0, 24.0);
   float blockers = 0.0, sum = 0.0;
@@ -444,10 +440,9 @@ void main()
 {
   float texAlpha = textured_alpha();
   float closedSide = param(9, 0).x;
-  if (closedSide > 1.5 && !gl_FrontFacing) discard;   /* a two-sided mesh: its other copy */
+  if (other_copy(closedSide)) discard;
   int sourceCount = textureSize(srcTex, 0).y;
-  bool inner = closedSide > 0.5 ? !gl_FrontFacing : (closedSide < -0.5 ? gl_FrontFacing : false);
-  if (inner || sourceCount == 0) {
+  if (inner_side(closedSide) || sourceCount == 0) {
     fragColor = vec4(0.0);
     return;
   }
@@ -473,15 +468,12 @@ void main()
   mappedN = mapped;
   smoothN = normalize(vNrm);
   vec4 eye = param(8, 0);
-  vec3 o = eye.w > 0.5 ? normalize(eye.xyz - vPos) : normalize(eye.xyz);
+  vec3 o = view_direction(eye, vPos);
   if (mapped && dot(ng, o) > 0.0) {
     n = valid_reflection_normal(ng, o, n);   /* Cycles' bump map correction: glossy only */
   }
-  float cos_o = dot(n, o);
-  if (cos_o < COS_VIEW_MIN) {
-    o = normalize(o + (COS_VIEW_MIN - cos_o) * n);
-  }
-  cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
+  o = bent_view(n, o);
+  float cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
   vec4 kd = param(0, 0);
 #ifdef ALBEDO_TEX
   if (texInfo.z > -0.5 && kd.w > 0.5) {          /* the slot's colour, per pixel / pi */
@@ -489,7 +481,7 @@ void main()
   }
 #endif
   vec4 lobe = param(1, 0);
-  float a = texAlpha > 0.0 ? texAlpha : max(lobe.x, 1e-4);
+  float a = texAlpha > 0.0 ? texAlpha : max(lobe.x, MICROFACET_ALPHA_MIN);
   int dist = int(lobe.y);
   int lobes = int(lobe.z);
 #ifdef GLOSSY
@@ -502,8 +494,7 @@ void main()
   float lam_o = smith_lambda(dist, a, cos_o);
   vec3 tx, ty;
   tangent_frame(n, tx, ty);
-  vec2 shift = fract(vec2(0.7548776662, 0.5698402910) *
-                     dot(floor(gl_FragCoord.xy), vec2(1.0, 61.0)));
+  vec2 shift = pixel_shift();
   vec3 color = vec3(0.0);
   for (int s = 0; s < sourceCount; s++) {
     vec4 s0 = source(s, 0);

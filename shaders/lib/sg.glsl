@@ -1,8 +1,9 @@
-/* Spherical-Gaussian helpers of Wang et al. 2009: functions only, no main.
+/* Spherical-Gaussian helpers of Wang et al. 2009: functions only, no main (after
+ * constants.glsl, common.glsl and microfacet.glsl: addon/gpu/shaders.py SG_LIBRARY).
  *
  * GLSL twin of core/sg/algebra.py (product eq. 5, inner product eq. 4 in the stable form),
  * core/sg/brdf.py (specular_lobes: NDF lobe -> spherical warp eq. 17-21 -> M_o at the
- * lobe centre eq. 22, Fresnel eq. 14) and core/sg/lighting.py
+ * lobe centre eq. 22, Fresnel eq. 14) and core/sg/prefilter.py
  * (PrefilteredEnvironment.lookup, eq. 34-35).  Every lobe is mu * exp(lam (dot(i, axis) - 1)).
  * tests/test_sg_brdf.py::test_glsl_matches_numpy renders these functions offscreen and
  * compares with numpy.
@@ -17,29 +18,12 @@
  *   ndf_lobes[k] = (axis in the local frame (t, b, n), lam), ndf_mu[k] = mu, k < n_ndf:
  *                                               the anisotropic fit of core.sg.brdf.ndf_lobes
  *                                               (unused by the isotropic models: n_ndf = 0).
+ * Its constants (SG_ALPHA_MIN, the NDF tables SG_CT_CLAM ..., SG_COS_MIN, ...) are in
+ * constants.glsl, generated from core.sg.ndf.
  * Prefiltered environment: one RGBA32F 2D texture (PrefilteredEnvironment.atlas()),
  * N texels wide, row (level * 6 + face) * N + row; read with texelFetch, bilinear within
  * a face (edge-clamped) and linear in log lam between levels, like the numpy lookup.
  */
-
-#define SG_MAX_LOBES 8
-#define SG_PI 3.14159265358979
-#define SG_ALPHA_MIN 0.005
-#define SG_COS_MIN 1e-4
-#define SG_COS_VIEW_MIN 1e-4
-#define SG_COS_MIN_SINGULAR 0.05
-#define SG_LAMBDA_MAX 1e5
-/* eq. 40's clamped-cosine SG (core.sg.algebra.clamped_cosine_sg) */
-#define SG_COSINE_LAMBDA 2.133
-#define SG_COSINE_MU 1.17
-
-/* NDF correction tables c_lam, c_mu on a = 0, 0.05, ..., 1 (core.sg.brdf.ISO_NDF_TABLE). */
-const float SG_CT_CLAM[21] = float[21](0.9999875, 0.998759, 0.9951434, 0.9894735, 0.9822715, 0.9742365, 0.9661932, 0.9590131, 0.9535198, 0.9504024, 0.9501555, 0.9530325, 0.9589624, 0.9674702, 0.9777121, 0.9886328, 0.9991382, 1.008208, 1.014945, 1.018575, 1.018442);
-const float SG_CT_CMU[21] = float[21](1.000009, 1.000942, 1.003824, 1.00881, 1.016176, 1.0263, 1.039642, 1.056713, 1.078028, 1.104056, 1.135187, 1.171698, 1.213695, 1.261066, 1.313499, 1.370577, 1.431874, 1.497024, 1.56574, 1.637814, 1.713104);
-const float SG_BP_CLAM[21] = float[21](0.9999875, 0.9987504, 0.9950063, 0.9887823, 0.9801036, 0.9690081, 0.9555488, 0.9397978, 0.9218516, 0.9018378, 0.8799089, 0.8561223, 0.830001, 0.7998931, 0.7626473, 0.7136991, 0.6471314, 0.5553527, 0.4281937, 0.250977, 3.368977e-05);
-const float SG_BP_CMU[21] = float[21](1.000003, 1.000313, 1.001261, 1.002869, 1.005181, 1.008263, 1.012208, 1.01714, 1.023227, 1.030694, 1.039831, 1.050948, 1.064152, 1.078992, 1.094267, 1.108047, 1.117649, 1.119314, 1.107412, 1.072862, 1.000034);
-const float SG_WARD_CLAM[21] = float[21](1.000038, 1.003747, 1.014944, 1.033472, 1.059136, 1.091688, 1.130836, 1.176271, 1.227673, 1.284734, 1.347164, 1.414696, 1.487091, 1.564131, 1.645614, 1.731344, 1.821123, 1.914752, 2.012031, 2.11276, 2.216747);
-const float SG_WARD_CMU[21] = float[21](1.000009, 1.000934, 1.003699, 1.008185, 1.014223, 1.0216, 1.03008, 1.039424, 1.049401, 1.059803, 1.070449, 1.081186, 1.091891, 1.102468, 1.112836, 1.122934, 1.132709, 1.142121, 1.151137, 1.159735, 1.167898);
 
 /* ---------------------------------------------------------------- SG algebra (core/sg/algebra.py) */
 
@@ -74,7 +58,7 @@ void sg_defect(vec3 p1, float l1, vec3 p2, float l2, out float dm, out float def
 /* Integral of G(.; p, lam, 1) over the sphere: 2 pi (1 - e^{-2 lam}) / lam. */
 float sg_integral(float lam)
 {
-  return 2.0 * SG_PI * sg_one_minus_exp2_over(lam);
+  return 2.0 * PI * sg_one_minus_exp2_over(lam);
 }
 
 /* Eq. 4 with unit amplitudes: 4 pi e^{-(l1+l2)} sinh(d_m)/d_m, stable for lam up to 1e5
@@ -84,7 +68,7 @@ float sg_inner_product(vec3 p1, float l1, vec3 p2, float l2)
   float dm, defect;
   vec3 dvec;
   sg_defect(p1, l1, p2, l2, dm, defect, dvec);
-  return 2.0 * SG_PI * exp(-defect) * sg_one_minus_exp2_over(dm);
+  return 2.0 * PI * exp(-defect) * sg_one_minus_exp2_over(dm);
 }
 
 /* Eq. 5: G1 G2 = G(.; d/|d|, |d|, mu1 mu2 exp(|d| - l1 - l2)), d = l1 p1 + l2 p2.
@@ -101,10 +85,11 @@ float sg_product(vec3 p1, float l1, vec3 p2, float l2, out vec3 axis, out float 
 
 /* ---------------------------------------------------------------- BRDF (core/sg/brdf.py) */
 
-float sg_table(float table[21], float a)
+/* linear between the table's nodes a = i / (SG_TABLE_NODES - 1) (core.sg.ndf.ISO_TABLE_ALPHA) */
+float sg_table(float table[SG_TABLE_NODES], float a)
 {
-  float x = clamp(a, 0.0, 1.0) * 20.0;
-  int i = min(int(x), 19);
+  float x = clamp(a, 0.0, 1.0) * float(SG_TABLE_NODES - 1);
+  int i = min(int(x), SG_TABLE_NODES - 2);
   float t = x - float(i);
   return (1.0 - t) * table[i] + t * table[i + 1];
 }
@@ -126,25 +111,12 @@ void sg_iso_ndf(int model, float roughness, out float lam, out float mu)
     cl = sg_table(SG_WARD_CLAM, a);
     cm = sg_table(SG_WARD_CMU, a);
   }
-  lam = max(cl * 2.0 / (a * a), 1e-4);
-  mu = cm / (SG_PI * a * a);
+  lam = max(cl * 2.0 / (a * a), SG_LAMBDA_MIN);
+  mu = cm / (PI * a * a);
 }
 
-/* Eq. 14 (Cook-Torrance Fresnel), c = |i.h|, eta the relative IOR. */
-float sg_fresnel_eq14(float c, float eta)
-{
-  c = abs(c);
-  float g2 = eta * eta + c * c - 1.0;
-  if (g2 <= 0.0) {
-    return 1.0;
-  }
-  float g = sqrt(g2);
-  float a = (g - c) / (g + c);
-  float b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
-  return 0.5 * a * a * (1.0 + b * b);
-}
-
-/* ks F(c) = A + B_d F_eq14(c, eta) + B_s (1 - c)^5 (core.sg.brdf.fresnel_coefficients). */
+/* ks F(c) = A + B_d F_eq14(c, eta) + B_s (1 - c)^5 (core.sg.brdf.fresnel_coefficients); eq. 14
+ * is the Cook-Torrance dielectric Fresnel, microfacet.glsl's fresnel_dielectric. */
 vec3 sg_fresnel(int mode, float c, float eta, vec3 ks, float metallic, vec3 base)
 {
   c = clamp(c, 0.0, 1.0);
@@ -155,7 +127,7 @@ vec3 sg_fresnel(int mode, float c, float eta, vec3 ks, float metallic, vec3 base
   if (mode == 1) {
     return ks + (1.0 - ks) * s5;
   }
-  float fd = sg_fresnel_eq14(c, eta);
+  float fd = fresnel_dielectric(c, eta);
   if (mode == 2) {
     return ks * fd;
   }
@@ -168,28 +140,16 @@ vec3 sg_fresnel(int mode, float c, float eta, vec3 ks, float metallic, vec3 base
   return max(A + Bd * fd + Bs * s5, vec3(0.0));
 }
 
-/* Cycles' rational Beckmann Smith Lambda (core.shading.brdf.smith_lambda), a2 = alpha^2. */
-float sg_beckmann_lambda(float a2, float c)
-{
-  c = clamp(c, 1e-12, 1.0);
-  float t2 = a2 * max(1.0 / (c * c) - 1.0, 0.0);
-  if (t2 < 0.39) {
-    return 0.0;
-  }
-  float a = 1.0 / sqrt(t2);
-  return ((0.396 * a - 1.259) * a + 1.0) / ((2.181 * a + 3.535) * a);
-}
-
-/* M_o(i) without Fresnel (core.sg.brdf._m_factor). */
+/* M_o(i) without Fresnel (core.sg.brdf._m_factor): Cook-Torrance and Blinn-Phong take
+ * Cycles' Beckmann Smith Lambda (microfacet.glsl smith_lambda). */
 float sg_m_factor(int model, float roughness, float cos_i, float cos_o, float h_dot_i)
 {
   if (model <= 1) {
     float ci = max(cos_i, SG_COS_MIN);
     float co = max(cos_o, SG_COS_MIN);
     float a = max(roughness, SG_ALPHA_MIN);
-    float a2 = a * a;
-    float li = sg_beckmann_lambda(a2, ci);
-    float lo = sg_beckmann_lambda(a2, co);
+    float li = smith_lambda(0, a, ci);
+    float lo = smith_lambda(0, a, co);
     return 1.0 / ((1.0 + li + lo) * 4.0 * ci * co);
   }
   float ci = max(cos_i, SG_COS_MIN_SINGULAR);
@@ -210,10 +170,8 @@ void sg_frame(vec3 n, vec3 t_in, out vec3 t, out vec3 b)
     t = t0 / len_t;
   }
   else {
-    float sgn = n.z >= 0.0 ? 1.0 : -1.0;
-    float a = -1.0 / (sgn + n.z);
-    float bb = n.x * n.y * a;
-    t = vec3(1.0 + sgn * n.x * n.x * a, sgn * bb, -sgn * n.x);
+    vec3 unused;
+    tangent_frame(n, t, unused);
   }
   b = cross(n, t);
 }
@@ -233,11 +191,8 @@ int specular_lobes(vec4 sgm0, vec4 sgm1, vec4 sgm2, vec3 n, vec3 o, vec3 t_in,
   vec3 t, b;
   sg_frame(n, t_in, t, b);
   int K = model <= 2 ? 1 : min(n_ndf, SG_MAX_LOBES);
+  o = bent_view(n, o);                           /* views below the horizon bent up */
   float cos_o = dot(n, o);
-  if (cos_o < SG_COS_VIEW_MIN) {                   /* bend views below the horizon */
-    o = normalize(o + (SG_COS_VIEW_MIN - cos_o) * n);
-    cos_o = dot(n, o);
-  }
   for (int k = 0; k < SG_MAX_LOBES; k++) {
     axes[k] = n;
     lams[k] = 1.0;
@@ -319,14 +274,14 @@ vec3 sg_atlas_bilinear(sampler2D atlas, int N, int level, int face, float s, flo
 
 /* PrefilteredEnvironment.lookup: kernel-weighted mean radiance around dir (texture space:
  * rotate world directions by the world's R first) for sharpness lam.  N: texels per face
- * edge, n_levels: levels in the atlas, lam1: lambdas[1], log_ratio: log(ratio) of the ladder.
- * The inner product of eq. 35 is mu * sg_integral(lam) * prefiltered_lookup(...). */
+ * edge, n_levels: levels in the atlas, lam1: lambdas[1], log_ratio: log(ratio) of the ladder,
+ * top: lambdas[-2] (the last finite level).  The inner product of eq. 35 is
+ * mu * sg_integral(lam) * prefiltered_lookup(...). */
 vec3 prefiltered_lookup(sampler2D atlas, vec3 dir, float lam, int N, int n_levels, float lam1,
-                        float log_ratio)
+                        float log_ratio, float top)
 {
   lam = max(lam, 0.0);
   int nf = n_levels - 2;
-  float top = lam1 * exp(log_ratio * float(nf - 1));
   float x;
   if (lam < lam1) {
     x = lam / lam1;
@@ -345,11 +300,4 @@ vec3 prefiltered_lookup(sampler2D atlas, vec3 dir, float lam, int N, int n_level
   sg_face_coordinates(dir, face, s, t);
   return sg_atlas_bilinear(atlas, N, l0, face, s, t) * (1.0 - f) +
          sg_atlas_bilinear(atlas, N, l1, face, s, t) * f;
-}
-
-/* Eq. 35: G(i; p, lam, mu) . L. */
-vec3 sg_environment_inner_product(sampler2D atlas, vec3 p, float lam, vec3 mu, int N,
-                                  int n_levels, float lam1, float log_ratio)
-{
-  return mu * sg_integral(lam) * prefiltered_lookup(atlas, p, lam, N, n_levels, lam1, log_ratio);
 }
