@@ -174,7 +174,9 @@ def child(spec: str, args) -> dict:
     before = os.path.getsize(tmp / "before.blend")
     out["setup_rss"] = _memory()["VmRSS"]
 
-    # precompute: REFERENCE (the default), gather/run/commit as the operator's execute
+    # precompute: REFERENCE (the default), gather/run/commit as the operator's execute; the
+    # direct light's first (bounces 0: today's figures), the bounces' at the end
+    scene.cycles.max_bounces = 0
     _reset_peak()
     t = scenes.precompute(32)
     out.update(points=t["points"], precompute_s=t["total"], rays_s=t["rays"],
@@ -216,6 +218,52 @@ def child(spec: str, args) -> dict:
         out["f12_s"]["AUTO"] = scenes.render_prt(tmp / "frame.exr")
         out["f12_peak"]["AUTO"] = _peak()
         out["auto_first_f12_s"] = out["auto_choice_s"] + out["f12_s"]["AUTO"]
+    out.update(_bounces(scene, tmp, before))
+    return out
+
+
+def _turn_world(scene, angle: float):
+    """Turn the World's Environment Texture about Z by ``angle`` more (a Mapping node)."""
+    nt = scene.world.node_tree
+    mapping = next((n for n in nt.nodes if n.type == "MAPPING"), None)
+    if mapping is None:
+        env = next(n for n in nt.nodes if n.type == "TEX_ENVIRONMENT")
+        coord = nt.nodes.new("ShaderNodeTexCoord")
+        mapping = nt.nodes.new("ShaderNodeMapping")
+        nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+        nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    mapping.inputs["Rotation"].default_value[2] += angle
+
+
+def _bounces(scene, tmp, before) -> dict:
+    """Issue 29's scale figures: REFERENCE's precompute with Cycles' default Light Paths
+    (4 diffuse bounces) against the direct one, its stored bytes per point, the peak, and
+    a relit F12 (the world turned) with the bounce against the same frame without."""
+    import bpy
+    from prt_relight.addon.blender import storage
+    out = {}
+    scene.prt.method = "REFERENCE"
+    relit = {}
+    for bounces in (0, 4):
+        scene.cycles.max_bounces = 12 if bounces else 0
+        scene.cycles.diffuse_bounces = max(bounces, 1)
+        _reset_peak()
+        t = scenes.precompute(32)
+        out[f"precompute_b{bounces}_s"] = t["total"]
+        out[f"precompute_b{bounces}_peak"] = _peak()
+        scenes.render_prt(tmp / "frame.exr")                  # the first frame's caches
+        _turn_world(scene, 0.4)
+        relit[bounces] = scenes.render_prt(tmp / "frame.exr")
+    points = t["points"]
+    out["bounce_bytes_per_point"] = sum(
+        storage.stored_bytes(o, storage.BOUNCE) for o in bpy.data.objects) / points
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "bounce.blend"), copy=True)
+    out["bounce_blend_bytes_per_point"] = (os.path.getsize(tmp / "bounce.blend") - before) \
+        / points
+    out["precompute_bounce_ratio"] = out["precompute_b4_s"] / out["precompute_b0_s"]
+    out["relit_f12_b0_s"], out["relit_f12_b4_s"] = relit[0], relit[4]
+    out["relit_f12_bounce_ratio"] = relit[4] / relit[0]
+    scene.cycles.max_bounces = 0
     return out
 
 
@@ -302,6 +350,11 @@ def table(results, methods) -> str:
             _mib(r["f12_peak"].get(m, 0)))
     col("largest peak MiB (any step)", lambda r: _mib(r["peak"]))
     col("ESC to stop s (REFERENCE F12)", lambda r: f"{r['esc_s']:.2f}")
+    col("bounces: precompute / direct's", lambda r: f"{r['precompute_bounce_ratio']:.2f}")
+    col("bounces: peak MiB", lambda r: _mib(r["precompute_b4_peak"]))
+    col("bounces: stored B/point", lambda r: f"{r['bounce_bytes_per_point']:.1f}")
+    col("bounces: .blend B/point (all)", lambda r: f"{r['bounce_blend_bytes_per_point']:.1f}")
+    col("bounces: relit F12 / direct's", lambda r: f"{r['relit_f12_bounce_ratio']:.2f}")
     col("progress updates before ESC", lambda r: f"{r['esc_progress_updates']}")
     width = max(len(n) for n, _ in rows)
     cw = max(10, max(len(v) for _, vs in rows for v in vs) + 1)

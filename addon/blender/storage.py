@@ -23,7 +23,7 @@ import bpy
 
 from ...core.common import codec
 from ..frame import keys
-from ...core.store.layouts import SHADOW_FIELD, VISIBILITY  # noqa: F401  (the blob names)
+from ...core.store.layouts import BOUNCE, SHADOW_FIELD, VISIBILITY  # noqa: F401  (the blob names)
 
 STORE = "prt_store"
 #: blob that cannot be read (damaged, or written by a newer prt_relight)

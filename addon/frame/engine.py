@@ -64,6 +64,21 @@ def _batches(state: FrameState, radiance_per_object):
     return batches, draws
 
 
+def _bounce_draws(state: FrameState, eye, view_dir):
+    """A per-pixel method's bounced light, per corner, added onto its frame (a per-vertex
+    method's is in its radiance already: ``FrameState.shade``)."""
+    plain, white = state.bounced_radiance(eye, view_dir)
+    draws = []
+    for st, rad, unit in zip(state.objects, plain, white):
+        if rad is None:
+            continue
+        positions = st.arrays.positions[st.arrays.corner_verts]
+        draws += drawing.textured_draws(
+            positions, TexturedRadiance.of(rad, unit, np.zeros_like(rad)), st.arrays.triangles,
+            st.closed_side, st.textures, st.arrays.corner_materials, added=True)
+    return draws
+
+
 def _eye(view_matrix, is_perspective: bool):
     """(eye, None) for a perspective view, (None, unit direction toward the viewer) for
     an orthographic one: the view's +Z axis in world space."""
@@ -133,6 +148,8 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
     added = (sharp.draws(state, eye, view_dir, background)
              + lights.draws(state, eye, view_dir, s)) if eye is not None or view_dir is not None \
         else []
+    if object_draws is not None and state.bounce is not None:
+        added += _bounce_draws(state, eye, view_dir)
     big = drawing.render_offscreen(batches, background, projection @ view,
                                    width * s, height * s, transparent,
                                    object_draws=list(object_draws or ()) + textured,

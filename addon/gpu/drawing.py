@@ -102,14 +102,15 @@ def redraw_viewports(self=None, context=None):
                 area.tag_redraw()
 
 
-def surface_shader():
-    """Per-vertex radiance (shaders/passes/surface_*.glsl)."""
-    return shaders.shader("surface")
+def surface_shader(added: bool = False):
+    """Per-vertex radiance (shaders/passes/surface_*.glsl); ``added``: its variant drawn
+    onto a frame (alpha 0)."""
+    return shaders.shader("surface", ("ADDED",) if added else ())
 
 
-def textured_shader():
+def textured_shader(added: bool = False):
     """Per-vertex radiance times a per-pixel colour (shaders/passes/surface_tex_*.glsl)."""
-    return shaders.shader("surface_tex")
+    return shaders.shader("surface_tex", ("ADDED",) if added else ())
 
 
 # GPU textures of colour inputs, per image content (keys.image_key), and "white"
@@ -156,10 +157,12 @@ def white_texture():
     return tex
 
 
-def textured_draws(positions, radiance, triangles, closed_side, textures, corner_slots):
+def textured_draws(positions, radiance, triangles, closed_side, textures, corner_slots,
+                   added: bool = False):
     """Draw callables of an object whose radiance is an ``addon.frame.state.TexturedRadiance``:
     per textured slot a batch multiplying ``radiance.diffuse`` by the slot's colour per
-    pixel (plus ``radiance.specular``); the other slots as plain radiance."""
+    pixel (plus ``radiance.specular``); the other slots as plain radiance.  ``added``:
+    drawn onto a frame already drawn (alpha 0; the caller sets the blending)."""
     tri_slot = corner_slots[triangles[:, 0]]
     draws = []
     rest = ~np.isin(tri_slot, list(textures))
@@ -167,7 +170,7 @@ def textured_draws(positions, radiance, triangles, closed_side, textures, corner
         plain = surface_batch(positions, radiance, triangles[rest], closed_side)
 
         def draw_plain(view_projection, batch=plain):
-            sh = surface_shader()
+            sh = surface_shader(added)
             sh.bind()
             sh.uniform_float("viewProjection", view_projection)
             batch.draw(sh)
@@ -196,7 +199,7 @@ def textured_draws(positions, radiance, triangles, closed_side, textures, corner
         uniforms = source_uniforms(source)
 
         def draw_textured(view_projection, batch=batch, tex=tex, uniforms=uniforms):
-            sh = textured_shader()
+            sh = textured_shader(added)
             sh.bind()
             sh.uniform_float("viewProjection", view_projection)
             for name, value in uniforms.items():

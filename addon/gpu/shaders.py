@@ -71,7 +71,9 @@ SPECS: dict[str, Spec] = {
     "surface": Spec(
         vertex=("passes/surface_vert.glsl",), fragment=_COMMON + ("passes/surface_frag.glsl",),
         push_constants=_VIEW, vertex_inputs=(("VEC3", "pos"), ("VEC4", "radiance")),
-        varyings=(("smooth", "VEC4", "vRadiance"),)),
+        varyings=(("smooth", "VEC4", "vRadiance"),),
+        # added onto a frame already drawn (a per-pixel method's bounced light): alpha 0
+        switches=("ADDED",)),
     # per-vertex radiance times a slot's colour per pixel (drawing.textured_draws)
     "surface_tex": Spec(
         vertex=("passes/surface_tex_vert.glsl",),
@@ -80,7 +82,8 @@ SPECS: dict[str, Spec] = {
         vertex_inputs=(("VEC3", "pos"), ("VEC4", "diffuse"), ("VEC3", "specular"),
                        ("VEC2", "uv"), ("VEC4", "attr")),
         varyings=(("smooth", "VEC4", "vDiffuse"), ("smooth", "VEC3", "vSpecular"),
-                  ("smooth", "VEC2", "vUv"), ("smooth", "VEC4", "vAttr"))),
+                  ("smooth", "VEC2", "vUv"), ("smooth", "VEC4", "vAttr")),
+        switches=("ADDED",)),
     # the world behind the objects
     "background": Spec(
         vertex=("passes/background_vert.glsl",),

@@ -188,7 +188,8 @@ class PrecomputeJob:
             patches.centroids, patches.normals, patches.areas,
             max(1, count // clusters.POINTS_PER_CLUSTER))
         hits = transfer.HitMap.of_meshes([o.arrays for o in static], patches, cluster_of)
-        rows = transfer.TransferRows(count, k, hits, cube)
+        inner = np.concatenate([core_mesh.point_interiors(o.arrays, o.points) for o in static])
+        rows = transfer.TransferRows(count, k, hits, cube, inner=inner)
         rows.patches, rows.cluster_of, rows.cell = patches, cluster_of, cell
         return rows
 

@@ -137,6 +137,18 @@ def point_areas(mesh: MeshArrays, points: "ShadingPoints") -> np.ndarray:
                        minlength=points.count)
 
 
+def point_interiors(mesh: MeshArrays, points: "ShadingPoints") -> np.ndarray:
+    """(P, 3) a point inside each shading point's own surface: the mean of the centroids of
+    the triangles it is a corner of (off the point's creases, on its side of them)."""
+    cen = mesh.triangle_positions.mean(axis=1)
+    pts = points.point_of_corner[mesh.triangles]             # (T, 3)
+    acc = np.zeros((points.count, 3))
+    for k in range(3):
+        np.add.at(acc, pts[:, k], cen)
+    count = np.bincount(pts.reshape(-1), minlength=points.count)
+    return np.where(count[:, None] > 0, acc / np.maximum(count, 1)[:, None], points.positions)
+
+
 def closed_side(mesh: MeshArrays) -> int:
     """How back faces are seen: 0 for an open mesh; for a closed one (every edge shared
     by exactly two triangles that traverse it in opposite directions) +1 when its

@@ -254,9 +254,9 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
     ``origins`` (P, 3): where each point's rays start (default :func:`ray_origins`).
     ``hits(start, stop, blocked, prim)``, when given, receives what each chunk's rays
     hit: ``blocked`` (n, D) the texels whose ray is blocked, ``prim`` (n, D) the triangle
-    the blocked rays of :func:`hit_texels` hit first, -2 where that hit grazes a surface
-    the point touches (within four steps), else -1 (:mod:`..transport.transfer` builds
-    the bounce from them).
+    the blocked rays of :func:`hit_texels` hit first (``-3 - triangle`` when the hit is
+    within four steps: a surface the point touches), else -1 (:mod:`..transport.transfer`
+    builds the bounce from them).
     """
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     nrm = np.ascontiguousarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -296,11 +296,13 @@ def trace_visibility(scene, points: np.ndarray, normals: np.ndarray, cube: Cubem
                                   np.ascontiguousarray(rays[pick]), query="INTERSECT",
                                   output=1)
                 got = np.asarray(found["primID"], np.int32)
-                # a hit within a few steps of the origin grazes a surface the point
-                # touches (a room's corner): which side it reads is not known, -2
+                # a hit within a few steps of the origin is on a surface the point touches
+                # (a crease): its side is the one the point's own surface lies on, which
+                # the ray's direction does not tell -- marked -3 - triangle
                 near = np.asarray(found["tfar"]) < 4.0 * np.repeat(
                     ray_step(pts[start:stop], offset), nearest.sum(axis=1))
-                got[near & (got >= 0)] = -2
+                near &= got >= 0
+                got[near] = -3 - got[near]
                 prim[nearest] = got
             hits(start, stop, mask, prim)
             np.logical_xor(traced, mask, out=mask)    # visible: traced and not blocked

@@ -87,6 +87,8 @@ class HitMap:
     front: np.ndarray            # (T,) int64
     back: np.ndarray             # (T,) int64
     normal: np.ndarray           # (T, 3) float32
+    #: (T, 3) a corner of each triangle (a point of its plane)
+    corner: np.ndarray = None
 
     @classmethod
     def of_meshes(cls, meshes, patches: Patches, cluster_of_patch: np.ndarray):
@@ -94,7 +96,7 @@ class HitMap:
         (``core.scene.mesh.occluder_index`` of each), their sides' clusters given per
         patch of ``patches``."""
         from ..scene.mesh import occluder_index
-        front, back, normal = [], [], []
+        front, back, normal, corner = [], [], [], []
         cl = np.asarray(cluster_of_patch, np.int64)
         for i, arrays in enumerate(meshes):
             t = occluder_index(arrays)
@@ -108,9 +110,10 @@ class HitMap:
             turn = np.einsum("ij,ij->i", g, arrays.corner_normals[tri].sum(axis=1)) < 0.0
             g[turn] *= -1.0
             normal.append(g.astype(np.float32))
+            corner.append(tp[:, 0])
         cat = (lambda xs, shape, dtype: np.concatenate(xs) if xs else np.zeros(shape, dtype))
         return cls(cat(front, (0,), np.int64), cat(back, (0,), np.int64),
-                   cat(normal, (0, 3), np.float32))
+                   cat(normal, (0, 3), np.float32), cat(corner, (0, 3), np.float64))
 
 
 def top_entries(acc: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -157,7 +160,7 @@ class TransferRows:
     each chunk writes its own rows)."""
 
     def __init__(self, count: int, clusters: int, hits: HitMap, cube,
-                 width: int = ROW_WIDTH):
+                 width: int = ROW_WIDTH, inner: np.ndarray | None = None):
         self.clusters = int(clusters)
         self.hits = hits
         self.dirs = np.asarray(cube.directions, np.float64)
@@ -166,6 +169,9 @@ class TransferRows:
         #: (3, D) float32 texel directions times their solid angles: ``n . w dw``
         self.dirs_solid = np.ascontiguousarray((self.dirs * self.solid[:, None]).T, np.float32)
         self.width = int(width)
+        #: (count, 3) a point inside each receiver's own surface (its triangles' centroids
+        #: averaged): which side of a touching surface the receiver is on
+        self.inner = inner
         self.columns = np.zeros((count, self.width), np.int32)
         self.weights = np.zeros((count, self.width), np.float32)
 
@@ -173,25 +179,34 @@ class TransferRows:
             prim: np.ndarray):
         """Rows ``start:stop`` from their traced rays: ``blocked`` (n, D) the texels whose
         ray is blocked, ``prim`` (n, D) the occluder triangle the blocked rays of the hit
-        texels (``core.scene.visibility.hit_texels``) hit first (-1: not traced, -2: a
-        graze of a touching surface, side unknown).  The hits stand for every blocked ray
-        of their receiver: scaled by all its blocked rays' ``cos dw`` over the hits' (a
-        ratio estimate: a row's sum stays the blocked share)."""
+        texels (``core.scene.visibility.hit_texels``) hit first (-1: not traced; ``-3 -
+        triangle``: a surface the receiver touches, read on the side its own surface lies
+        on).  The hits stand for every blocked ray of their receiver: scaled by all its
+        blocked rays' ``cos dw`` over the hits' (a ratio estimate: a row's sum stays the
+        blocked share)."""
         n = stop - start
         nrm = np.asarray(normals, np.float32).reshape(-1, 3)
         cosw = nrm @ self.dirs_solid                                   # (n, D) cos dw
         np.maximum(cosw, 0.0, out=cosw)
         cosw[~blocked] = 0.0                                           # blocked rays only
         full = cosw.sum(axis=1, dtype=np.float64)
-        part = np.where(prim >= 0, cosw, 0.0).sum(axis=1, dtype=np.float64)
+        found = (prim >= 0) | (prim <= -3)
+        part = np.where(found, cosw, 0.0).sum(axis=1, dtype=np.float64)
         scale = np.where(part > 0.0, full / np.maximum(part, 1e-300), 0.0)
-        i, k = np.nonzero(prim >= 0)
+        i, k = np.nonzero(found)
         if len(i) == 0 or self.clusters == 0:
             self.columns[start:stop] = 0
             self.weights[start:stop] = 0.0
             return
         t = prim[i, k].astype(np.int64)
+        touching = t <= -3
+        t = np.where(touching, -3 - t, t)
         front = np.einsum("ij,ij->i", self.dirs[k], self.hits.normal[t]) < 0.0
+        if touching.any() and self.inner is not None:
+            # a touching surface's side is the one the receiver's own surface lies on
+            j = np.nonzero(touching)[0]
+            front[j] = np.einsum("ij,ij->i", self.inner[start + i[j]] - self.hits.corner[t[j]],
+                                 self.hits.normal[t[j]]) > 0.0
         m = np.where(front, self.hits.front[t], self.hits.back[t])
         ok = m >= 0
         i, m, w = i[ok], m[ok], (cosw[i, k].astype(np.float64) * scale[i])[ok]

@@ -1,1 +1,0 @@
-"""Blender-free tests of core/, one folder per core package."""

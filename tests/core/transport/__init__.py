@@ -1,1 +1,0 @@
-"""core/transport: gather clusters, transfer rows, the frame's bounce."""
