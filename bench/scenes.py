@@ -40,12 +40,16 @@ def load_addon():
     return mod
 
 
-def reset():
-    """An empty scene (factory settings) with the add-on registered."""
+def reset(bounces: int = 0):
+    """An empty scene (factory settings) with the add-on registered; its Cycles Light Paths
+    allow ``bounces`` diffuse bounces (0: direct light, what most benches compare)."""
     import bpy
     bpy.ops.wm.read_factory_settings(use_empty=True)
     load_addon()
-    return bpy.context.scene
+    scene = bpy.context.scene
+    scene.cycles.max_bounces = 12 if bounces else 0
+    scene.cycles.diffuse_bounces = max(int(bounces), 1)
+    return scene
 
 
 # ------------------------------------------------------------------ world

@@ -19,9 +19,14 @@ def hdri_path(name: str = "sunset") -> str:
     return bpy.utils.system_resource("DATAFILES", path="studiolights/world") + f"/{name}.exr"
 
 
-def reset():
+def reset(bounces: int = 0):
+    """An empty scene whose Cycles Light Paths allow ``bounces`` diffuse bounces (0: the
+    direct light most tests compare with Cycles' ``max_bounces = 0``)."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    return bpy.context.scene
+    scene = bpy.context.scene
+    scene.cycles.max_bounces = 12 if bounces else 0
+    scene.cycles.diffuse_bounces = max(int(bounces), 1)
+    return scene
 
 
 def add_world(image=None, strength=1.0, rotation_z=0.0, path=None):

@@ -111,21 +111,21 @@ def _read_exr_pixels(path) -> np.ndarray:
 
 
 def render_cycles(scene, path, samples: int) -> np.ndarray:
-    """Direct-light Cycles render of the scene camera (film transparent), saved to
-    ``path`` (EXR); the scene's render settings are put back afterwards."""
+    """Cycles render of the scene camera (film transparent) with the scene's own Light Paths
+    (0 bounces: direct light), what our frames draw too; saved to ``path`` (EXR); the
+    scene's render settings are put back afterwards."""
     r = scene.render
     cy = scene.cycles
     saved_r = {k: getattr(r, k) for k in ("engine", "film_transparent")}
     saved_fmt = {k: getattr(r.image_settings, k) for k in ("file_format", "color_depth",
                                                            "color_mode")}
-    saved_c = {k: getattr(cy, k) for k in ("device", "samples", "max_bounces", "use_denoising",
+    saved_c = {k: getattr(cy, k) for k in ("device", "samples", "use_denoising",
                                            "use_adaptive_sampling", "seed")}
     try:
         r.engine = "CYCLES"
         r.film_transparent = True
         cy.device = "CPU"
         cy.samples = int(samples)
-        cy.max_bounces = 0
         cy.use_denoising = False
         cy.use_adaptive_sampling = False
         cy.seed = 0
