@@ -161,6 +161,7 @@ def test_turning_an_object_turns_its_self_shadowing_without_recompute(registered
     from prt_relight.addon.frame.state import FrameState
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
+    scene.cycles.max_bounces = 0          # direct light: the stale turn draws no bounce
     bpy.ops.mesh.primitive_monkey_add()
     monkey = bpy.context.active_object                  # flat shaded: split normals
     world = bpy.data.worlds.new("W")
