@@ -24,27 +24,6 @@ ALBEDO = 0.8
 
 # --------------------------------------------------------------------------- core
 
-def test_core_srgb_128_is_0_21586_and_non_color_is_identity():
-    px = np.full((2, 4, 3), GREY, np.float32)
-    lin = envmap.to_working_space(px, "sRGB")
-    np.testing.assert_allclose(lin, 0.21586, atol=2e-5)
-    np.testing.assert_allclose(lin, GREY_LINEAR, rtol=1e-6)
-    np.testing.assert_array_equal(envmap.to_working_space(px, "Non-Color"), px)
-    np.testing.assert_array_equal(envmap.to_working_space(px, "Linear Rec.709"), px)
-    np.testing.assert_array_equal(envmap.to_working_space(px, "Filmic sRGB", is_data=True), px)
-    # The curve's linear toe, its knee and values past 1 (float images).
-    c = np.array([0.0, 0.04045, 0.5, 1.0, 2.0], np.float32)
-    want = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-    np.testing.assert_allclose(envmap.srgb_to_linear(c), want, rtol=1e-6)
-
-
-def test_core_other_spaces_without_a_config_are_refused_by_name():
-    px = np.full((2, 4, 3), 0.5, np.float32)
-    with pytest.raises(envmap.EnvironmentError_, match="'Filmic sRGB'"):
-        envmap.to_working_space(px, "Filmic sRGB", config_path=None)
-    with pytest.raises(envmap.EnvironmentError_, match="'sRGB'"):     # sRGB into Rec.2020
-        envmap.to_working_space(px, "sRGB", "Linear Rec.2020", config_path=None)
-
 
 @pytest.mark.skipif(not envmap.have_opencolorio(), reason="OpenImageIO without OpenColorIO")
 def test_core_blender_config_converts_like_blender_float_images(tmp_path):

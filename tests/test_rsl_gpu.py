@@ -16,7 +16,7 @@ from prt_relight.core.methods.rsl import shading as rsl
 from prt_relight.core.scene import distance_tables
 from prt_relight.core.methods.rsl import square_lights  # noqa: E402
 
-from .test_rsl import _scene, _sky_with_sun  # noqa: E402
+from .core.methods.rsl.scenes import occluded_grid as _scene, sky_with_sun as _sky_with_sun  # noqa: E402
 
 CUBE = directions.cubemap(32)
 

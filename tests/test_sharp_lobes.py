@@ -22,64 +22,6 @@ METHODS = ["REFERENCE", "SSDF_SG", "RSL", "BLOCKS", "SH", "WAVELET", "AUTO"]
 
 # --------------------------------------------------------------------------- core
 
-def test_sharp_lobes_are_those_the_cubemap_cannot_resolve():
-    mirror = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.0)
-    assert brdf.is_sharp(mirror, 32) and brdf.is_sharp(mirror, 128)
-    rough = materials.principled_material(roughness=0.5)
-    assert not brdf.is_sharp(rough, 32)
-    # the limit shrinks with the texels: roughness 0.12 is sharp at 32 and 64, not 128
-    mid = materials.principled_material(roughness=0.12)
-    assert [brdf.is_sharp(mid, n) for n in (32, 64, 128)] == [True, True, False]
-    assert not brdf.is_sharp(materials.Material(diffuse_albedo=(0.5, 0.5, 0.5)), 32)
-
-
-def test_a_per_pixel_lobe_leaves_only_the_layered_lambert_base():
-    """Every per-vertex evaluation skips the lobes; the Principled base keeps Cycles'
-    layering weight (the dielectric layer above it is still there, drawn per pixel)."""
-    m = materials.principled_material(roughness=0.05, metallic=0.25)
-    flagged = brdf.with_sharp_lobe(m, 32)
-    assert flagged.per_pixel_lobe and flagged.is_diffuse_only and not m.is_diffuse_only
-    n = np.array([[0.0, 0.0, 1.0]] * 3)
-    v = np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [0.0, 0.96, 0.28]])
-    d = np.array([[0.0, 0.0, 1.0], [0.0, -0.6, 0.8]])
-    assert brdf.specular_terms(flagged, n, v, d) == []
-    np.testing.assert_array_equal(brdf.diffuse_view_weight(flagged, n, v),
-                                  brdf.diffuse_view_weight(m, n, v))
-    lobes = brdf.sharp_lobes(flagged)
-    kinds = sorted((k, round(w, 6)) for k, w, *_ in lobes)
-    assert kinds == [(brdf.SHARP_DIELECTRIC, 0.75), (brdf.SHARP_F82, 0.25)]
-
-
-def _energy(level):
-    h = level.shape[0]
-    edges = np.cos(np.linspace(0.0, np.pi, h + 1))
-    band = (edges[:-1] - edges[1:]) * (2.0 * np.pi / level.shape[1])
-    return np.einsum("h,hwc->c", band, level.astype(np.float64))
-
-
-def _levels(atlas, sizes):
-    row = 0
-    for h, w in sizes:
-        yield atlas[row:row + h, :w, :3]
-        row += h
-
-
-def test_mip_atlas_keeps_each_levels_energy():
-    rng = np.random.default_rng(3)
-    img = rng.random((64, 128, 3)).astype(np.float32) ** 4 * 10.0      # peaky
-    sizes = envmap.equirect_mip_sizes(*img.shape[:2])
-    atlas = envmap.equirect_mip_atlas(img)
-    assert atlas.shape == (sum(h for h, _ in sizes), sizes[0][1], 4)
-    assert sizes[-1][1] == 4
-    for level in _levels(atlas, sizes):
-        np.testing.assert_allclose(_energy(level), _energy(img), rtol=1e-6)
-    odd = envmap.equirect_mip_atlas(img[:37, :70])          # odd sizes: shapes, finite
-    assert odd.shape[0] == sum(h for h, _ in envmap.equirect_mip_sizes(37, 70))
-    assert np.isfinite(odd).all() and odd.min() >= 0.0
-    constant = envmap.equirect_mip_atlas(np.full((16, 32, 3), 0.7, np.float32))
-    for level in _levels(constant, envmap.equirect_mip_sizes(16, 32)):
-        np.testing.assert_allclose(level, 0.7, rtol=1e-6)
-
 
 # --------------------------------------------------------------------------- GLSL vs quadrature
 

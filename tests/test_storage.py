@@ -358,16 +358,3 @@ def test_precompute_streams_the_visibility_and_keeps_it_only_for_a_derive():
         np.testing.assert_array_equal(o.bits, p.bits)
 
 
-def test_in_order_writer_takes_chunks_in_any_order():
-    got = []
-    w = tracing.InOrder(lambda a, b, rows: got.append((a, b, rows[0, 0])))
-    chunks = [(a, a + 3, np.full((3, 2), a)) for a in range(0, 30, 3)]
-    for i in np.random.default_rng(0).permutation(len(chunks)):
-        w.put(*chunks[i])
-    w.drain()
-    assert [g[0] for g in got] == list(range(0, 30, 3)) and [g[2] for g in got] == \
-        list(range(0, 30, 3))
-    gap = tracing.InOrder(lambda a, b, rows: None)
-    gap.put(3, 6, np.zeros((3, 2)))
-    with pytest.raises(RuntimeError):
-        gap.drain()

@@ -157,20 +157,6 @@ def test_pca_error_within_budget_and_streaming(cube):
     assert np.allclose(np.abs(np.sum(one.eigen * basis.eigen, 1)), 1.0, atol=1e-4)
 
 
-def test_open_field_equals_computed_open_ssdf():
-    """Objects without visibility data get the closed-form open SSDF; it matches the SSDF
-    computed from fully visible cubemap bits."""
-    import importlib
-    method = importlib.import_module("prt_relight.addon.methods.ssdf_sg.shading")
-    stored = importlib.import_module("prt_relight.addon.methods.ssdf_sg.store")
-    cube = directions.cubemap(16)
-    normals = _unit([[0.2, 0.1, 1.0], [-1.0, 0.3, 0.0]])
-    bits = np.packbits(np.ones((2, cube.size), bool), axis=1)
-    computed = ssdf.compute_ssdf(bits, normals, cube, method.method_grid(8))
-    field = stored.open_field(2, 8)
-    assert np.allclose(field.numpy.images[0][None, :], computed, atol=1e-5)
-
-
 def _small_occluders(cube, seed, P=300):
     """Mostly open points with a small blocker each (a ground near small objects):
     ``(normals, bits, grid, exact SSDFs)``."""

@@ -1,85 +1,24 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Numerical checks of core/shading/brdf.py (quadrature on the sphere / hemisphere)."""
+"""core.shading.brdf (Cycles' Lambert and microfacet lobes, the Principled BSDF's layering)
+by quadrature on the sphere and hemisphere: Lambert's albedo, the Cycles transcription,
+reciprocity, directional albedo, finite values everywhere, Fresnel conventions, energy
+conservation, the F82 tint, the specular terms, and the lobes too sharp for the cubemap.
+No bpy."""
+
+from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from prt_relight.core.shading import brdf, brdf_tables
-from prt_relight.core.shading import materials
+from prt_relight.core.shading import brdf, brdf_tables, materials
 
-DISTS = ("BECKMANN", "GGX")
-N_UP = np.array([[0.0, 0.0, 1.0]])
+from .quadrature import (CYCLES_TABLE_GGX_E, DISTS, N_UP, fibonacci_sphere, hemisphere_grid,
+                         lobe_integral, view_at)
 
 
 # --------------------------------------------------------------------------- #
 # quadrature helpers
 # --------------------------------------------------------------------------- #
-
-def fibonacci_sphere(n):
-    """n nearly-uniform unit vectors; equal weights 4*pi/n."""
-    i = np.arange(n, dtype=np.float64) + 0.5
-    z = 1.0 - 2.0 * i / n
-    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    phi = i * np.pi * (3.0 - np.sqrt(5.0))
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-
-
-def view_at(theta_deg, phi_deg=0.0):
-    t, p = np.radians(theta_deg), np.radians(phi_deg)
-    return np.array([[np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)]])
-
-
-def hemisphere_grid(alpha, n_theta, n_phi):
-    """(theta, phi) grid on the upper hemisphere, theta concentrated near 0 on
-    the scale alpha: theta = arctan(alpha * tan(pi/2 * u)), u uniform.
-    Returns directions (T*F, 3), trapezoid weights (T*F,) incl. sin(theta)."""
-    u = np.linspace(0.0, 1.0, n_theta)
-    theta = np.arctan(alpha * np.tan(0.5 * np.pi * np.minimum(u, 1.0 - 1e-12)))
-    theta[-1] = 0.5 * np.pi
-    wt = np.zeros_like(theta)
-    dt = np.diff(theta)
-    wt[:-1] += 0.5 * dt
-    wt[1:] += 0.5 * dt
-    phi = (np.arange(n_phi) + 0.5) * (2.0 * np.pi / n_phi)
-    T, F = np.meshgrid(theta, phi, indexing="ij")
-    dirs = np.stack([np.sin(T) * np.cos(F), np.sin(T) * np.sin(F), np.cos(T)], axis=-1)
-    w = (wt * np.sin(theta))[:, None] * np.full(n_phi, 2.0 * np.pi / n_phi)[None, :]
-    return dirs.reshape(-1, 3), w.reshape(-1)
-
-
-def lobe_integral(mat, views, dirs, weights, chunk=250_000):
-    """sum_d reflectance_cosine[p, d, :] * w_d, chunked over D -> (P, 3)."""
-    acc = np.zeros((views.shape[0], 3))
-    normals = np.repeat(N_UP, views.shape[0], axis=0)
-    for s in range(0, dirs.shape[0], chunk):
-        rc = brdf.reflectance_cosine(mat, normals, views, dirs[s:s + chunk])
-        acc += np.einsum("pdc,d->pc", rc.astype(np.float64), weights[s:s + chunk])
-    return acc
-
-
-# --------------------------------------------------------------------------- #
-# NDF normalisation
-# --------------------------------------------------------------------------- #
-
-@pytest.mark.parametrize("dist", DISTS)
-@pytest.mark.parametrize("alpha", [0.05, 0.1, 0.3, 0.7, 1.0])
-def test_ndf_normalised(dist, alpha):
-    # integral D(m) cos(theta_m) dm = 2 pi int_0^1 D(x) x dx, x = cos(theta_m);
-    # D is concentrated at x -> 1 on a scale alpha^2, so integrate in y = 1 - x
-    # on a geometric grid.
-    y = np.concatenate([[0.0], np.geomspace(1e-14, 1.0, 200_001)])
-    x = 1.0 - y
-    f = brdf.microfacet_D(dist, alpha, x) * x
-    total = 2.0 * np.pi * np.trapz(f, y)
-    assert total == pytest.approx(1.0, abs=1e-3)
-
-
-def test_ndf_peak_and_support():
-    for dist in DISTS:
-        # peak value 1 / (pi alpha^2) for both distributions
-        assert brdf.microfacet_D(dist, 0.2, 1.0) == pytest.approx(1.0 / (np.pi * 0.04), rel=1e-9)
-        assert brdf.microfacet_D(dist, 0.2, -0.5) == 0.0
-        assert brdf.microfacet_D(dist, 0.2, 0.0) == 0.0
 
 
 # --------------------------------------------------------------------------- #
@@ -215,19 +154,6 @@ def test_glossy_directional_albedo_at_most_one(dist, alpha):
         assert E[0] < 1.0 + 2e-3
 
 
-# Cycles' own precomputed single-scattering GGX directional albedo,
-# intern/cycles/scene/shader.tables, ``table_ggx_E[1024]`` (32 x 32, row = mu
-# index, column = roughness index, grid value = index / 31; read in
-# microfacet_ggx_preserve_energy via lookup_table_read_2D(rough, mu)).
-# (row, col) -> E
-CYCLES_TABLE_GGX_E = {
-    (31, 31): 0.306853, (31, 20): 0.770757, (31, 15): 0.926694, (31, 10): 0.987261,
-    (15, 31): 0.457779, (15, 20): 0.748187, (15, 10): 0.964995,
-    (5, 31): 0.681600, (5, 20): 0.832480,
-    (1, 31): 0.888202, (1, 15): 0.952526,
-}
-
-
 def test_ggx_albedo_matches_cycles_table():
     """Integrating our GGX lobe reproduces Cycles' table_ggx_E: this checks D,
     Lambda, G2, the 1/(4 cos_o) factor and alpha = r^2 end to end."""
@@ -239,37 +165,6 @@ def test_ggx_albedo_matches_cycles_table():
         v = np.array([[np.sqrt(1.0 - mu * mu), 0.0, mu]])
         E = lobe_integral(mat, v, dirs, w)[0, 0]
         assert E == pytest.approx(ref, abs=3e-4), (row, col, E, ref)
-
-
-# --------------------------------------------------------------------------- #
-# Smith masking: projected-area identity
-# --------------------------------------------------------------------------- #
-
-@pytest.mark.parametrize("dist,tol", [("GGX", 0.01), ("BECKMANN", 0.03)])
-@pytest.mark.parametrize("alpha", [0.1, 0.3, 0.7, 1.0])
-def test_smith_projected_area(dist, tol, alpha):
-    # G1(wo) * integral max(0, wo.m) D(m) dm = cos(theta_o)
-    m, w = hemisphere_grid(alpha, 1500, 1024)
-    Dm = brdf.microfacet_D(dist, alpha, m[:, 2]) * w
-    for theta_o in (0.0, 30.0, 60.0, 75.0, 85.0):
-        wo = view_at(theta_o, 40.0)[0]
-        proj = np.maximum(m @ wo, 0.0) @ Dm
-        g1 = 1.0 / (1.0 + brdf.smith_lambda(dist, alpha, wo[2]))
-        assert float(brdf.smith_G1(dist, alpha, wo[2])) == pytest.approx(float(g1))
-        assert g1 * proj == pytest.approx(wo[2], rel=tol), (theta_o, g1 * proj, wo[2])
-
-
-def test_smith_lambda_values():
-    # GGX closed form and Beckmann cut-off, as in Cycles.
-    c = np.cos(np.radians(60.0))
-    t2 = 0.25 * 3.0  # alpha = 0.5, tan^2(60) = 3
-    assert brdf.smith_lambda("GGX", 0.5, c) == pytest.approx(0.5 * (np.sqrt(1 + t2) - 1))
-    assert brdf.smith_lambda("BECKMANN", 0.5, 1.0) == 0.0
-    a = 1.0 / np.sqrt(t2)
-    ref = (1 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a)
-    assert brdf.smith_lambda("BECKMANN", 0.5, c) == pytest.approx(ref)
-    # below the cut a >= 1.6 -> 0
-    assert brdf.smith_lambda("BECKMANN", 0.1, np.cos(np.radians(60.0))) == 0.0
 
 
 # --------------------------------------------------------------------------- #
@@ -360,68 +255,6 @@ def test_schlick_and_colour_conventions():
     off = materials.Material(specular_color=(0, 0, 0), fresnel="SCHLICK")
     assert off.is_diffuse_only
     assert not np.any(brdf.specular_cosine(off, normals, views, dirs))
-
-
-def test_material_validation_and_alpha():
-    assert materials.Material(roughness=0.5).alpha == pytest.approx(0.25)
-    assert materials.Material(roughness=0.0).alpha == brdf.ALPHA_MIN
-    assert materials.Material(roughness=3.0).alpha == 1.0
-    assert materials.Material(distribution="ggx").distribution == "GGX"
-    assert not materials.Material(diffuse_albedo=(0, 0, 0)).has_diffuse
-    with pytest.raises(ValueError):
-        materials.Material(distribution="PHONG")
-    with pytest.raises(ValueError):
-        materials.Material(fresnel="CONDUCTOR")
-
-
-# --------------------------------------------------------------------------- #
-# Cycles 4.x/5.x Principled BSDF and Multiscatter GGX
-# --------------------------------------------------------------------------- #
-
-# Cycles' table_ggx_Eavg[32] (intern/cycles/scene/shader.tables), index = roughness * 31.
-CYCLES_TABLE_GGX_EAVG = {
-    1: 0.999992, 5: 0.997199, 8: 0.985805, 12: 0.946279, 16: 0.870874,
-    20: 0.761345, 24: 0.631068, 28: 0.499191, 31: 0.409137,
-}
-
-# Cycles' table_ggx_gen_schlick_ior_s[4096] (16^3, data[z*256 + mu*16 + rough],
-# grid value = index / 15 clamped to [1e-4, 1] (z: 0.99); IOR = ior_from_F0(z^4)),
-# the Principled layering albedo S(rough, mu, z).  Slices z = 6 (IOR 1.38) and
-# z = 7 (IOR 1.56), rows mu = 0, 3, 7, 11, columns rough = 0, 2, 4, 8, 15.
-CYCLES_TABLE_GEN_SCHLICK_IOR_S = {
-    6: {0: (0.999374, 0.736620, 0.449900, 0.162051, 0.049543),
-        3: (0.294528, 0.289595, 0.246073, 0.109290, 0.026967),
-        7: (0.055252, 0.055405, 0.055074, 0.039653, 0.011387),
-        11: (0.006749, 0.006854, 0.007597, 0.009208, 0.004302)},
-    7: {0: (0.999398, 0.744723, 0.463498, 0.173793, 0.055228),
-        3: (0.315614, 0.310403, 0.264841, 0.120619, 0.030898),
-        7: (0.066236, 0.066340, 0.065506, 0.046703, 0.013620),
-        11: (0.008907, 0.009032, 0.009899, 0.011624, 0.005396)},
-}
-
-
-def test_own_tables_match_cycles_tables():
-    """Our quadrature on Cycles' grids reproduces Cycles' Monte-Carlo tables."""
-    for (row, col), ref in CYCLES_TABLE_GGX_E.items():
-        assert brdf_tables.ggx_E_table_column(col)[row] == pytest.approx(ref, abs=5e-4), (row, col)
-    for col, ref in CYCLES_TABLE_GGX_EAVG.items():
-        assert brdf_tables.ggx_E_avg_node(col) == pytest.approx(ref, abs=5e-4), col
-    for iz, rows in CYCLES_TABLE_GEN_SCHLICK_IOR_S.items():
-        for row, refs in rows.items():
-            for ix, ref in zip((0, 2, 4, 8, 15), refs):
-                got = brdf_tables.dielectric_s_table_column(ix, iz)[row]
-                assert got == pytest.approx(ref, abs=1e-3), (iz, row, ix, got, ref)
-
-
-def test_table_interpolation_is_cycles_lookup():
-    # node values are returned exactly, midpoints are linear blends (lookup_table_read)
-    col = brdf_tables.ggx_E_table_column(10)
-    assert brdf.ggx_E(10 / 31, 7 / 31)[()] == pytest.approx(col[7], abs=1e-12)
-    mid = brdf.ggx_E(10 / 31, 7.5 / 31)[()]
-    assert mid == pytest.approx(0.5 * (col[7] + col[8]), abs=1e-12)
-    # E decreases with roughness at normal incidence, E_avg likewise
-    assert brdf.ggx_E(0.2, 1.0) > brdf.ggx_E(0.6, 1.0) > brdf.ggx_E(1.0, 1.0)
-    assert 1.0 >= brdf.ggx_E_avg(0.0) > brdf.ggx_E_avg(0.5) > brdf.ggx_E_avg(1.0) > 0.4
 
 
 def _albedo(mat, theta, n_theta=600, n_phi=720):
@@ -531,35 +364,6 @@ def test_principled_fresnel_is_remapped_real_fresnel():
     assert brdf.fresnel_dielectric(0.3, 1.0 / 1.5) == 1.0          # total internal reflection
 
 
-def test_principled_mapping_details():
-    # Specular IOR Level 0 switches the layer off (eta = 1), 1 doubles F0.
-    off = materials.principled_material(specular_ior_level=0.0)
-    assert off.ior == 1.0 and off.is_diffuse_only and off.has_diffuse
-    np.testing.assert_array_equal(brdf.diffuse_view_weight(off, N_UP, view_at(80)), 1.0)
-    hi = materials.principled_material(specular_ior_level=1.0)
-    assert brdf.F0_from_ior(hi.ior) == pytest.approx(0.08, rel=1e-6)
-    assert hi.specular_color == pytest.approx((0.08,) * 3)
-    # metallic 1: no base, no dielectric lobe, an F82 lobe with F0 = base colour
-    metal = materials.principled_material(base_color=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3,
-                                     distribution="GGX")
-    assert not metal.has_diffuse and not metal.is_diffuse_only
-    np.testing.assert_array_equal(brdf.diffuse_view_weight(metal, N_UP, view_at(30)), 0.0)
-    conductor = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(0.9, 0.6, 0.3),
-                              roughness=0.3, distribution="GGX", fresnel="F82")
-    dirs = fibonacci_sphere(500)
-    a = brdf.reflectance_cosine(metal, N_UP, view_at(50), dirs)
-    b = brdf.reflectance_cosine(conductor, N_UP, view_at(50), dirs)
-    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-9)
-    # half metallic: half of each
-    half = materials.principled_material(base_color=(0.9, 0.6, 0.3), metallic=0.5, roughness=0.3,
-                                    distribution="GGX")
-    diel = materials.principled_material(base_color=(0.9, 0.6, 0.3), metallic=0.0, roughness=0.3,
-                                    distribution="GGX")
-    c = brdf.reflectance_cosine(half, N_UP, view_at(50), dirs)
-    d = brdf.reflectance_cosine(diel, N_UP, view_at(50), dirs)
-    np.testing.assert_allclose(c, 0.5 * (b + d), rtol=1e-5, atol=1e-8)
-
-
 def test_f82_tint():
     f0 = np.array([0.9, 0.6, 0.3])
     tint = np.array([1.0, 0.5, 0.0])
@@ -580,6 +384,8 @@ def test_f82_tint():
 @pytest.mark.parametrize("fresnel,dist", [("DIELECTRIC", "MULTI_GGX"), ("DIELECTRIC", "GGX"),
                                           ("F82", "MULTI_GGX"), ("NONE", "MULTI_GGX"),
                                           ("SCHLICK", "MULTI_GGX")])
+
+
 @pytest.mark.parametrize("roughness", [0.0, 1e-4, 0.05, 1.0])
 def test_new_modes_finite_everywhere(fresnel, dist, roughness):
     views = _nasty_views()
@@ -637,20 +443,31 @@ def test_specular_terms_sum_to_specular_cosine():
         np.testing.assert_allclose(total, brdf.specular_cosine(mat, normals, views, dirs),
                                    rtol=1e-6, atol=1e-9)
 
+# --------------------------------------------------------------------------- core
 
-def test_lambda_of_t2_is_smith_lambda_in_the_dtype_given():
-    """One Lambda for REFERENCE (float64) and BLOCKS' float32 evaluator: the same values,
-    float32 in stays float32; Beckmann is 0 below t2 = 0.39 (a > 1.6)."""
-    from prt_relight.core.shading import microfacet
-    c = np.linspace(0.05, 1.0, 40)
-    for dist, alpha in (("GGX", 0.3), ("BECKMANN", 0.3), ("BECKMANN", 0.05)):
-        t2 = alpha ** 2 * (1.0 / (c * c) - 1.0)
-        np.testing.assert_allclose(microfacet.lambda_of_t2(dist, t2),
-                                   brdf.smith_lambda(dist, alpha, c), rtol=1e-12)
-        lam32 = microfacet.lambda_of_t2(dist, t2.astype(np.float32))
-        assert lam32.dtype == np.float32
-        np.testing.assert_allclose(lam32, brdf.smith_lambda(dist, alpha, c), rtol=2e-6, atol=1e-7)
-    assert microfacet.lambda_of_t2("BECKMANN", np.array([0.389]))[0] == 0.0
-    a = 1.0 / np.sqrt(0.5)
-    assert microfacet.lambda_of_t2("BECKMANN", np.array([0.5]))[0] == pytest.approx(
-        (1 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a))
+def test_sharp_lobes_are_those_the_cubemap_cannot_resolve():
+    mirror = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.0)
+    assert brdf.is_sharp(mirror, 32) and brdf.is_sharp(mirror, 128)
+    rough = materials.principled_material(roughness=0.5)
+    assert not brdf.is_sharp(rough, 32)
+    # the limit shrinks with the texels: roughness 0.12 is sharp at 32 and 64, not 128
+    mid = materials.principled_material(roughness=0.12)
+    assert [brdf.is_sharp(mid, n) for n in (32, 64, 128)] == [True, True, False]
+    assert not brdf.is_sharp(materials.Material(diffuse_albedo=(0.5, 0.5, 0.5)), 32)
+
+
+def test_a_per_pixel_lobe_leaves_only_the_layered_lambert_base():
+    """Every per-vertex evaluation skips the lobes; the Principled base keeps Cycles'
+    layering weight (the dielectric layer above it is still there, drawn per pixel)."""
+    m = materials.principled_material(roughness=0.05, metallic=0.25)
+    flagged = brdf.with_sharp_lobe(m, 32)
+    assert flagged.per_pixel_lobe and flagged.is_diffuse_only and not m.is_diffuse_only
+    n = np.array([[0.0, 0.0, 1.0]] * 3)
+    v = np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [0.0, 0.96, 0.28]])
+    d = np.array([[0.0, 0.0, 1.0], [0.0, -0.6, 0.8]])
+    assert brdf.specular_terms(flagged, n, v, d) == []
+    np.testing.assert_array_equal(brdf.diffuse_view_weight(flagged, n, v),
+                                  brdf.diffuse_view_weight(m, n, v))
+    lobes = brdf.sharp_lobes(flagged)
+    kinds = sorted((k, round(w, 6)) for k, w, *_ in lobes)
+    assert kinds == [(brdf.SHARP_DIELECTRIC, 0.75), (brdf.SHARP_F82, 0.25)]

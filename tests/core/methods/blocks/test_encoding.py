@@ -1,4 +1,6 @@
-"""BLOCKS (Inger et al. 2013, §4): layout, differential visibility, lighting bases, Algorithm 1."""
+"""core.methods.blocks.encoding (Inger, Farbman, Lischinski 2013, §4): the block layout, the
+DCT basis, varints, the differential (eq. 5) and quantized visibility round trips and the
+BRDF's projection on the block bases.  No bpy."""
 
 import numpy as np
 import pytest
@@ -6,22 +8,8 @@ import pytest
 from prt_relight.core.methods.blocks import encoding as E
 from prt_relight.core.sphere.directions import cubemap
 
-from . import blocks_oracle as O
-
-
-def _structured_bits(n, rng, P=6):
-    """Random + structured binary maps (P, 6N^2) bool, packed."""
-    D = 6 * n * n
-    maps = [np.zeros(D, bool), np.ones(D, bool)]
-    f, r, c = np.meshgrid(np.arange(6), np.arange(n), np.arange(n), indexing="ij")
-    maps.append(((r + c) % 2 == 0).reshape(-1))                    # checkerboard
-    maps.append((r < n // 3).reshape(-1) | (f == 2).reshape(-1))   # horizon-like spans
-    d = cubemap(n).directions
-    maps.append(d[:, 2] > 0.2 * np.sin(7 * d[:, 0]))               # wavy horizon
-    while len(maps) < P:
-        maps.append(rng.random(D) < rng.uniform(0.05, 0.95))
-    v = np.stack(maps)
-    return v, np.packbits(v, axis=1)
+from . import oracle as O
+from .cases import structured_bits
 
 
 @pytest.mark.parametrize("n", [32, 64, 128])
@@ -67,7 +55,7 @@ def test_varint_round_trip():
 @pytest.mark.parametrize("n", [32, 64])
 def test_differential_visibility_round_trip(n):
     rng = np.random.default_rng(n)
-    v, bits = _structured_bits(n, rng, P=9)
+    v, bits = structured_bits(n, rng, P=9)
     dv = E.encode_visibility(bits, n)
     assert dv.binary and dv.kind.shape == (9, E.block_count(n))
     assert (dv.kind[0] == E.ZERO).all() and (dv.kind[1] == E.ONE).all()
@@ -132,39 +120,6 @@ def test_quantized_visibility_round_trip():
         E.decode_visibility(dv)
 
 
-@pytest.mark.parametrize("grey", [False, True])
-def test_light_vis_product_equals_pixel_sum(grey):
-    n, rng = 32, np.random.default_rng(4)
-    L = rng.random((6 * n * n, 3)) * np.where(rng.random((6 * n * n, 1)) < 0.01, 100.0, 1.0)
-    light = O.block_lighting(L, n)
-    v, bits = _structured_bits(n, rng, P=7)
-    if grey:
-        g = np.where(v, rng.random(v.shape), 0.0)
-        dv = E.encode_quantized_visibility(g, n)
-        vis = E.decode_levels(dv) / 63.0
-    else:
-        dv = E.encode_visibility(bits, n)
-        vis = v.astype(float)
-    dw = cubemap(n).solid_angles
-    for p in range(len(vis)):
-        got = O.light_vis_product(light, dv.vertex(p))
-        want = np.einsum("bk,bkc->bc", E.to_blocks(vis[p] * dw, n), E.to_blocks(L, n))
-        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-14)
-
-
-def test_lighting_representations():
-    n, rng = 32, np.random.default_rng(5)
-    L = rng.random((6 * n * n, 3))
-    light = O.block_lighting(L, n)
-    cube = cubemap(n)
-    pix = E.to_blocks(L * cube.solid_angles[:, None], n)
-    np.testing.assert_allclose(light.pixel, pix)                    # solid-angle corrected
-    np.testing.assert_allclose(light.integral[:, 0], pix.sum(axis=1))
-    np.testing.assert_allclose(light.integral[:, 255], pix[:, 255])
-    # DCT coefficients: projection on the orthonormal basis
-    np.testing.assert_allclose(light.dct, np.einsum("kp,bpc->bkc", E.dct_basis(), pix))
-
-
 def test_projection_exact_for_band_limited_brdf():
     n, rng = 32, np.random.default_rng(6)
     nb = E.block_count(n)
@@ -192,90 +147,3 @@ def test_projection_exact_for_band_limited_brdf():
     assert list(levels) == [256, 1, 256]         # ... and caught by the highlight hint
     assert pixels[2, 100, 0] == 1.0
     assert O.highlight_blocks(d, n, angle=0.3).sum() > 1
-
-
-def _random_scene(n, rng, P=4):
-    D = 6 * n * n
-    L = rng.random((D, 3)) * np.where(rng.random((D, 1)) < 0.02, 50.0, 1.0)
-    v, bits = _structured_bits(n, rng, P=P + 5)
-    d = cubemap(n).directions
-    nrm = rng.normal(size=3)
-    nrm /= np.linalg.norm(nrm)
-    cos = np.maximum(d @ nrm, 0.0)
-    rho = rng.random((D, 3)) * cos[:, None]            # arbitrary BRDF samples x cos
-    return L, v, bits, rho
-
-
-@pytest.mark.parametrize("n", [32, 64])
-def test_integrate_vertex_pixel_basis_equals_reference(n):
-    rng = np.random.default_rng(10 + n)
-    L, v, bits, rho = _random_scene(n, rng)
-    light = O.block_lighting(L, n)
-    dv = E.encode_visibility(bits, n)
-    dw = cubemap(n).solid_angles
-    for p in range(dv.count):
-        res = O.integrate_vertex(dv.vertex(p), light, rho, mode="pixel")
-        want = np.einsum("k,kc,kc->c", v[p] * dw, L, rho)
-        np.testing.assert_allclose(res.radiance, want, rtol=1e-6, atol=1e-12)
-        counts = res.case_counts()
-        assert sum(counts.values()) == E.block_count(n)
-        assert counts["light-vis (line 9)"] == 0                  # pixel BRDF is never constant
-        if p == 0:
-            assert counts["zero (line 2)"] == E.block_count(n)
-        if p == 1:
-            assert counts["light-brdf (line 6)"] == E.block_count(n)
-        if p == 2:
-            assert counts["triple (line 11)"] == E.block_count(n)
-
-
-def test_integrate_vertex_all_cases_exact_for_blockwise_bandlimited_brdf():
-    """Adaptive path: a BRDF that is exactly constant / 4- / 16-DCT / arbitrary per
-    block reproduces the triple product exactly and uses all four cases."""
-    n, rng = 32, np.random.default_rng(11)
-    nb = E.block_count(n)
-    L, v, bits, _ = _random_scene(n, rng)
-    lv = rng.integers(0, 4, nb)
-    A = rng.normal(size=(nb, 16, 3)) * 0.1
-    A[:, 0] += 5.0
-    for i, k in enumerate((1, 4, 16)):
-        A[lv == i, k:] = 0
-    pix = np.einsum("bkc,kp->bpc", A, E.dct_basis())
-    pix[lv == 3] = rng.random((int((lv == 3).sum()), 256, 3))
-    rho = E.from_blocks(pix, n)
-    light = O.block_lighting(L, n)
-    dv = E.encode_visibility(bits, n)
-    dw = cubemap(n).solid_angles
-    seen = np.zeros(4, int)
-    for p in range(dv.count):
-        res = O.integrate_vertex(dv.vertex(p), light, rho, rel_tol=1e-9, abs_tol=1e-12)
-        want = np.einsum("k,kc,kc->c", v[p] * dw, L, rho)
-        np.testing.assert_allclose(res.radiance, want, rtol=1e-9)
-        np.testing.assert_allclose(res.values, np.einsum("bk,bkc,bkc->bc", E.to_blocks(v[p] * dw, n),
-                                                         E.to_blocks(L, n), pix), rtol=1e-8, atol=1e-13)
-        active = dv.kind[p] != E.ZERO
-        assert np.array_equal(res.levels[active], np.array([1, 4, 16, 256])[lv[active]])
-        seen += np.bincount(res.cases, minlength=4)
-    assert (seen > 0).all(), seen
-
-
-def test_integrate_vertex_material_adaptive_close_to_reference():
-    from prt_relight.core.shading.brdf import reflectance_cosine
-    from prt_relight.core.shading.materials import Material
-    n, rng = 32, np.random.default_rng(12)
-    L, v, bits, _ = _random_scene(n, rng)
-    light = O.block_lighting(L, n)
-    dv = E.encode_visibility(bits, n)
-    mat = Material()
-    nrm, view = np.array([0.0, 0.3, 1.0]), np.array([0.5, 0.0, 1.0])
-    nrm /= np.linalg.norm(nrm)
-    view /= np.linalg.norm(view)
-    f = O.material_sampler(mat, nrm, view, n)
-    rho = reflectance_cosine(mat, nrm[None], view[None], cubemap(n).directions)[0].astype(float)
-    dw = cubemap(n).solid_angles
-    p = 4
-    res = O.integrate_vertex(dv.vertex(p), light, f)
-    want = np.einsum("k,kc,kc->c", v[p] * dw, L, rho)
-    np.testing.assert_allclose(res.radiance, want, rtol=0.02)
-    exact = O.integrate_vertex(dv.vertex(p), light, f, mode="pixel")
-    np.testing.assert_allclose(exact.radiance, want, rtol=1e-6)
-    assert sum(res.level_counts().values()) == int((dv.kind[p] != E.ZERO).sum())
