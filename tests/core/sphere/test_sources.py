@@ -1,5 +1,5 @@
 """Compact sources split off the environment (core/sphere/sources.py): the split itself, without
-Blender.  The per-pixel pass is tested in test_lights_addon.py."""
+Blender.  The per-pixel pass is tested in tests/addon/gpu/test_lights.py."""
 
 from __future__ import annotations
 
