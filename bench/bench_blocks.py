@@ -31,6 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
+from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
 
 
 def psnr(a, ref):
@@ -114,7 +115,7 @@ def main(argv=None):
                                   png=out_dir / "blocks_BLOCKS.png")
     img = scenes.read_exr(out_dir / "blocks_BLOCKS.exr")
     say(f"F12: REFERENCE {t_ref_f12:.2f} s, BLOCKS {t_blk_f12:.2f} s;  BLOCKS vs REFERENCE: "
-        f"PSNR {psnr(img, ref_img):.2f} dB, rel-L2 {scenes.rel_l2(img, ref_img):.2e}, "
+        f"PSNR {psnr(img, ref_img):.2f} dB, rel-L2 {rel_l2(img, ref_img):.2e}, "
         f"PSNR of the images clipped to [0, 1] (display range) {psnr_display(img, ref_img):.2f} dB "
         f"(paper, Fig. 5: 45.67 dB against its reference)")
     say(f"sources of the differential visibility at sync: {method.LAST_STATS['sources']}")
@@ -138,7 +139,7 @@ def main(argv=None):
             t = scenes.render_prt(path)
             timg = scenes.read_exr(path)
             say(f"  {mid + ' ' + setting + '=' + str(value):22s} {t:7.2f}s {psnr(timg, ref_img):8.2f}dB "
-                f"{scenes.rel_l2(timg, ref_img):9.2e} {psnr_display(timg, ref_img):9.2f}dB")
+                f"{rel_l2(timg, ref_img):9.2e} {psnr_display(timg, ref_img):9.2f}dB")
         prt.method = "BLOCKS"
 
     # ---------------------------------------------------------------- frame timings
@@ -280,7 +281,7 @@ def main(argv=None):
         path = out_dir / f"blocks_tol_{tol:g}.exr"
         scenes.render_prt(path)
         timg = scenes.read_exr(path)
-        ps, rl, pd = psnr(timg, ref_img), scenes.rel_l2(timg, ref_img), psnr_display(timg, ref_img)
+        ps, rl, pd = psnr(timg, ref_img), rel_l2(timg, ref_img), psnr_display(timg, ref_img)
         state.settings["blocks_tolerance"] = tol
         t, _ = timed(lambda: frame("BLOCKS"), args.repeats)
         say(f"  {tol:10g} {t:11.3f}s {t_ref / t:8.1f}x {ps:8.2f}dB {rl:9.2e} {pd:9.2f}dB")

@@ -24,6 +24,7 @@ import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
+from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
 
 import numpy as np  # noqa: E402
 
@@ -107,7 +108,7 @@ def run(kind, methods, out_dir, lines):
             scene.prt.light_sources = split
             path = d.with_suffix(f".{method}.{split}.exr")
             scenes.render_prt(path)                             # first frame: caches
-            err = scenes.rel_l2(scenes.read_exr(path), truth)
+            err = rel_l2(scenes.read_exr(path), truth)
             angle = [mapping.inputs["Rotation"].default_value[2]]
 
             def relit():

@@ -20,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
+from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
 
 def sweeps():
     """(method, setting name, values) for every registered method (its ``budget``),
@@ -97,7 +98,7 @@ def main(argv=None):
             t = shade_time(args.repeats)
             if method == "REFERENCE":
                 ref_img, ref_shade = img, t
-            err = scenes.rel_l2(img, ref_img)
+            err = rel_l2(img, ref_img)
             rows.append((label, t, f12, err, psnr(img, ref_img), ref_shade / max(t, 1e-9)))
             print(f"{label:22s} shade {t:8.4f} s  F12 {f12:6.2f} s  rel-L2 {err:.4f}  "
                   f"PSNR {rows[-1][4]:6.2f} dB  speed-up {rows[-1][5]:8.1f}x", flush=True)

@@ -24,6 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
+from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
 
 COUNTS = (10, 30, 60, 100)
 
@@ -97,7 +98,7 @@ def run_scene(mesh, hdri, w, h, out_dir, lines):
         img = scenes.read_exr(path)
         vert, t = _shade(_state())
         err_vtx = float(np.linalg.norm(vert - ref_vert) / np.linalg.norm(ref_vert))
-        err = scenes.rel_l2(img, ref_img)
+        err = rel_l2(img, ref_img)
         lines.append(f"{K:4d} {err:10.4f} {err_vtx:10.4f} {t:7.3f}s {f12:6.2f}s "
                      f"{f12 / ref_f12:8.3f} {warm:8.2f}s {warm / ref_warm:6.3f} {decomp:6.2f}s")
         print(lines[-1], flush=True)

@@ -30,6 +30,7 @@ import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
+from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
 
 MESHES = scenes.ROOT.parent / "shared/data/meshes"
 
@@ -70,7 +71,7 @@ def run_scene(label, build, kind, w, h, samples, out_dir, lines):
     t_cyc = scenes.render_cycles(d.with_suffix(".cycles.exr"), samples=samples)
     ref = scenes.read_exr(d.with_suffix(".ref.exr"))
     cyc = scenes.read_exr(d.with_suffix(".cycles.exr"))
-    e_ref_cyc = scenes.rel_l2(ref, cyc)
+    e_ref_cyc = rel_l2(ref, cyc)
     rows = [
         f"== {label} ({kind}, {w}x{h}) ==",
         f"points {t['points']}, SSDF+PCA derive {t.get('derive', 0):.1f} s "
@@ -86,8 +87,8 @@ def run_scene(label, build, kind, w, h, samples, out_dir, lines):
         t_first = scenes.render_prt(path)
         t_ssdf = _timed(lambda: scenes.render_prt(path))
         ours = scenes.read_exr(path)
-        e_cyc = scenes.rel_l2(ours, cyc)
-        e_ref = scenes.rel_l2(ours, ref)
+        e_cyc = rel_l2(ours, cyc)
+        e_ref = rel_l2(ours, ref)
         ok_acc = (e_cyc <= 0.03 and e_ref <= 0.02) if kind == "diffuse" else e_cyc <= 0.06
         ok_time = t_ssdf <= t_ref / 5 and t_ssdf <= 2 * t_wb
         rows += [

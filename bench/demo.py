@@ -20,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
+from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
 
 
 def parse_args(argv=None):
@@ -81,7 +82,7 @@ def main(argv=None):
     cyc_s = scenes.render_cycles(out / "cycles.exr", samples=args.cycles_samples,
                                  png=out / "cycles.png")
     prt, ref = scenes.read_exr(out / "prt.exr"), scenes.read_exr(out / "cycles.exr")
-    err = scenes.rel_l2(prt, ref)
+    err = rel_l2(prt, ref)
     coverage = float(((prt[..., 3] > 0.5) == (ref[..., 3] > 0.5)).mean())
     try:
         write_compare(out / "compare.png", out / "prt.png", out / "cycles.png", prt, ref)

@@ -17,6 +17,7 @@ import sys
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
+from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
 
 
 def main(argv=None):
@@ -48,7 +49,7 @@ def main(argv=None):
         t = scenes.precompute(resolution=args.directions)
         prt_s = scenes.render_prt(args.out / f"{hdri}_prt.exr")
         cyc_s = scenes.render_cycles(args.out / f"{hdri}_cycles.exr", samples=args.samples)
-        err = scenes.rel_l2(scenes.read_exr(args.out / f"{hdri}_prt.exr"),
+        err = rel_l2(scenes.read_exr(args.out / f"{hdri}_prt.exr"),
                             scenes.read_exr(args.out / f"{hdri}_cycles.exr"))
         rows.append((hdri, err, t["total"], prt_s, cyc_s))
         print(f"{hdri:10s} rel-L2 {err:.4f}  precompute {t['total']:.1f} s  "

@@ -1,15 +1,23 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Scene builders shared by the demo, the benchmarks and tests.
+"""The one scene builder of the demo, the benchmarks and the tests (headless Blender).
 
-Importing this module registers the repository as the package ``prt_relight``
-(the checkout directory may have any name) and registers the add-on once, so a
-script only needs ``from scenes import *`` style imports::
+Importing this module registers the repository as the package ``prt_relight`` (the
+checkout directory may have any name); :func:`reset` also registers the add-on once, so a
+script only needs::
 
     import scenes
     scenes.reset(); scenes.add_world("sunset"); scenes.add_ground(); ...
 
-Every image written here is linear scene radiance in a 32-bit float EXR
-unless the name ends in ``.png`` (then the scene's view transform applies).
+The tests import it as ``prt_relight.bench.scenes`` (their conftest registers the package
+and the ``registered_addon`` fixture the add-on).  It lives with the benchmarks, outside the
+add-on: it is development tooling (renders, timings, EXR files), not shipped in the
+extension (bench/ is excluded from its zip); the add-on's own scene building (the report's
+hard cases) is ``addon/blender/scene_build.py``, whose materials this module reuses.
+
+Every image written here is linear scene radiance in a 32-bit float EXR unless the name
+ends in ``.png`` (then the scene's view transform applies); images read back are
+``(H, W, C)`` float32, top row first.  Errors between images are
+``core.report.metrics.rel_l2`` (the report's figure), not defined here.
 """
 
 from __future__ import annotations
@@ -25,8 +33,8 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
-def load_addon():
-    """Import the repository as ``prt_relight`` and register it (idempotent)."""
+def _package():
+    """The repository imported as ``prt_relight`` (once; no Blender needed)."""
     mod = sys.modules.get("prt_relight")
     if mod is None:
         spec = importlib.util.spec_from_file_location(
@@ -34,6 +42,15 @@ def load_addon():
         mod = importlib.util.module_from_spec(spec)
         sys.modules["prt_relight"] = mod
         spec.loader.exec_module(mod)
+    return mod
+
+
+_package()
+
+
+def load_addon():
+    """Import the repository as ``prt_relight`` and register the add-on (idempotent)."""
+    mod = _package()
     import bpy
     if not hasattr(bpy.types.Scene, "prt"):
         mod.register()
@@ -55,6 +72,7 @@ def reset(bounces: int = 0):
 # ------------------------------------------------------------------ world
 
 def hdri_path(name: str) -> pathlib.Path:
+    """One of Blender's bundled HDRIs (``"sunset"``, ``"forest"``, ...)."""
     import bpy
     folder = pathlib.Path(bpy.utils.system_resource("DATAFILES", path="studiolights/world"))
     path = folder / (name if name.endswith(".exr") else name + ".exr")
@@ -64,18 +82,49 @@ def hdri_path(name: str) -> pathlib.Path:
     return path
 
 
-def add_world(hdri_name: str = "sunset", strength: float = 1.0, rotation_z: float = 0.0):
-    """A world lit by one of Blender's bundled HDRIs (Environment Texture [+ Mapping])."""
+def float_image(name: str, pixels_top_first: np.ndarray, is_data: bool = True):
+    """A packed float image of the RGB of (H, W, 3|4) pixels given top row first, alpha 1."""
+    import bpy
+    h, w = pixels_top_first.shape[:2]
+    rgba = np.ones((h, w, 4), dtype=np.float32)
+    rgba[:, :, :3] = pixels_top_first[:, :, :3]
+    img = bpy.data.images.new(name, w, h, alpha=True, float_buffer=True, is_data=is_data)
+    img.pixels.foreach_set(rgba[::-1].reshape(-1))
+    img.pack()
+    return img
+
+
+def sun_image(width: int, height: int, direction, radiance: float = 1e3) -> np.ndarray:
+    """A black equirect (H, W, 3) with one pixel of ``radiance`` where the world reads
+    ``direction`` (Blender's convention ``u = 0.5 - atan2(y, x) / 2 pi``, ``v = acos(z) / pi``)."""
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    u = (0.5 - math.atan2(d[1], d[0]) / (2 * math.pi)) % 1.0
+    v = math.acos(d[2]) / math.pi
+    img = np.zeros((height, width, 3), dtype=np.float32)
+    img[min(int(v * height), height - 1), min(int(u * width), width - 1)] = radiance
+    return img
+
+
+def add_world(hdri: str = "sunset", strength: float = 1.0, rotation_z: float = 0.0, *,
+              image=None, path=None):
+    """A world lit by an Environment Texture (+ a Mapping node turning it by ``rotation_z``):
+    ``image`` (a bpy image, e.g. :func:`float_image`), else the image file ``path``, else
+    Blender's bundled HDRI ``hdri``."""
     import bpy
     scene = bpy.context.scene
     world = bpy.data.worlds.new("PRT World")
     scene.world = world
-    world.use_nodes = True
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
     nodes, links = world.node_tree.nodes, world.node_tree.links
     bg = next(n for n in nodes if n.type == "BACKGROUND")
     bg.inputs["Strength"].default_value = strength
     env = nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(str(hdri_path(hdri_name)), check_existing=True)
+    if image is None:
+        file = path if path is not None else hdri_path(hdri)
+        image = bpy.data.images.load(str(file), check_existing=True)
+    env.image = image
     links.new(env.outputs["Color"], bg.inputs["Color"])
     if rotation_z:
         coord = nodes.new("ShaderNodeTexCoord")
@@ -86,14 +135,21 @@ def add_world(hdri_name: str = "sunset", strength: float = 1.0, rotation_z: floa
     return world
 
 
+def environment_node(world=None):
+    """The Environment Texture node of ``world`` (default: the scene's)."""
+    import bpy
+    world = world or bpy.context.scene.world
+    return next(n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT")
+
+
 # ------------------------------------------------------------------ objects
 
-def add_ground(size: float = 6.0, cuts: int = 96):
+def add_ground(size: float = 6.0, cuts: int = 96, name: str = "Ground"):
     """A tessellated ground plane at z = 0 (per-vertex shading needs the cuts)."""
     import bpy
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=cuts, y_subdivisions=cuts, size=size)
     ob = bpy.context.active_object
-    ob.name = "Ground"
+    ob.name = name
     return ob
 
 
@@ -118,18 +174,22 @@ def _smooth(ob):
         poly.use_smooth = True
 
 
-def add_suzanne(subdiv: int = 2, height: float = 1.6):
-    """Smooth Suzanne with a Subdivision Surface modifier, standing on the ground."""
+def add_suzanne(subdiv: int = 2, height: float = 1.6, location=None):
+    """Smooth Suzanne with a Subdivision Surface modifier: tilted a little and scaled to
+    ``height`` standing on the ground, or (``location`` given) as modelled, its origin at
+    ``location``."""
     import bpy
-    bpy.ops.mesh.primitive_monkey_add()
+    bpy.ops.mesh.primitive_monkey_add(location=location or (0.0, 0.0, 0.0))
     ob = bpy.context.active_object
     ob.name = "Suzanne"
-    ob.rotation_euler = (math.radians(-20.0), 0.0, 0.0)   # tilt the face up a little
+    if location is None:
+        ob.rotation_euler = (math.radians(-20.0), 0.0, 0.0)   # tilt the face up a little
     _smooth(ob)
     if subdiv:
         mod = ob.modifiers.new("Subdivision", "SUBSURF")
         mod.levels = mod.render_levels = subdiv
-    _stand_on_ground(ob, height)
+    if location is None:
+        _stand_on_ground(ob, height)
     return ob
 
 
@@ -154,35 +214,49 @@ def add_obj(path, height: float = 1.6, forward_axis: str = "NEGATIVE_Z", up_axis
     return ob
 
 
+def set_resolution(width: int, height: int):
+    """The render size in pixels (at 100 %)."""
+    import bpy
+    r = bpy.context.scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
+
+
 def add_camera(target=(0.0, 0.0, 0.75), distance: float = 5.5, elevation_deg: float = 20.0,
-               azimuth_deg: float = -90.0, lens: float = 50.0, resolution=(320, 240)):
-    """A perspective camera on a sphere around ``target``, looking at it (azimuth -90 = from -Y)."""
+               azimuth_deg: float = -90.0, lens: float = 50.0, resolution=(320, 240), *,
+               location=None, rotation=(0.0, 0.0, 0.0)):
+    """The scene's perspective camera, on a sphere around ``target`` looking at it (azimuth
+    -90 = from -Y), or (``location`` given) there with the Euler ``rotation``; it becomes
+    the active object.  ``resolution`` (width, height) sets the render size (None: as it is)."""
     import bpy
     from mathutils import Vector
-    scene = bpy.context.scene
-    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
-    t = Vector(target)
-    pos = t + distance * Vector((math.cos(el) * math.cos(az), math.cos(el) * math.sin(az),
-                                 math.sin(el)))
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    if location is None:
+        el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+        t = Vector(target)
+        location = t + distance * Vector((math.cos(el) * math.cos(az),
+                                          math.cos(el) * math.sin(az), math.sin(el)))
+        rotation = (t - location).to_track_quat("-Z", "Y").to_euler()
+    bpy.ops.object.camera_add(location=tuple(location), rotation=tuple(rotation))
+    cam = bpy.context.object
     cam.data.lens = lens
-    cam.location = pos
-    cam.rotation_euler = (t - pos).to_track_quat("-Z", "Y").to_euler()
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    scene.render.resolution_x, scene.render.resolution_y = resolution
-    scene.render.resolution_percentage = 100
+    bpy.context.scene.camera = cam
+    if resolution is not None:
+        set_resolution(*resolution)
     return cam
 
 
+def bsdf_material(name: str, node_type: str, **inputs):
+    """A new material whose surface is one BSDF node (``inputs`` by socket name;
+    ``distribution=`` sets the node's distribution): ``addon.blender.scene_build``'s."""
+    from prt_relight.addon.blender.scene_build import bsdf_material as make
+    return make(name, node_type, **inputs)
+
+
 def add_bsdf_material(ob, name: str, node_type: str = "ShaderNodeBsdfGlossy", **inputs):
-    """Give ``ob`` a material whose surface is one BSDF node (``inputs`` by socket name;
-    ``distribution=`` sets the node's distribution), e.g. a Beckmann Glossy BSDF::
+    """Give ``ob`` a :func:`bsdf_material` as its only material, e.g. a Beckmann Glossy BSDF::
 
         add_bsdf_material(ob, "Glossy", "ShaderNodeBsdfGlossy", distribution="BECKMANN",
                           Roughness=0.25)
     """
-    from prt_relight.addon.blender.scene_build import bsdf_material
     mat = bsdf_material(name, node_type, **inputs)
     ob.data.materials.clear()
     ob.data.materials.append(mat)
@@ -225,11 +299,23 @@ def _save_render(path):
     bpy.data.images["Render Result"].save_render(str(path))
 
 
-def _render(engine, paths):
+def render(paths=(), engine: str = "PRT_RELIGHT", samples: int = 256, transparent: bool = True,
+           seed: int | None = None) -> float:
+    """F12 with ``engine`` (Cycles: the scene's Light Paths -- :func:`reset` makes them
+    direct light only --, CPU, ``samples`` per pixel with ``seed`` (None: the scene's), no
+    denoising, no adaptive sampling), film transparent unless told; saved to each of
+    ``paths``.  Returns the render's seconds."""
     import bpy
     scene = bpy.context.scene
     scene.render.engine = engine
-    scene.render.film_transparent = True
+    scene.render.film_transparent = transparent
+    if engine == "CYCLES":
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = samples
+        scene.cycles.use_adaptive_sampling = False
+        scene.cycles.use_denoising = False
+        if seed is not None:
+            scene.cycles.seed = seed
     t0 = time.perf_counter()
     bpy.ops.render.render()
     seconds = time.perf_counter() - t0
@@ -238,27 +324,27 @@ def _render(engine, paths):
     return seconds
 
 
+def render_exr(path, engine: str = "PRT_RELIGHT", samples: int = 64, transparent: bool = True,
+               seed: int | None = None) -> np.ndarray:
+    """:func:`render` to the EXR ``path`` and its pixels read back (H, W, 4), top row first."""
+    render([path], engine, samples, transparent, seed)
+    return read_exr(path)
+
+
 def render_cycles(path, samples: int = 256, png=None, seed: int = 0) -> float:
-    """Direct-light-only Cycles render (ground truth), saved as EXR; returns seconds."""
-    import bpy
-    scene = bpy.context.scene
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = samples
-    scene.cycles.use_adaptive_sampling = False
-    scene.cycles.use_denoising = False
-    scene.cycles.max_bounces = 0
-    scene.cycles.seed = seed
-    return _render("CYCLES", [path] + ([png] if png else []))
+    """Cycles with the scene's Light Paths (ground truth; :func:`reset` makes them direct
+    light only), saved as EXR; returns seconds."""
+    return render([path] + ([png] if png else []), "CYCLES", samples, seed=seed)
 
 
 def render_prt(path, png=None) -> float:
     """F12 with the PRT_RELIGHT engine, saved as EXR; returns seconds."""
-    return _render("PRT_RELIGHT", [path] + ([png] if png else []))
+    return render([path] + ([png] if png else []))
 
 
 def render_workbench(path=None) -> float:
     """F12 with Workbench (timing baseline); returns seconds."""
-    return _render("BLENDER_WORKBENCH", [path] if path else [])
+    return render([path] if path else [], "BLENDER_WORKBENCH")
 
 
 def precompute(resolution: int = 32, threads=None, method: str = "REFERENCE") -> dict:
@@ -293,16 +379,3 @@ def read_exr(path) -> np.ndarray:
     if buf.has_error:
         raise RuntimeError(f"cannot read {path}: {buf.geterror()}")
     return np.asarray(buf.get_pixels(oiio.FLOAT), dtype=np.float32)
-
-
-def rel_l2(a: np.ndarray, b: np.ndarray, mask_from=None) -> float:
-    """||a - b|| / ||b|| over RGB of the pixels where ``b``'s alpha > 0.5.
-
-    ``b`` is the reference (Cycles); ``mask_from`` overrides the image whose
-    alpha selects the pixels.
-    """
-    ref_alpha = (mask_from if mask_from is not None else b)
-    mask = ref_alpha[..., 3] > 0.5 if ref_alpha.shape[-1] > 3 else np.ones(b.shape[:2], bool)
-    da = a[..., :3][mask].astype(np.float64)
-    db = b[..., :3][mask].astype(np.float64)
-    return float(np.linalg.norm(da - db) / max(np.linalg.norm(db), 1e-30))

@@ -58,3 +58,40 @@ def test_architecture_doc_lists_every_module_as_the_tree_has_it():
     spec.loader.exec_module(arch)
     assert arch.rendered(ROOT) == (ROOT / "docs" / "architecture.md").read_text(), \
         "docs/architecture.md is out of date: run `make docs`"
+
+
+def _core_modules():
+    return sorted(p.relative_to(ROOT / "core") for p in (ROOT / "core").rglob("*.py")
+                  if p.name != "__init__.py" and "__pycache__" not in p.parts)
+
+
+def test_every_core_module_has_a_test_file_mirroring_it():
+    """core/<package>/<module>.py is tested by tests/core/<package>/test_<module>.py, and
+    every test file there names a module that exists."""
+    want = {rel.parent / f"test_{rel.name}" for rel in _core_modules()}
+    have = {p.relative_to(ROOT / "tests" / "core")
+            for p in (ROOT / "tests" / "core").rglob("test_*.py")}
+    assert sorted(map(str, want - have)) == [], "core modules without a test file"
+    assert sorted(map(str, have - want)) == [], "test files without a core module"
+
+
+def test_tests_of_core_need_no_blender():
+    """`pytest tests/core` runs without Blender: no file there imports Blender's modules or
+    the add-on (not even through pytest.importorskip)."""
+    import ast
+    found = []
+    for p in sorted((ROOT / "tests" / "core").rglob("*.py")):
+        for node in ast.walk(ast.parse(p.read_text(), str(p))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                names = [node.module]
+            elif isinstance(node, ast.Call) and getattr(node.func, "attr", "") in (
+                    "importorskip", "import_module") and node.args:
+                names = [getattr(node.args[0], "value", "")]
+            for name in names:
+                parts = str(name).split(".")
+                if parts[0] in lint.BLENDER or parts[:2] == ["prt_relight", "addon"]:
+                    found.append(f"{p.relative_to(ROOT)}:{node.lineno}: {name}")
+    assert found == []

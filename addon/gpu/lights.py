@@ -183,12 +183,14 @@ def _shadow_atlas(state, sources, casters):
     cols = min(len(sources), 4)
     rows = -(-len(sources) // 4)
     width, height = SHADOW_TILE * cols, SHADOW_TILE * rows
-    target = _SHADOW_TARGET.get((width, height))
-    if target is None:
+    tex = _SHADOW_TARGET.get((width, height))
+    if tex is None:
         _SHADOW_TARGET.clear()
-        tex = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
-        target = _SHADOW_TARGET[(width, height)] = (tex, gpu.types.GPUFrameBuffer(depth_slot=tex))
-    tex, fb = target
+        tex = _SHADOW_TARGET[(width, height)] = gpu.types.GPUTexture((width, height),
+                                                                     format="DEPTH_COMPONENT32F")
+    # a framebuffer belongs to the GPU context that made it (F12's and the viewport's
+    # differ; textures are shared): made here, in the context that draws the atlas
+    fb = gpu.types.GPUFrameBuffer(depth_slot=tex)
     tiles = []
     saved = gpu.state.viewport_get()
     sh = _depth_shader()

@@ -49,7 +49,7 @@ _SSDF_SG_SAMPLERS = (("FLOAT_2D", "coeffTex"), ("FLOAT_2D_ARRAY", "eigenTex"),
                      ("FLOAT_2D", "envTex"), ("FLOAT_2D", "lightTex"), ("FLOAT_2D", "paramTex"))
 #: the libraries every pass's fragment stage starts with (common.glsl reads the constants)
 _COMMON = ("lib/constants.glsl", "lib/common.glsl")
-#: lib/sg.glsl with the libraries it calls, in order (tests/test_sg_brdf.py's twin builds it too)
+#: lib/sg.glsl with the libraries it calls, in order (tests/gpu/test_sg_common.py's twin builds it too)
 SG_LIBRARY = _COMMON + ("lib/microfacet.glsl", "lib/sg.glsl")
 _SSDF_SG_LIBS = SG_LIBRARY + ("lib/texture.glsl", "methods/ssdf_sg_lib.glsl")
 

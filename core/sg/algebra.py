@@ -240,7 +240,7 @@ def clamped_cosine_sg(n=None):
     Without ``n`` returns ``(lam_c, mu_c)``; with unit normals ``n`` (..., 3)
     returns the lobe ``(n, lam_c, mu_c)`` broadcast to ``n``'s batch shape.
     (L2 error against ``max(0, cos)`` over the sphere, by quadrature in
-    tests/test_sg.py: 0.2568, i.e. 17.7% of ``||max(0, cos)||_2 = sqrt(2 pi/3)``;
+    tests/core/sg/test_algebra.py: 0.2568, i.e. 17.7% of ``||max(0, cos)||_2 = sqrt(2 pi/3)``;
     a grid search finds the L2 optimum within 0.5% of it.)
     """
     if n is None:

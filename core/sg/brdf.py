@@ -95,7 +95,7 @@ their own tilt, sharpness and share by a least-squares table over (r, n.o),
 GGX lobes drawn as the Beckmann lobe of the same alpha without the multiscatter factor
 (before 2026-12-02, ``sg_material_from_brdf(ggx=False)``) were 14-20 % off on a rough
 metal: docs/measurements.md "SG lobes of a rough metal".  Measured errors:
-``tests/test_sg_brdf.py``, docs/measurements.md.
+``tests/core/sg/test_brdf.py``, docs/measurements.md.
 """
 
 from __future__ import annotations
@@ -353,7 +353,7 @@ def _ggx_normalisation(material, n, pw, lam, mu_d, cos_o, P, cosine=None, frame=
     its axis's elevation over ``n``'s horizon (the SSDF of an open hemisphere, core.methods.ssdf_sg.ssdf),
     as eq. 41 draws a flat open surface: the part of a broad lobe's product below the
     horizon, which the visibility removes, no longer counts toward ``E`` (it was 2-3.5 % of
-    ``E`` at r >= 0.7, up to 22 % at grazing views of r 0.3: tests/test_sg_brdf.py)."""
+    ``E`` at r >= 0.7, up to 22 % at grazing views of r 0.3: tests/core/sg/test_brdf.py)."""
     if cosine is None:
         lam_c, mu_c = sg.clamped_cosine_sg()
         lobes = [(n, lam_c, mu_c)]

@@ -5,7 +5,7 @@
  * core/sg/brdf.py (specular_lobes: NDF lobe -> spherical warp eq. 17-21 -> M_o at the
  * lobe centre eq. 22, Fresnel eq. 14) and core/sg/prefilter.py
  * (PrefilteredEnvironment.lookup, eq. 34-35).  Every lobe is mu * exp(lam (dot(i, axis) - 1)).
- * tests/test_sg_brdf.py::test_glsl_matches_numpy renders these functions offscreen and
+ * tests/gpu/test_sg_common.py (test_glsl_*) renders these functions offscreen and
  * compares with numpy.
  *
  * Material parameters of specular_lobes (per pixel; textured values go in here):

@@ -1,8 +1,8 @@
 """BLOCKS: locally adaptive per-block products (Inger, Farbman, Lischinski 2013, §4) -- the batched
 evaluator of the method.  The data layout and the visibility encoding are in
 :mod:`.blocks_encoding`, the float32 microfacet lobe in :mod:`.blocks_lobe`;
-``tests/blocks_oracle.py`` states Algorithm 1 per vertex (the oracle the tests hold this
-evaluator to).
+``tests/core/methods/blocks/oracle.py`` states Algorithm 1 per vertex (the oracle the tests
+hold this evaluator to).
 
 Per vertex and block the integral ``B_b = sum_k L_k V_k rho_k dw_k`` (``rho`` is
 BRDF x cosine) is evaluated by Algorithm 1 of the paper:
@@ -66,7 +66,7 @@ CASE_NAMES = ("zero (line 2)", "light-brdf (line 6)", "light-vis (line 9)", "tri
 
 # --------------------------------------------------------------------------- batched evaluator
 #
-# The per-vertex ``integrate_vertex`` of tests/blocks_oracle.py is the readable
+# The per-vertex ``integrate_vertex`` of tests/core/methods/blocks/oracle.py is the readable
 # statement of Algorithm 1; what follows evaluates the same cases for many vertices at once
 # (numpy over every active (vertex, block) pair of a chunk of vertices; the
 # per-level batches and pixel-basis groups shared out to threads -- numpy releases

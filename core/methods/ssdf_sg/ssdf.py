@@ -25,7 +25,7 @@ Discretisation (what "exact" means here)
 
     The minimum over the boundary set is computed exactly (all boundary points
     of a point, by matrix products over chunks of points), so the result equals
-    a brute-force loop over all boundary points (``tests/test_ssdf.py``).
+    a brute-force loop over all boundary points (``tests/core/methods/ssdf_sg/test_ssdf.py``).
 
 Special cases: a fully open hemisphere has no boundary except the horizon, its
 SSDF is the elevation ``asin(z)`` (exact); a fully blocked hemisphere has no

@@ -16,7 +16,7 @@ import pytest
 from prt_relight.addon.blender import storage
 from prt_relight.core.report.metrics import rel_l2_converged
 
-from ... import blender_scene as bs
+from prt_relight.bench import scenes
 
 pytestmark = pytest.mark.slow
 
@@ -40,7 +40,7 @@ def _render(tmp_path, name, engine="PRT_RELIGHT", samples=256, seed=0, transpare
     bpy.ops.render.render()
     path = tmp_path / f"{name}.exr"
     bpy.data.images["Render Result"].save_render(str(path))
-    return bs.read_exr(path)
+    return scenes.read_exr(path)
 
 
 def _cycles(tmp_path, name, samples=256, transparent=False):
@@ -49,13 +49,13 @@ def _cycles(tmp_path, name, samples=256, transparent=False):
 
 
 def _diffuse(name, colour):
-    return bs.bsdf_material(name, "ShaderNodeBsdfDiffuse", Color=(*colour, 1.0))
+    return scenes.bsdf_material(name, "ShaderNodeBsdfDiffuse", Color=(*colour, 1.0))
 
 
 def _cornell_box():
     """Five inward-facing 2 m walls (red left, green right), a box, a 0.5 m area lamp under
     the ceiling, a black world; the camera looks in through the open front."""
-    bs.reset()
+    scenes.reset()
     walls = (("Floor", (0, 0, 0), (0, 0, 0), (0.8, 0.8, 0.8)),
              ("Ceiling", (0, 0, 2), (math.pi, 0, 0), (0.8, 0.8, 0.8)),
              ("Back", (0, 1, 1), (math.pi / 2, 0, 0), (0.8, 0.8, 0.8)),
@@ -74,9 +74,10 @@ def _cornell_box():
     world = bpy.data.worlds.new("Black")
     bpy.context.scene.world = world
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (0, 0, 0, 1)
-    bs.add_camera(location=(0, -3.4, 1), rotation=(math.pi / 2, 0, 0))
+    scenes.add_camera(location=(0, -3.4, 1), rotation=(math.pi / 2, 0, 0),
+                       resolution=None)
     bpy.context.scene.camera.data.lens = 35
-    bs.set_resolution(96, 96)
+    scenes.set_resolution(96, 96)
     return lamp
 
 
@@ -85,8 +86,8 @@ def _room():
     behind: two-sided), a window cut in the +x wall, a box inside; lit by 'sunrise', whose
     sun falls through the window."""
     import bmesh
-    bs.reset()
-    bs.add_world(path=bs.hdri_path("sunrise"))
+    scenes.reset()
+    scenes.add_world("sunrise")
     bm = bmesh.new()
     bmesh.ops.create_cube(bm, size=1.0)
     bmesh.ops.scale(bm, vec=(4, 4, 2.6), verts=bm.verts)
@@ -103,9 +104,11 @@ def _room():
     room.data.materials.append(_diffuse("Wall", (0.75, 0.72, 0.68)))
     bpy.ops.mesh.primitive_cube_add(size=0.8, location=(-0.6, 0.5, 0.4))
     bpy.context.object.data.materials.append(_diffuse("Box", (0.6, 0.2, 0.15)))
-    bs.add_camera(location=(-1.8, -1.8, 1.5), rotation=(math.radians(80), 0, math.radians(-50)))
+    scenes.add_camera(location=(-1.8, -1.8, 1.5),
+                       rotation=(math.radians(80), 0, math.radians(-50)),
+                       resolution=None)
     bpy.context.scene.camera.data.lens = 18
-    bs.set_resolution(64, 48)
+    scenes.set_resolution(64, 48)
     return room
 
 
@@ -142,18 +145,19 @@ def test_window_lit_room_with_and_without_bounces(registered_addon, tmp_path):
 
 
 def test_object_on_a_coloured_ground_under_an_hdri(registered_addon, tmp_path):
-    bs.reset()
-    bs.add_world(path=bs.hdri_path("courtyard"))
-    ground = bs.add_ground(size=8, cuts=40)
-    ground.data.materials.append(bs.bsdf_material(
+    scenes.reset()
+    scenes.add_world("courtyard")
+    ground = scenes.add_ground(size=8, cuts=40)
+    ground.data.materials.append(scenes.bsdf_material(
         "Ground", "ShaderNodeBsdfPrincipled", **{"Base Color": (0.7, 0.35, 0.15, 1),
                                                  "Roughness": 0.8}))
-    suzanne = bs.add_suzanne(location=(0, 0, 1), subdiv=1)
-    suzanne.data.materials.append(bs.bsdf_material(
+    suzanne = scenes.add_suzanne(location=(0, 0, 1), subdiv=1)
+    suzanne.data.materials.append(scenes.bsdf_material(
         "Grey", "ShaderNodeBsdfPrincipled", **{"Base Color": (0.8, 0.8, 0.8, 1),
                                                "Roughness": 0.6}))
-    bs.add_camera(location=(0, -5.5, 2.2), rotation=(1.25, 0, 0))
-    bs.set_resolution(80, 60)
+    scenes.add_camera(location=(0, -5.5, 2.2), rotation=(1.25, 0, 0),
+                       resolution=None)
+    scenes.set_resolution(80, 60)
     _light_paths(4)
     bpy.ops.prt.precompute()
     ours = _render(tmp_path, "ours", transparent=True)
@@ -166,13 +170,14 @@ def test_object_on_a_coloured_ground_under_an_hdri(registered_addon, tmp_path):
 
 
 def test_plane_seen_from_below_is_lit_from_below(registered_addon, tmp_path):
-    bs.reset()
-    bs.add_world(path=bs.hdri_path("forest"))
-    plane = bs.add_ground(size=4, cuts=24)
+    scenes.reset()
+    scenes.add_world("forest")
+    plane = scenes.add_ground(size=4, cuts=24)
     plane.location.z = 1.0
     plane.data.materials.append(_diffuse("Plane", (0.7, 0.7, 0.7)))
-    bs.add_camera(location=(0, -4.5, -0.8), rotation=(math.radians(100), 0, 0))
-    bs.set_resolution(64, 48)
+    scenes.add_camera(location=(0, -4.5, -0.8), rotation=(math.radians(100), 0, 0),
+                       resolution=None)
+    scenes.set_resolution(64, 48)
     _light_paths(0)
     bpy.ops.prt.precompute()
     assert plane.prt.back_sides

@@ -1,0 +1,115 @@
+"""addon.frame.engine in headless Blender: the viewport's draw path (a fake region and view)
+draws the same frame as F12, turning the world redraws without a recompute, and the
+viewport shades view-dependent materials off the main thread."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+
+from prt_relight.addon.blender import storage
+from prt_relight.bench import scenes
+
+from ... import viewport
+
+
+pytestmark = pytest.mark.usefixtures("registered_addon")
+
+
+def _stored():
+    """(object, blob key) of every object's stored visibility: equal lists, same data."""
+    return sorted((o.name, storage.key(o, storage.VISIBILITY)) for o in bpy.data.objects
+                  if storage.has(o, storage.VISIBILITY))
+
+
+def _small_scene(hdri="sunset", cuts=16, subdiv=1):
+    scenes.reset()
+    scenes.add_world(hdri)
+    scenes.add_ground(size=6.0, cuts=cuts)
+    scenes.add_suzanne(subdiv=subdiv, location=(0.0, 0.0, 1.0))
+    scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
+    scenes.set_resolution(64, 48)
+    bpy.context.scene.prt.supersampling = 2
+
+
+def test_world_rotation_redraws_without_recompute(tmp_path):
+    _small_scene()
+    bpy.ops.prt.precompute()
+    a = scenes.render_exr(tmp_path / "a.exr")
+    images = _stored()
+    world = bpy.context.scene.world
+    nt = world.node_tree
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value[2] = 2.0
+    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], nt.nodes["Environment Texture"].inputs["Vector"])
+    b = scenes.render_exr(tmp_path / "b.exr")
+    assert _stored() == images
+    assert np.abs(a - b)[..., :3].mean() > 0.01 * a[..., :3].mean()
+
+
+@pytest.mark.parametrize("method", ["REFERENCE", "SSDF_SG"])
+def test_view_draw_path_draws_the_same_frame_as_f12(method):
+    """The viewport's drawing code (everything but Blender's display shader) runs
+    headless: a fake region/view from the scene camera gives the F12 pixels.  SSDF_SG
+    draws per pixel, and runs its ground's pair pass (an offscreen of its own) inside the
+    viewport's bound framebuffer."""
+    from prt_relight.addon.frame.engine import render_pixels
+    from prt_relight.addon.methods.ssdf_sg import gpu as ssdf_sg_gpu
+
+    _small_scene()
+    bpy.context.scene.prt.method = method
+    bpy.ops.prt.precompute()
+    ssdf_sg_gpu.PAIR_TABLES.clear()
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()                      # gives the gpu module a context in -b
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    w, h = 64, 48
+    view, window = cam.matrix_world.inverted(), cam.calc_matrix_camera(depsgraph, x=w, y=h)
+    engine, shown = viewport.view_draw(depsgraph, view, window, w, h)
+    assert engine.bound == 0 and engine._view_texture is not None
+    assert engine.stats is not None
+    direct = render_pixels(engine._state, view, window, w, h,
+                           scene.render.film_transparent, True)
+    np.testing.assert_array_equal(shown, direct)
+    assert np.isfinite(shown).all() and shown[..., :3].max() > 0.05
+    assert bool(ssdf_sg_gpu.PAIR_TABLES) == (method == "SSDF_SG")
+
+
+def test_viewport_shades_view_dependent_materials_off_the_main_thread():
+    """REFERENCE with a glossy layer: after a camera move the viewport redraws at once
+    with the previous radiance and a worker computes the new one; the next draw shows
+    exactly what F12 computes for that view."""
+    from prt_relight.addon.frame.engine import render_pixels
+
+    _small_scene()                               # no materials: Principled, view dependent
+    bpy.ops.prt.precompute()
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    w, h = 48, 36
+    window = cam.calc_matrix_camera(depsgraph, x=w, y=h)
+
+    def draw(view):
+        return viewport.view_draw(depsgraph, view, window, w, h, engine=engine)[1]
+
+    engine = viewport.FakeViewEngine()
+    view_a = cam.matrix_world.inverted()
+    first = draw(view_a)
+    assert engine._state.view_dependent and not engine.workers     # first frame: synchronous
+    from mathutils import Matrix
+    view_b = view_a @ Matrix.Rotation(0.15, 4, "Z")
+    interim = draw(view_b)
+    assert len(engine.workers) == 1                                 # shading went to a worker
+    engine.workers[0].join(60)
+    final = draw(view_b)
+    expected = render_pixels(engine._state, view_b, window, w, h,
+                             scene.render.film_transparent, True)
+    np.testing.assert_array_equal(final, expected)
+    assert not np.array_equal(interim, final)                       # highlights caught up

@@ -1,0 +1,243 @@
+"""Compact sources and lamps drawn per pixel (addon/gpu/lights.py): shadows against analytic
+penumbrae, a point-like sun without acne, an overcast world drawn exactly as without the
+split, point, spot and area lamps on a Lambert plane against their irradiance."""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+from prt_relight.addon.frame import state as runtime
+from prt_relight.bench import scenes
+
+from ...cases.lights import area_lamp, black_world, local_lamp, plate_over_ground, sun_lamp
+
+
+pytestmark = pytest.mark.usefixtures("registered_addon")
+
+
+def _edge_profile(frame, scale, width):
+    """The ground's radiance along x through the middle row, and the x of each column."""
+    row = frame.shape[0] // 2
+    xs = (np.arange(width) + 0.5) / width * scale - 0.5 * scale
+    return xs, frame[row, :, 0]
+
+
+@pytest.mark.parametrize("angle_deg", [4.0, 10.0])
+def test_penumbra_of_a_straight_edge_matches_the_disc_it_comes_from(tmp_path, angle_deg):
+    """A plate's edge 1 m above a Lambert ground under a sun straight above: across the
+    edge, the fraction of the sun's disc (projected radius 1 m * tan(angle / 2)) that is
+    not behind the plate is a circular segment's area.  The filtered shadow map follows
+    it."""
+    scenes.reset()
+    black_world()
+    plate_over_ground(1.0)
+    sun_lamp(3.0, math.radians(angle_deg))
+    # between the plate and the ground, looking down: the plate is behind the camera
+    cam = scenes.add_camera(location=(0.0, 0.0, 0.5), rotation=(0.0, 0.0, 0.0), resolution=None)
+    cam.data.type = "ORTHO"
+    rho = math.tan(math.radians(angle_deg / 2.0))
+    cam.data.ortho_scale = scale = 8.0 * rho
+    width = 128
+    scenes.set_resolution(width, 8)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 1
+    scene.render.filter_size = 0.0
+    bpy.ops.prt.precompute()
+    frame = scenes.render_exr(tmp_path / "edge.exr")
+    xs, got = _edge_profile(frame, scale, width)
+    full = 0.8 / math.pi * 3.0
+    # the plate covers x < 0: the lit fraction of the disc centred at x (projected)
+    t = np.clip(xs / rho, -1.0, 1.0)
+    lit = 0.5 + (t * np.sqrt(1.0 - t * t) + np.arcsin(t)) / math.pi
+    err = np.abs(got / full - lit)
+    assert err.mean() < 0.04, (err.mean(), err.max())
+    assert err.max() < 0.15
+
+    def width_between(profile, lo=0.25, hi=0.75):
+        return xs[np.argmax(profile >= hi)] - xs[np.argmax(profile >= lo)]
+
+    assert width_between(got / full) == pytest.approx(width_between(lit), rel=0.3)
+
+
+def test_a_point_like_sun_casts_a_sharp_shadow_without_acne(tmp_path):
+    scenes.reset()
+    black_world()
+    plate_over_ground(1.0)
+    sun_lamp(3.0, 0.0)
+    cam = scenes.add_camera(location=(0.0, 0.0, 0.5), rotation=(0.0, 0.0, 0.0), resolution=None)
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 2.0
+    scenes.set_resolution(64, 8)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 1
+    scene.render.filter_size = 0.0
+    bpy.ops.prt.precompute()
+    frame = scenes.render_exr(tmp_path / "sharp.exr")
+    xs, got = _edge_profile(frame, 2.0, 64)
+    full = 0.8 / math.pi * 3.0
+    np.testing.assert_allclose(got[xs < -0.05], 0.0, atol=1e-6)          # in the shadow
+    np.testing.assert_allclose(got[xs > 0.05], full, rtol=1e-4)          # lit: no acne
+
+
+def test_an_overcast_world_draws_exactly_as_without_extraction(tmp_path):
+    """No pixel over the threshold: no source, the same frame as with extraction off."""
+    scenes.reset()
+    h, w = 64, 128
+    theta = (np.arange(h) + 0.5) / h * math.pi
+    sky = np.repeat((0.3 + 0.7 * np.clip(np.cos(theta), 0, 1))[:, None, None]
+                    * np.ones((1, w, 3)), 1, axis=0).astype(np.float32)
+    scenes.add_world(image=scenes.float_image("overcast", np.broadcast_to(sky, (h, w, 3)).copy()))
+    scenes.add_ground(size=4.0, cuts=12)
+    scenes.add_suzanne(subdiv=1, location=(0.0, 0.0, 1.0))
+    scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
+    scenes.set_resolution(48, 36)
+    bpy.ops.prt.precompute()
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    assert state.sources == [] and state.world is state.full_world
+    with_split = scenes.render_exr(tmp_path / "a.exr")
+    bpy.context.scene.prt.light_sources = 0
+    without = scenes.render_exr(tmp_path / "b.exr")
+    np.testing.assert_array_equal(with_split, without)
+
+
+@pytest.mark.parametrize("method", ["REFERENCE", "SH"])
+def test_point_and_spot_lamps_light_every_method_per_pixel(tmp_path, method):
+    """A point lamp 2 m above a Lambert plane gives albedo / pi * Phi / (4 pi d^2) * cos
+    (Cycles' point light); a spot pointing down keeps that inside its cone and nothing
+    outside; a plate between the lamp and the plane casts a shadow."""
+    scenes.reset()
+    black_world()
+    ground = scenes.add_ground(size=8.0, cuts=8)
+    ground.data.materials.append(scenes.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
+                                                  Color=(0.8, 0.8, 0.8, 1.0)))
+    lamp = local_lamp("POINT", 500.0, (0.0, 0.0, 2.0), radius=0.01)
+    cam = scenes.add_camera(location=(0.0, 0.0, 1.0), rotation=(0.0, 0.0, 0.0), resolution=None)
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 6.0
+    scenes.set_resolution(30, 30)
+    scene = bpy.context.scene
+    scene.prt.method = method
+    scene.prt.supersampling = 1
+    scene.render.filter_size = 0.0
+    bpy.ops.prt.precompute()
+    frame = scenes.render_exr(tmp_path / "point.exr")[::-1]          # row 0 at y = -3
+    xs = (np.arange(30) + 0.5) / 30 * 6.0 - 3.0
+    X, Y = np.meshgrid(xs, xs, indexing="xy")
+    d2 = X * X + Y * Y + 4.0
+    expected = 0.8 / math.pi * 500.0 / (4 * math.pi * d2) * (2.0 / np.sqrt(d2))
+    np.testing.assert_allclose(frame[..., 0], expected, rtol=0.01)
+    bpy.data.objects.remove(lamp)
+    local_lamp("SPOT", 500.0, (0.0, 0.0, 2.0), radius=0.01, size=math.radians(60),
+                blend=0.0)
+    frame = scenes.render_exr(tmp_path / "spot.exr")[::-1]
+    inside = np.arctan(np.sqrt(X * X + Y * Y) / 2.0) < math.radians(27)
+    outside = np.arctan(np.sqrt(X * X + Y * Y) / 2.0) > math.radians(33)
+    np.testing.assert_allclose(frame[..., 0][inside], expected[inside], rtol=0.01)
+    assert frame[..., 0][outside].max() == 0.0
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(1.5, 0.0, 1.5))
+    bpy.ops.prt.precompute()
+    frame = scenes.render_exr(tmp_path / "shadow.exr")[::-1]
+    # the plate at x 1..2 (1.5 m up) shades the ground from x = 1.33 to 2.67 (the lamp at
+    # x = 0, 2 m up): inside the shadow but within the cone
+    col = int((2.0 + 3.0) / 6.0 * 30)
+    assert frame[15, col, 0] < 0.02 * expected[15, col]
+
+
+def _area_irradiance(points, centre, half_x, half_y, facing, radiance, ellipse, n=300):
+    """Irradiance of an upward-facing plane at ``points`` from a Lambertian emitter of
+    ``radiance`` (midpoint quadrature over its area)."""
+    u = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+    U, V = np.meshgrid(u, u, indexing="ij")
+    keep = (U * U + V * V <= 1.0) if ellipse else np.ones_like(U, bool)
+    q = centre + U[keep][:, None] * half_x + V[keep][:, None] * half_y      # (Q, 3)
+    dA = 4.0 * np.linalg.norm(np.cross(half_x, half_y)) / (n * n)
+    out = np.zeros(len(points))
+    for k, p in enumerate(points):
+        w = q - p
+        d2 = (w * w).sum(1)
+        cos_i = np.maximum(w[:, 2], 0.0) / np.sqrt(d2)
+        cos_l = np.maximum(-(w @ facing), 0.0) / np.sqrt(d2)
+        out[k] = radiance * (cos_i * cos_l / d2).sum() * dA
+    return out
+
+
+@pytest.mark.parametrize("shape", ["RECTANGLE", "DISK"])
+def test_area_lamp_lights_a_lambert_plane_as_its_area_integral(tmp_path, shape):
+    """An area lamp tilted over a Lambert plane (every method draws it per pixel): albedo
+    / pi times the irradiance of a Lambertian emitter of Phi / (pi A) integrated over its
+    area (numerical quadrature), dark behind it."""
+    scenes.reset()
+    black_world()
+    ground = scenes.add_ground(size=8.0, cuts=8)
+    ground.data.materials.append(scenes.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
+                                                  Color=(0.8, 0.8, 0.8, 1.0)))
+    tilt = 0.5
+    lamp = area_lamp(400.0, (0.3, -0.2, 1.5), 1.2, 0.6, shape=shape,
+                      rotation=(tilt, 0.0, 0.3))
+    cam = scenes.add_camera(location=(0.0, 0.0, 1.0), rotation=(0.0, 0.0, 0.0), resolution=None)
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 6.0
+    scenes.set_resolution(24, 24)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 1
+    scene.render.filter_size = 0.0
+    bpy.ops.prt.precompute()
+    frame = scenes.render_exr(tmp_path / "area.exr")[::-1]
+    xs = (np.arange(24) + 0.5) / 24 * 6.0 - 3.0
+    X, Y = np.meshgrid(xs, xs, indexing="xy")
+    M = np.array(lamp.matrix_world)
+    sy = 0.6 if shape == "RECTANGLE" else 1.2
+    half_x, half_y, facing = 0.6 * M[:3, 0], 0.5 * sy * M[:3, 1], -M[:3, 2]
+    area = 1.2 * sy * (math.pi / 4 if shape == "DISK" else 1.0)
+    E = _area_irradiance(np.column_stack([X.ravel(), Y.ravel(), np.zeros(X.size)]), M[:3, 3],
+                         half_x, half_y, facing, 400.0 / (math.pi * area), shape == "DISK")
+    expected = (0.8 / math.pi * E).reshape(24, 24)
+    lit = expected > 0.02 * expected.max()
+    err = np.abs(frame[..., 0] - expected)[lit] / expected[lit]
+    assert np.median(err) < 0.01 and err.max() < 0.05, (np.median(err), err.max())
+    assert frame[..., 0][~lit].max() <= 0.05 * expected.max()
+
+
+def _state():
+    state = runtime.FrameState()
+    state.sync(bpy.context.evaluated_depsgraph_get())
+    return state
+
+
+@pytest.mark.slow
+def test_sun_lamp_lights_an_open_plane_like_lambert_and_moves_live(tmp_path):
+    """A Blender sun lamp is drawn per pixel by every method (addon/gpu/lights.py): an open
+    Lambert plane under a black world shows albedo/pi * strength * cos(theta); turning the
+    lamp needs no recompute."""
+    scenes.reset()
+    scenes.add_world(image=scenes.float_image("black", np.zeros((8, 16, 3), np.float32)))
+    ground = scenes.add_ground(size=4.0, cuts=4)
+    ground.data.materials.append(scenes.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
+                                                  Color=(0.8, 0.8, 0.8, 1.0)))
+    sun = bpy.data.lights.new("Sun", "SUN")
+    sun.energy, sun.angle = 3.0, 0.05
+    lamp = bpy.data.objects.new("Sun", sun)
+    bpy.context.scene.collection.objects.link(lamp)
+    lamp.rotation_euler = (np.radians(30.0), 0.0, 0.0)          # 30 degrees from the zenith
+    scenes.add_camera(location=(0.0, 0.0, 5.0), rotation=(0.0, 0.0, 0.0), resolution=None)
+    scenes.set_resolution(16, 16)
+    scene = bpy.context.scene
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    pid = ground.prt.precompute_id
+    for method in ("SSDF_SG", "REFERENCE"):
+        scene.prt.method = method
+        lamp.rotation_euler = (np.radians(30.0), 0.0, 0.0)
+        frame = scenes.render_exr(tmp_path / f"{method}30.exr")
+        np.testing.assert_allclose(frame[..., :3], 0.8 / np.pi * 3.0 * np.cos(np.radians(30.0)),
+                                   rtol=0.01, err_msg=method)
+        lamp.rotation_euler = (np.radians(60.0), 0.0, 0.0)
+        frame = scenes.render_exr(tmp_path / f"{method}60.exr")
+        np.testing.assert_allclose(frame[..., :3], 0.8 / np.pi * 3.0 * 0.5, rtol=0.01,
+                                   err_msg=method)
+        assert not _state().lamps and len(_state().drawn_lamps) == 1
+    assert ground.prt.precompute_id == pid

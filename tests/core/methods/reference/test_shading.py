@@ -1,0 +1,191 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""core.methods.reference.shading (Inger et al. 2013, eq. 1): the pixel-basis triple product
+against explicit python loops over texels, uniform white worlds (albedo, half-blocked),
+material slots and view directions, a fine hemisphere quadrature (white furnace), the
+coarse-edge share and the point views.  No bpy."""
+
+import numpy as np
+import pytest
+
+from prt_relight.core.shading import brdf
+from prt_relight.core.shading import materials
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.scene import mesh, visibility
+from prt_relight.core.methods.reference import shading as reference
+from ...scene.geometry import LAMBERT, N, shade, trace, unit, wall_triangles, white_world
+
+
+def test_shade_lambert_uniform_white():
+    cube = directions.cubemap(N)
+    light = white_world()
+    pts = np.zeros((2, 3))
+    nrm = np.tile([0.0, 0.0, 1.0], (2, 1))
+    bits_open, vis_open = trace(np.zeros((0, 3, 3)), pts, nrm)
+    np.testing.assert_array_equal(vis_open[0], cube.directions[:, 2] > 0)
+    out = shade(bits_open, pts, nrm, light, LAMBERT)
+    np.testing.assert_allclose(out, np.tile(LAMBERT.diffuse_albedo, (2, 1)), atol=1e-3)
+    irr = reference.diffuse_irradiance(bits_open, nrm, cube, light)
+    np.testing.assert_allclose(irr, np.pi, rtol=1e-4)
+    bits_wall, _ = trace(wall_triangles(), pts, nrm)
+    out = shade(bits_wall, pts, nrm, light, LAMBERT)
+    np.testing.assert_allclose(out, np.tile(LAMBERT.diffuse_albedo, (2, 1)) / 2, atol=5e-3)
+
+
+def test_shade_lambert_uniform_white_random_normals():
+    # Unoccluded, arbitrary normal: albedo to the horizon-straddling error (< 2e-3 * albedo/pi)
+    rng = np.random.default_rng(4)
+    nrm = unit(rng.normal(size=(20, 3)))
+    pts = rng.normal(size=(20, 3))
+    bits, _ = trace(np.zeros((0, 3, 3)), pts, nrm)
+    out = shade(bits, pts, nrm, white_world(), LAMBERT)
+    np.testing.assert_allclose(out, np.tile(LAMBERT.diffuse_albedo, (20, 1)), atol=1e-3)
+
+
+# --------------------------------------------------------------------------- #
+# reference vs brute force
+# --------------------------------------------------------------------------- #
+
+def brute_visible(tris, origin_base, offset, dirs):
+    """Möller-Trumbore in float64 for each direction; also returns ambiguity margin."""
+    tris = np.asarray(tris, float)
+    v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    vis = np.ones(len(dirs), bool)
+    margin = np.full(len(dirs), np.inf)
+    for k, d in enumerate(dirs):
+        o = origin_base + offset * d
+        pvec = np.cross(d, e2)
+        det = np.einsum("ij,ij->i", e1, pvec)
+        ok = np.abs(det) > 1e-14
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        tvec = o - v0
+        u = np.einsum("ij,ij->i", tvec, pvec) * inv
+        q = np.cross(tvec, e1)
+        v = (q @ d) * inv
+        t = np.einsum("ij,ij->i", e2, q) * inv
+        m = np.minimum(np.minimum(u, v), 1.0 - u - v)
+        front = ok & (t > 0)
+        hit = front & (m >= 0)
+        vis[k] = not hit.any()
+        if front.any():
+            margin[k] = np.abs(m[front]).min()
+    return vis, margin
+
+
+def test_reference_matches_brute_force_loops():
+    n = 16
+    cube = directions.cubemap(n)
+    rng = np.random.default_rng(12)
+    # a few triangles above a ground point at the origin
+    tris = rng.uniform(-0.8, 0.8, size=(5, 3, 3)) + [0, 0, 1.0]
+    tris[:, :, 2] = np.abs(tris[:, :, 2]) + 0.2
+    pts = np.array([[0.0, 0.0, 0.0], [0.2, -0.1, 0.0], [-0.3, 0.25, 0.0]])
+    nrm = unit(np.array([[0.0, 0.0, 1.0], [0.2, 0.1, 1.0], [-0.3, 0.0, 1.0]]))
+    offset = 1e-4
+    bits, vis = trace(tris, pts, nrm, n=n, offset=offset)
+
+    # visibility vs float64 brute force, ignoring texels grazing a triangle edge or the horizon
+    for p in range(len(pts)):
+        bv, margin = brute_visible(tris, pts[p] + offset * nrm[p], offset, cube.directions)
+        bv &= (cube.directions @ nrm[p]) > 0
+        # the hemisphere test is float32 (visibility.hemisphere_mask): skip the horizon
+        sure = (margin > 1e-4) & (np.abs(cube.directions @ nrm[p]) > 1e-6)
+        np.testing.assert_array_equal(vis[p][sure], bv[sure])
+        assert sure.sum() > 0.98 * cube.size
+    assert 0 < vis.sum() < (nrm @ cube.directions.T > 0).sum()   # some texels are blocked
+
+    # random coloured environment
+    img = rng.uniform(0.0, 3.0, size=(32, 64, 3)).astype(np.float32)
+    img[5, 20] = 500.0                                              # a bright spot
+    light = envmap.WorldLighting(img, strength=0.8).to_cubemap(n)
+    mat = materials.Material(diffuse_albedo=(0.6, 0.3, 0.1), specular_color=(0.9, 0.7, 0.5),
+                        roughness=0.3, distribution="BECKMANN")
+    spec_only = materials.Material(diffuse_albedo=(0.0, 0.0, 0.0), specular_color=mat.specular_color,
+                              roughness=0.3, distribution="BECKMANN")
+    eye = np.array([1.5, -2.0, 3.0])
+    got = reference.shade_points(bits, pts, nrm, np.zeros(len(pts), np.int64), [mat], eye, cube,
+                                 light)
+    unit_dirs = light.unit_directions
+    for p in range(len(pts)):
+        view = unit(eye - pts[p])
+        acc = np.zeros(3)
+        for k in range(cube.size):
+            if not vis[p, k]:
+                continue
+            L = light.radiance[k].astype(np.float64)
+            cos_mean = max(0.0, float(nrm[p] @ light.directions[k]))
+            diffuse = np.array(mat.diffuse_albedo) / np.pi * cos_mean
+            spec = brdf.reflectance_cosine(spec_only, nrm[p][None], view[None],
+                                           unit_dirs[k][None])[0, 0].astype(np.float64)
+            acc += L * (diffuse + spec) * cube.solid_angles[k]
+        np.testing.assert_allclose(got[p], acc, rtol=1e-4)
+    assert np.all(got > 0)
+
+    # diffuse-only material: shade = albedo/pi * diffuse_irradiance
+    irr = reference.diffuse_irradiance(bits, nrm, cube, light)
+    lam = reference.shade_points(bits, pts, nrm, np.zeros(len(pts), np.int64), [LAMBERT], eye,
+                                 cube, light)
+    np.testing.assert_allclose(lam, irr * np.array(LAMBERT.diffuse_albedo) / np.pi, rtol=1e-5)
+
+
+def test_reference_material_slots_and_view_dirs():
+    cube = directions.cubemap(N)
+    pts = np.zeros((4, 3))
+    nrm = np.tile([0, 0, 1.0], (4, 1))
+    bits, _ = trace(np.zeros((0, 3, 3)), pts, nrm)
+    light = white_world()
+    m0 = materials.Material(diffuse_albedo=(0.2, 0.2, 0.2))
+    m1 = materials.Material(diffuse_albedo=(0.9, 0.1, 0.4))
+    out = reference.shade_points(bits, pts, nrm, np.array([0, 1, 0, 7]), [m0, m1],
+                                 np.array([0, 0, 5.0]), cube, light)
+    np.testing.assert_allclose(out[0], m0.diffuse_albedo, atol=1e-3)
+    np.testing.assert_allclose(out[1], m1.diffuse_albedo, atol=1e-3)
+    # a slot past the table is the last one (Cycles clamps the material index)
+    np.testing.assert_allclose(out[3], m1.diffuse_albedo, atol=1e-3)
+    # view_dirs overrides eye
+    glossy = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=0.5)
+    vd = np.tile([0.0, 0.0, 1.0], (4, 1))
+    a = reference.shade_points(bits, pts, nrm, np.zeros(4, np.int64), [glossy],
+                               np.array([100.0, 0, 0.01]), cube, light, view_dirs=vd)
+    b = reference.shade_points(bits, pts, nrm, np.zeros(4, np.int64), [glossy],
+                               np.array([0, 0, 5.0]), cube, light)
+    np.testing.assert_allclose(a, b, rtol=1e-6)
+    # white furnace: the cubemap sum equals the lobe's directional albedo computed
+    # with a fine equal-area hemisphere quadrature (independent directions)
+    hd, hw = directions.hemisphere_uniform(512)
+    for rough, view in [(0.5, [0.0, 0.0, 1.0]), (0.7, [0.6, 0.0, 0.8]), (0.7, [0.0, -0.96, 0.28])]:
+        g = materials.Material(diffuse_albedo=(0, 0, 0), specular_color=(1, 1, 1), roughness=rough)
+        albedo = (brdf.specular_cosine(g, nrm[:1], np.array([view]), hd)[0].astype(np.float64)
+                  * hw).sum()
+        got = reference.shade_points(bits, pts, nrm, np.zeros(4, np.int64), [g], None, cube,
+                                     light, view_dirs=np.tile(view, (4, 1)))
+        np.testing.assert_allclose(got, albedo, rtol=2e-3)
+
+
+def test_coarse_edge_share_counts_edges_across_a_shadow_edge():
+    """A 4 x 4 grid whose points at x < 0 see no sky and the others all of it: the edges
+    that join the two halves jump by 1, the others by 0; counted by hand."""
+    g = mesh.grid(2.0, 4)
+    pts = mesh.shading_points(g)
+    cube = directions.cubemap(8)
+    open_bits = np.packbits(visibility.hemisphere_mask(pts.normals, cube), axis=1)
+    bits = np.where((pts.positions[:, 0] < -1e-9)[:, None], 0, open_bits).astype(np.uint8)
+    tri_points = pts.point_of_corner[g.triangles]
+    shaded = pts.positions[:, 0] < -1e-9
+    edges = np.concatenate([tri_points[:, [0, 1]], tri_points[:, [1, 2]], tri_points[:, [2, 0]]])
+    want = float(np.mean(shaded[edges[:, 0]] != shaded[edges[:, 1]]))
+    assert 0.0 < want < 1.0
+    got = reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner, g.triangles, cube)
+    assert got == pytest.approx(want)
+    # a jump of exactly the whole sky is over any threshold below 1, none at 1
+    assert reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner, g.triangles,
+                                       cube, jump=1.0) == 0.0
+    assert reference.coarse_edge_share(bits, pts.normals, pts.point_of_corner,
+                                       np.zeros((0, 3), np.int64), cube) == 0.0
+
+
+def test_point_views():
+    pos = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 2.0]])
+    np.testing.assert_allclose(reference.point_views(pos, eye=np.array([0.0, 0.0, 3.0])),
+                               [[0.0, 0.0, 1.0], np.array([-1.0, -2.0, 1.0]) / np.sqrt(6.0)])
+    ortho = reference.point_views(pos, eye=None, view_dir=np.array([0.0, 1.0, 0.0]))
+    assert ortho.shape == (2, 3) and np.all(ortho == [0.0, 1.0, 0.0])
