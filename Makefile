@@ -12,6 +12,7 @@
 #   make bench   run the precompute benchmark
 #   make bench-scale  production scale: 25k-500k vertices (time, memory, storage, AUTO)
 #   make bench-dynamic  shadow fields: precompute/storage per detail, frames with 1/4/16 dynamic objects
+#   make bench-bounces  bounced light: every method against Cycles with bounces and direct, F12 both ways
 #   make report  speed/error report of every method into out/report
 #   make clean   remove dist/, out/, caches   (make distclean: also .venv, wheels/)
 
@@ -37,7 +38,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-methods report clean distclean
+.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-methods bench-bounces report clean distclean
 
 setup: apt venv
 
@@ -132,6 +133,13 @@ bench-methods: setup
 	$(VENV_PY) bench/bench_blocks.py
 	$(VENV_PY) bench/bench_rsl.py
 	$(VENV_PY) bench/bench_ssdf_sg.py
+
+# Light that bounces (issue 29): every method against Cycles with 4 diffuse bounces and
+# direct, F12 with and without bounces, on the Cornell box, the window-lit room and an object
+# on a coloured ground; pictures of the room and the box (about 20 minutes on 2 cores).
+BOUNCE_ARGS ?= --pictures docs/images
+bench-bounces: setup
+	$(VENV_PY) bench/bench_bounces.py $(BOUNCE_ARGS)
 
 # Speed/error report of every method on the held-out scenes (out/report/<scene>/index.html).
 report: setup

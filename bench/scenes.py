@@ -280,6 +280,96 @@ def glossy_bunny_scene(hdri: str = "city", roughness: float = 0.25, cuts: int = 
     return ob
 
 
+# ------------------------------------------------------------------ scenes with bounced light
+
+def light_paths(bounces: int):
+    """The scene's Cycles Light Paths: ``bounces`` diffuse bounces (0: direct light only)."""
+    import bpy
+    scene = bpy.context.scene
+    scene.cycles.max_bounces = 12 if bounces else 0
+    scene.cycles.diffuse_bounces = max(int(bounces), 1)
+
+
+def _diffuse(name: str, colour):
+    return bsdf_material(name, "ShaderNodeBsdfDiffuse", Color=(*colour, 1.0))
+
+
+def cornell_box(size=(96, 96)):
+    """Five inward-facing 2 m walls (red left, green right), a box, a 0.5 m area lamp under
+    the ceiling, a black world; the camera looks in through the open front.  Returns the
+    lamp."""
+    import bpy
+    reset()
+    walls = (("Floor", (0, 0, 0), (0, 0, 0), (0.8, 0.8, 0.8)),
+             ("Ceiling", (0, 0, 2), (math.pi, 0, 0), (0.8, 0.8, 0.8)),
+             ("Back", (0, 1, 1), (math.pi / 2, 0, 0), (0.8, 0.8, 0.8)),
+             ("Left", (-1, 0, 1), (0, math.pi / 2, 0), (0.8, 0.1, 0.1)),
+             ("Right", (1, 0, 1), (0, -math.pi / 2, 0), (0.1, 0.8, 0.1)))
+    for name, loc, rot, col in walls:
+        bpy.ops.mesh.primitive_grid_add(x_subdivisions=16, y_subdivisions=16, size=2,
+                                        location=loc, rotation=rot)
+        bpy.context.object.name = name
+        bpy.context.object.data.materials.append(_diffuse(name, col))
+    bpy.ops.mesh.primitive_cube_add(size=0.6, location=(-0.35, 0.3, 0.3))
+    bpy.context.object.data.materials.append(_diffuse("Box", (0.8, 0.8, 0.8)))
+    bpy.ops.object.light_add(type="AREA", location=(0, 0, 1.98))
+    lamp = bpy.context.object
+    lamp.data.size, lamp.data.energy = 0.5, 60.0
+    world = bpy.data.worlds.new("Black")
+    bpy.context.scene.world = world
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0, 0, 0, 1)
+    add_camera(location=(0, -3.4, 1), rotation=(math.pi / 2, 0, 0), resolution=size)
+    bpy.context.scene.camera.data.lens = 35
+    return lamp
+
+
+def window_room(size=(64, 48), hdri: str = "sunrise"):
+    """A 4 x 4 x 2.6 m room made as a box whose normals face out (its walls are seen from
+    behind: two-sided), a window cut in the +x wall, a box inside; lit by ``hdri``, whose
+    sun falls through the window.  Returns the room."""
+    import bmesh
+    import bpy
+    reset()
+    add_world(hdri)
+    bm = bmesh.new()
+    bmesh.ops.create_cube(bm, size=1.0)
+    bmesh.ops.scale(bm, vec=(4, 4, 2.6), verts=bm.verts)
+    bmesh.ops.translate(bm, vec=(0, 0, 1.3), verts=bm.verts)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=15, use_grid_fill=True)
+    window = [f for f in bm.faces if f.normal.x > 0.9 and abs(f.calc_center_median().y) < 0.9
+              and 0.8 < f.calc_center_median().z < 2.0]
+    bmesh.ops.delete(bm, geom=window, context="FACES")
+    mesh = bpy.data.meshes.new("Room")
+    bm.to_mesh(mesh)
+    bm.free()
+    room = bpy.data.objects.new("Room", mesh)
+    bpy.context.collection.objects.link(room)
+    room.data.materials.append(_diffuse("Wall", (0.75, 0.72, 0.68)))
+    bpy.ops.mesh.primitive_cube_add(size=0.8, location=(-0.6, 0.5, 0.4))
+    bpy.context.object.data.materials.append(_diffuse("Box", (0.6, 0.2, 0.15)))
+    add_camera(location=(-1.8, -1.8, 1.5), rotation=(math.radians(80), 0, math.radians(-50)),
+               resolution=size)
+    bpy.context.scene.camera.data.lens = 18
+    return room
+
+
+def coloured_ground(size=(80, 60), hdri: str = "courtyard", subdiv: int = 1):
+    """Suzanne (Principled grey, roughness 0.6) over an orange Principled ground (roughness
+    0.8) under ``hdri``: the ground's colour bleeds onto her.  Returns Suzanne."""
+    reset()
+    add_world(hdri)
+    ground = add_ground(size=8, cuts=40)
+    ground.data.materials.append(bsdf_material(
+        "Ground", "ShaderNodeBsdfPrincipled", **{"Base Color": (0.7, 0.35, 0.15, 1),
+                                                 "Roughness": 0.8}))
+    suzanne = add_suzanne(location=(0, 0, 1), subdiv=subdiv)
+    suzanne.data.materials.append(bsdf_material(
+        "Grey", "ShaderNodeBsdfPrincipled", **{"Base Color": (0.8, 0.8, 0.8, 1),
+                                               "Roughness": 0.6}))
+    add_camera(location=(0, -5.5, 2.2), rotation=(1.25, 0, 0), resolution=size)
+    return suzanne
+
+
 # ------------------------------------------------------------------ rendering
 
 def _save_render(path):

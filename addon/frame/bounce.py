@@ -100,8 +100,8 @@ class FrameBounce:
         return cluster.astype(np.int64), weight, pos, nrm, bits, res, k_cols, k_w
 
     def _albedo(self, state) -> np.ndarray:
-        """(K, 3) each cluster's diffuse reflectance: the area-weighted mean over its
-        triangle sides of their material's (a textured colour at its mean)."""
+        """(K, 3) each cluster's reflectance: the area-weighted mean over its triangle
+        sides of their material's, diffuse and glossy (a textured colour at its mean)."""
         total = np.zeros((self.clusters, 3))
         area = np.zeros(self.clusters)
         for i, d in self.receivers:
@@ -110,7 +110,7 @@ class FrameBounce:
             tri = arrays.triangles[:arrays.front_triangles]
             a = core_mesh.triangle_areas(arrays.positions[arrays.corner_verts[tri]])
             slots = arrays.corner_materials[tri[:, 0]]
-            table = np.array([core_bounce.diffuse_reflectance(
+            table = np.array([core_bounce.reflectance(
                 slot_material(st.materials, m), brdf.diffuse_view_weight)
                 for m in range(max(len(st.materials), 1))])
             rho = table[np.clip(slots, 0, len(table) - 1)]

@@ -67,14 +67,14 @@ def _batches(state: FrameState, radiance_per_object):
 def _bounce_draws(state: FrameState, eye, view_dir):
     """A per-pixel method's bounced light, per corner, added onto its frame (a per-vertex
     method's is in its radiance already: ``FrameState.shade``)."""
-    plain, white = state.bounced_radiance(eye, view_dir)
+    plain, white, glossy = state.bounced_radiance(eye, view_dir)
     draws = []
-    for st, rad, unit in zip(state.objects, plain, white):
+    for st, rad, unit, spec in zip(state.objects, plain, white, glossy):
         if rad is None:
             continue
         positions = st.arrays.positions[st.arrays.corner_verts]
         draws += drawing.textured_draws(
-            positions, TexturedRadiance.of(rad, unit, np.zeros_like(rad)), st.arrays.triangles,
+            positions, TexturedRadiance.of(rad, unit, spec), st.arrays.triangles,
             st.closed_side, st.textures, st.arrays.corner_materials, added=True)
     return draws
 

@@ -17,6 +17,7 @@ import numpy as np
 from ...core.methods.reference import shading as reference
 from ...core.shading import brdf as core_brdf
 from ...core.shading.materials import slot_material
+from ...core.transport import bounce as core_bounce
 from ...core.sphere import directions, envmap
 from ...core.pipeline import frame_status
 from ...core.scene import mesh as core_mesh, textures, visibility
@@ -381,10 +382,10 @@ class FrameState:
         direction toward an orthographic camera (then ``eye`` is ignored).
         """
         out = self.method_impl.shade(self, eye, view_dirs_for)
-        bounced = white = None
+        bounced = white = glossy = None
         if out is not None and self.bounce is not None:
-            # the bounce reaches every receiver's diffuse base (addon.frame.bounce)
-            bounced, white = self.bounced_radiance(eye, view_dirs_for)
+            # the bounce reaches every receiver (addon.frame.bounce)
+            bounced, white, glossy = self.bounced_radiance(eye, view_dirs_for)
             out = [r if b is None else np.asarray(r) + b for r, b in zip(out, bounced)]
         textured = [i for i, st in enumerate(self.objects) if st.textures]
         if out is None or not textured:
@@ -399,33 +400,42 @@ class FrameState:
             diffuse = np.asarray(w) - np.asarray(b)
             if white is not None and white[i] is not None:
                 diffuse = diffuse + white[i]
+                b = np.asarray(b) + glossy[i]
             out[i] = TexturedRadiance.of(out[i], diffuse, b)
         return out
 
-    def bounced_radiance(self, eye, view_dirs_for=None) -> tuple[list, list]:
-        """Per object, per corner (C, 3) float32 or None: the bounced light its diffuse base
-        sends toward the view with each slot's colour, and with a textured slot's colour
-        white (what its colour multiplies per pixel)."""
-        plain, white = [], []
+    def bounced_radiance(self, eye, view_dirs_for=None) -> tuple[list, list, list]:
+        """Per object, per corner (C, 3) float32 or None: the bounced light it sends toward
+        the view (diffuse base with each slot's colour, plus glossy part); its diffuse
+        base's with a textured slot's colour white (what that colour multiplies per
+        pixel); and its glossy part's alone.  The glossy part takes the bounce as if it
+        came evenly from the hemisphere (core.transport.bounce.glossy_albedo)."""
+        plain, white, glossy = [], [], []
         for st, E in zip(self.objects, self.bounce.irradiance(self)):
             if E is None:
                 plain.append(None)
                 white.append(None)
+                glossy.append(None)
                 continue
             pts = st.points
             views = reference.point_views(pts.positions, eye, view_dirs_for)
+            cos_o = np.einsum("ij,ij->i", pts.normals, views)
             rad = np.zeros((pts.count, 3), np.float32)
             unit = np.zeros((pts.count, 3), np.float32)
+            spec = np.zeros((pts.count, 3), np.float32)
             for m in np.unique(pts.materials):
                 sel = np.nonzero(pts.materials == m)[0]
                 mat = slot_material(st.materials, m)
+                spec[sel] = E[sel] / np.pi * core_bounce.glossy_albedo(mat, cos_o[sel])
                 rad[sel] = reference.lambert_layer(mat, E[sel], pts.normals[sel], views[sel])
                 if st.slot_of[min(int(m), len(st.slot_of) - 1)] in st.textures:
                     unit[sel] = reference.lambert_layer(replace(mat, diffuse_albedo=(
                         1.0, 1.0, 1.0)), E[sel], pts.normals[sel], views[sel])
-            plain.append(rad[pts.point_of_corner])
-            white.append(unit[pts.point_of_corner])
-        return plain, white
+            corner = pts.point_of_corner
+            plain.append((rad + spec)[corner])
+            white.append(unit[corner])
+            glossy.append(spec[corner])
+        return plain, white, glossy
 
     def draw_objects(self, eye, view_dirs_for=None):
         """Per-pixel draw callables of the active method, or None (see methods)."""

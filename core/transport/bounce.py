@@ -7,15 +7,20 @@ lamps), one bounce gives each receiver ``E_ind = T_pm L_m`` (:mod:`.transfer`). 
 bounces go through the clusters first: ``E'_m = T_mj L_j``, ``L'_m = rho_m E'_m / pi``,
 and the receivers gather the sum ``L + L' + ...`` (Sloan, Kautz, Snyder 2002, §5: bounce
 passes, each gathering the previous one; Hasan, Pellacini, Bala 2006: the gather-to-gather
-matrix for multiple bounces).  Reflectors are diffuse with their albedo (their glossy
-part sends nothing here); receivers take the bounce through their diffuse part.
+matrix for multiple bounces).  Reflectors send their whole albedo, diffuse and glossy,
+as diffuse light (:func:`reflectance`: the glossy part's energy kept, its direction not);
+receivers take the bounce through their diffuse part and, as if it came evenly from
+their hemisphere, through their glossy part (:func:`glossy_albedo`).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
+
+from ..shading import brdf
 
 #: shadow rays traced per area lamp and gather point (points spread over its surface)
 AREA_SAMPLES = 4
@@ -25,6 +30,67 @@ _MU, _MU_W = np.polynomial.legendre.leggauss(6)
 _MU = 0.5 * (_MU + 1.0)
 _MU_W = _MU_W * _MU          # cosine-weighted, normalised below
 _MU_W = _MU_W / _MU_W.sum()
+#: the glossy albedo's quadrature: Gauss-Legendre in cos(theta), uniform in phi, and view
+#: cosines a table interpolates between
+_GL_MU, _GL_W = np.polynomial.legendre.leggauss(48)
+_GL_MU, _GL_W = 0.5 * (_GL_MU + 1.0), 0.5 * _GL_W
+_GL_PHI = 192
+_GL_VIEWS = np.linspace(0.02, 1.0, 12)
+#: lobes narrower than the quadrature resolves are integrated at this roughness: a
+#: microfacet lobe's albedo changes by under 2 % between it and a mirror's
+GLOSSY_QUADRATURE_ROUGHNESS = 0.3
+_GLOSSY_TABLES: dict = {}
+
+
+def _hemisphere():
+    """(D, 3) directions and (D,) solid angles of the glossy albedo's quadrature."""
+    phi = (np.arange(_GL_PHI) + 0.5) * (2.0 * math.pi / _GL_PHI)
+    mu = np.repeat(_GL_MU, _GL_PHI)
+    s = np.sqrt(np.maximum(1.0 - mu * mu, 0.0))
+    ph = np.tile(phi, len(_GL_MU))
+    dirs = np.column_stack([s * np.cos(ph), s * np.sin(ph), mu])
+    return dirs, np.repeat(_GL_W, _GL_PHI) * (2.0 * math.pi / _GL_PHI)
+
+
+def _glossy_table(material) -> np.ndarray:
+    """(len(_GL_VIEWS), 3) the glossy albedo at the table's view cosines (cached)."""
+    key = repr(material)
+    got = _GLOSSY_TABLES.get(key)
+    if got is not None:
+        return got
+    mat = replace(material, per_pixel_lobe=False,
+                  roughness=max(float(material.roughness), GLOSSY_QUADRATURE_ROUGHNESS))
+    table = np.zeros((len(_GL_VIEWS), 3))
+    if not mat.is_diffuse_only:
+        dirs, w = _hemisphere()
+        views = np.column_stack([np.sqrt(1.0 - _GL_VIEWS ** 2), 0 * _GL_VIEWS, _GL_VIEWS])
+        n = np.tile([0.0, 0.0, 1.0], (len(views), 1))
+        spec = np.asarray(brdf.specular_cosine(mat, n, views, dirs), np.float64)
+        if spec.ndim == 2:                           # a colourless lobe: times its colour
+            spec = spec[..., None] * np.asarray(mat.specular_color, np.float64)
+        table = np.einsum("vdc,d->vc", spec, w)
+    if len(_GLOSSY_TABLES) > 256:
+        _GLOSSY_TABLES.clear()
+    _GLOSSY_TABLES[key] = table
+    return table
+
+
+def glossy_albedo(material, cos_o) -> np.ndarray:
+    """(N, 3) the share of light arriving evenly over the hemisphere that a material's
+    glossy part sends toward views at ``cos_o`` (N,): the cosine-weighted integral of its
+    lobe (core.shading.brdf.specular_cosine, Fresnel, layering and multiscatter included)
+    by quadrature; by reciprocity also the share of light from ``cos_o`` it reflects."""
+    table = _glossy_table(material)
+    c = np.clip(np.asarray(cos_o, np.float64).reshape(-1), _GL_VIEWS[0], 1.0)
+    return np.column_stack([np.interp(c, _GL_VIEWS, table[:, k]) for k in range(3)])
+
+
+def reflectance(material, weight_of_views=None) -> np.ndarray:
+    """(3,) the share of light a reflector sends back (cosine-weighted over incidence):
+    its diffuse base's (:func:`diffuse_reflectance`) and its glossy part's, all sent on
+    as diffuse light."""
+    return (diffuse_reflectance(material, weight_of_views)
+            + _MU_W @ glossy_albedo(material, _MU))
 
 
 def diffuse_reflectance(material, weight_of_views=None) -> np.ndarray:

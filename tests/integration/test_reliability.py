@@ -287,7 +287,7 @@ def test_world_without_nodes_is_refused_and_a_colour_world_lights(tmp_path):
     nt = scene.world.node_tree
     for node in list(nt.nodes):
         nt.nodes.remove(node)
-    _refused("World 'World' has no World Output with a Surface link")
+    _refused(f"World '{scene.world.name}' has no World Output with a Surface link")
     assert "no World Output" in (_sync().error or "")
     with pytest.raises(RuntimeError, match="no World Output"):
         scenes.render_exr(tmp_path / "x.exr")
