@@ -3,12 +3,13 @@ blob ``bounce``) driven by the frame's direct light at the gather clusters, adde
 receiver's diffuse radiance.
 
 The number of bounces follows the scene's Cycles *Light Paths* (0: nothing is added, the
-frame is the direct one).  The World (its compact sources included) lights the clusters
-through their stored visibility; lamps through shadow rays traced at the frame (an
-occluder scene of the static objects, kept per geometry).  Turning the HDRI, moving or
+frame is the direct one).  The World less its compact sources lights the clusters through
+their stored visibility; lamps through shadow rays traced at the frame (an
+occluder scene of the static objects, kept per geometry), as do the World's compact sources
+(a sun).  Turning the HDRI, moving or
 recolouring a lamp, editing a material's colour update the bounce with no precompute.
-A dynamic object neither sends nor receives bounced light (its shadows move with it; the
-transfer is of the static scene).
+A dynamic object neither sends nor receives bounced light, nor shadows it (its direct
+shadows move with it; the transfer is of the static scene).
 """
 
 from __future__ import annotations
@@ -64,7 +65,8 @@ class FrameBounce:
             return None
         receivers, blob_keys, counts, missing = [], [], set(), []
         for i, st in enumerate(state.objects):
-            if st.status != "ok" or st.dynamic is not None:
+            # a static object shadowed by dynamic ones ("posed") keeps its bounce
+            if st.status not in ("ok", "posed") or st.dynamic is not None:
                 continue
             if st.bounce is None:
                 missing.append(st.name)
@@ -146,13 +148,18 @@ class FrameBounce:
         cluster, weight, pos, nrm, bits, res, k_cols, k_w = keys.held(
             _SCENE, ("samples", self.key), (), self._samples)
         direct = np.zeros((len(cluster), 3))
-        world = state.full_world if state.full_world is not None else state.world
+        world = state.world
         if world is not None and len(cluster):
             direct += keys.held(_WORLD, (self.key, keys.env_key(world, res)), (),
                                 lambda: reference.diffuse_irradiance(
                                     bits, nrm, directions.cubemap(res),
                                     keys.environment_cubemap(world, res)))
-        lamps = list(state.lamps) + list(state.drawn_lamps)
+        # the World's compact sources (a sun) as distant lights with shadow rays: through
+        # the samples' coarse cubemap a sun falls in one texel, whose centre misses or
+        # finds a window's edge for the whole texel
+        lamps = [core_bounce.distant_source(s.direction, s.radiance, s.radius, s.point_like)
+                 for s in state.sources]
+        lamps += list(state.lamps) + list(state.drawn_lamps)
         if lamps and len(cluster):
             direct += core_bounce.lamp_irradiance(lamps, pos, nrm, self._occluded(state))
         per_cluster = np.stack([np.bincount(cluster, weights=weight * direct[:, c],

@@ -140,13 +140,23 @@ def point_areas(mesh: MeshArrays, points: "ShadingPoints") -> np.ndarray:
 def point_interiors(mesh: MeshArrays, points: "ShadingPoints") -> np.ndarray:
     """(P, 3) a point inside each shading point's own surface: the mean of the centroids of
     the triangles it is a corner of (off the point's creases, on its side of them)."""
-    cen = mesh.triangle_positions.mean(axis=1)
-    pts = points.point_of_corner[mesh.triangles]             # (T, 3)
-    acc = np.zeros((points.count, 3))
+    return face_interiors(mesh.triangle_positions, points.point_of_corner[mesh.triangles],
+                          points.positions)
+
+
+def face_interiors(tri_positions: np.ndarray, tri_points: np.ndarray,
+                   points: np.ndarray) -> np.ndarray:
+    """(P, 3) the mean of the centroids of the triangles (T, 3, 3) each point is a corner
+    of (``tri_points`` (T, 3): the point of each corner); the point itself where it is a
+    corner of none."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    tri_points = np.asarray(tri_points, np.int64).reshape(-1, 3)
+    cen = np.asarray(tri_positions, np.float64).reshape(-1, 3, 3).mean(axis=1)
+    acc = np.zeros((len(points), 3))
     for k in range(3):
-        np.add.at(acc, pts[:, k], cen)
-    count = np.bincount(pts.reshape(-1), minlength=points.count)
-    return np.where(count[:, None] > 0, acc / np.maximum(count, 1)[:, None], points.positions)
+        np.add.at(acc, tri_points[:, k], cen)
+    count = np.bincount(tri_points.reshape(-1), minlength=len(points))
+    return np.where(count[:, None] > 0, acc / np.maximum(count, 1)[:, None], points)
 
 
 def closed_side(mesh: MeshArrays) -> int:

@@ -31,6 +31,7 @@ import numpy as np
 from ..common.cache import Cache
 from ..sphere.directions import Cubemap
 from ..common.parallel import Cancelled, default_threads
+from .mesh import face_interiors
 
 try:
     from embreex import rtcore_scene as _rtcs
@@ -107,10 +108,19 @@ def contact_origins(scene, points: np.ndarray, normals: np.ndarray, tri_position
     the point index of each corner (indices into ``points``)."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    origins = ray_origins(p, n, offset)
     tp_all = np.asarray(tri_positions, dtype=np.float64).reshape(-1, 3, 3)
     tri_pts = np.asarray(tri_points, dtype=np.int64).reshape(-1, 3)
     step = ray_step(p, offset)
+    origins = ray_origins(p, n, offset)
+    # a flat point on a concave crease (a room's corner) steps along its normal into the
+    # plane of the face across the crease: its rays start on that face (hit at t = 0 or
+    # slip through it).  Cycles shades the inside of a face, so the origin of a point
+    # whose own faces all lie in its tangent plane also moves a little into them
+    # (CONTACT_SHARE of the way to their centroids; smooth points keep the plain step)
+    flat = _on_own_faces(tp_all, tri_pts, n)
+    inward = face_interiors(tp_all, tri_pts, p)[flat] - p[flat]
+    inward -= np.einsum("ij,ij->i", inward, n[flat])[:, None] * n[flat]
+    origins[flat] += (CONTACT_SHARE * inward).astype(np.float32)
 
     def pairs(tris, probed_only=False):
         """(point, |n . face normal|, kept, sample) of the corners of triangles ``tris``
@@ -175,6 +185,20 @@ def contact_origins(scene, points: np.ndarray, normals: np.ndarray, tri_position
     rows = rows[np.unique(pt[rows], return_index=True)[1]]
     origins[pt[rows]] = sample[rows].astype(np.float32)
     return origins, moved
+
+
+def _on_own_faces(tri_positions: np.ndarray, tri_points: np.ndarray,
+                  normals: np.ndarray) -> np.ndarray:
+    """(P,) bool: every triangle a point is a corner of lies in its tangent plane (its
+    normal within :data:`CONTACT_ALIGNED` of the point's; a point of no triangle: False)."""
+    tp = tri_positions
+    ng = np.cross(tp[:, 1] - tp[:, 0], tp[:, 2] - tp[:, 0])
+    ng /= np.maximum(np.linalg.norm(ng, axis=1), 1e-300)[:, None]
+    worst = np.full(len(normals), 2.0)
+    for k in range(3):
+        pt = tri_points[:, k]
+        np.minimum.at(worst, pt, np.abs(np.einsum("ij,ij->i", ng, normals[pt])))
+    return (worst >= CONTACT_ALIGNED) & (worst <= 1.0 + 1e-9)
 
 
 def _occluded(scene, origins, dirs, dists, parts: int | None = None) -> np.ndarray:

@@ -20,6 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..sg.lamp_lobes import Lamp
 from ..shading import brdf
 
 #: shadow rays traced per area lamp and gather point (points spread over its surface)
@@ -159,6 +160,18 @@ def lamp_irradiance(lamps, positions, normals, occluded=None) -> np.ndarray:
         vis = _visible(occluded, x, n, to, dist, cos * e)
         out += (cos * e * vis)[:, None] * col
     return out
+
+
+def distant_source(direction, radiance, radius: float, point_like: bool = False) -> Lamp:
+    """A compact source of the World (core.sphere.sources: a disc of ``radius`` and uniform
+    ``radiance`` toward ``direction``) as the sun lamp of the same irradiance at normal
+    incidence (``radiance`` is that irradiance already when ``point_like``)."""
+    e = np.asarray(radiance, np.float64)
+    if not point_like:
+        e = e * (2.0 * math.pi * (1.0 - math.cos(float(radius))))
+    d = np.asarray(direction, np.float64)
+    return Lamp("SUN", color=tuple(e), direction=tuple(-d / max(np.linalg.norm(d), 1e-300)),
+                angle=2.0 * float(radius))
 
 
 def _visible(occluded, x, n, to, dist, weight) -> np.ndarray:

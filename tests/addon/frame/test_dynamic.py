@@ -203,3 +203,23 @@ def test_rsl_multi_product_matches_rsl_precomputed_at_the_new_pose():
     _move(cube, (0.9, 0.4, 0.75), (0.3, 0.2, 1.3))
     _, stale = _shade("RSL")
     assert _rel(stale["Ground"], exact["Ground"]) > 3 * err["Ground"]
+
+
+def test_with_bounces_a_dynamic_object_neither_sends_nor_receives_bounced_light():
+    """The bounce transfer is the static scene's (addon/frame/bounce.py): with the Light
+    Paths' bounces on, the dynamic cube is no receiver and no reflector -- its frame and
+    the flat ground's (which only the cube could light) are their direct frames, moved
+    or not."""
+    scene, cube = _scene()
+    scenes.light_paths(4)
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    for pose in (((0.0, 0.0, 0.9), (0.0, 0.0, 0.0)), ((0.4, -0.3, 1.1), (0.3, 0.2, 0.5))):
+        _move(cube, *pose)
+        state, bounced = _shade()
+        assert state.bounce is not None
+        assert [state.objects[i].name for i, _ in state.bounce.receivers] == ["Ground"]
+        scenes.light_paths(0)
+        _, direct = _shade()
+        scenes.light_paths(4)
+        for name in ("Cube", "Ground"):
+            np.testing.assert_allclose(bounced[name], direct[name], rtol=1e-5, atol=1e-7)

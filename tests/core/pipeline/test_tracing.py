@@ -95,14 +95,22 @@ def test_esc_stops_the_trace_and_writes_no_blob():
 
 
 def test_trace_origins_step_off_along_the_normal_away_from_contacts():
-    """Points that touch no other surface start their rays ``offset`` along the normal."""
+    """Points that touch no other surface start their rays ``offset`` along the normal,
+    moved CONTACT_SHARE of the way into their own faces in their tangent plane (a cube's
+    edge point leaves the plane of the face across its edge)."""
     job = _job()
     scene = visibility.build_occluder_scene(job.occluders)
-    origins, moved = tracing.trace_origins(job.objects[1:], scene, job.offset)   # the box
-    pts = job.objects[1].points
+    box = job.objects[1]
+    origins, moved = tracing.trace_origins([box], scene, job.offset)
+    pts = box.points
     plain = visibility.ray_origins(pts.positions, pts.normals, job.offset)
+    inward = mesh.point_interiors(box.arrays, pts) - pts.positions
+    inward -= np.einsum("ij,ij->i", inward, pts.normals)[:, None] * pts.normals
+    expected = plain + visibility.CONTACT_SHARE * inward
     bottom = pts.positions[:, 2] < 1e-9                     # its bottom rests on the ground
-    np.testing.assert_array_equal(origins[~moved], plain[~moved])
+    np.testing.assert_allclose(origins[~moved], expected[~moved], atol=1e-6)
+    assert np.all(np.einsum("ij,ij->i", origins - plain, pts.normals)[~moved] < 1e-6)
+    assert np.all(np.linalg.norm(inward, axis=1) > 0.0)     # every point is on an edge
     assert not moved[~bottom].any()
 
 

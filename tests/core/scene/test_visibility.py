@@ -135,7 +135,8 @@ def test_contact_origins_lift_a_smooth_rim_off_the_ground_it_rests_on():
     origins, moved = visibility.contact_origins(scene, pts, nrm, tris[:12], corners, offset)
     bottom = pts[:, 2] == 0.0
     np.testing.assert_array_equal(moved, bottom)
-    # the points off the ground keep the plain step along the normal
+    # the points off the ground keep the plain step along the normal (and the nudge into
+    # their own faces)
     np.testing.assert_array_equal(origins[~bottom],
                                   visibility.ray_origins(pts, nrm, offset)[~bottom])
     hemi = visibility.hemisphere_mask(nrm, cube)
@@ -146,6 +147,39 @@ def test_contact_origins_lift_a_smooth_rim_off_the_ground_it_rests_on():
         for k in np.flatnonzero(bottom):
             assert seen_up[0] <= vis[k][hemi[k] & up].mean() <= seen_up[1]
             assert vis[k][hemi[k] & down].mean() == seen_down
+
+
+def test_flat_points_on_a_concave_crease_start_inside_their_own_face():
+    """The inside corner of an open box (floor and two walls, flat shaded, normals in):
+    stepped along its normal alone a floor corner's origin lies in both walls' planes; it
+    moves into its own face (by CONTACT_SHARE of the way to its faces' centroid), so its
+    rays into the walls hit them a little way off and those into the box are free."""
+    floor = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0]], [[0, 0, 0], [1, 1, 0], [0, 1, 0]]], float)
+    wall_x = floor[:, :, [2, 0, 1]]                  # the plane x = 0, normal +x
+    wall_y = floor[:, :, [1, 2, 0]]                  # the plane y = 0, normal +y
+    tris = np.concatenate([floor, wall_x, wall_y])
+    pts = np.zeros((3, 3))                          # the corner, once per face (flat)
+    nrm = np.eye(3)[[2, 0, 1]]
+    corners = np.array([[0, 3, 3], [0, 3, 3], [1, 3, 3], [1, 3, 3], [2, 3, 3], [2, 3, 3]])
+    pts = np.vstack([pts, [[0.5, 0.5, 0.5]]])       # a point of no triangle (index 3)
+    nrm = np.vstack([nrm, [[0.0, 0.0, 1.0]]])
+    scene = visibility.build_occluder_scene(tris)
+    origins, moved = visibility.contact_origins(scene, pts, nrm, tris, corners, 1e-4)
+    plain = visibility.ray_origins(pts, nrm, 1e-4)
+    np.testing.assert_array_equal(origins[3], plain[3])
+    shift = origins[:3] - plain[:3]
+    assert np.all(np.abs(np.einsum("ij,ij->i", shift, nrm[:3])) < 1e-7)   # in the face
+    assert np.all(np.linalg.norm(shift, axis=1) > 0.005) and np.all(origins[:3] > 0.0)
+    cube = directions.cubemap(N)
+    vis = visibility.unpack_visibility(visibility.trace_visibility(
+        scene, pts[:3], nrm[:3], cube, 1e-4, origins=origins[:3]), cube.size)
+    inside = np.all(cube.directions > 0.0, axis=1)  # into the box: nothing blocks them
+    for k in range(3):
+        hemi = visibility.hemisphere_mask(nrm[k:k + 1], cube)[0]
+        assert vis[k][inside].all()
+        # through the other faces: blocked (the walls of a box are not windows)
+        through = hemi & np.any(cube.directions[:, [0, 1, 2]] < 0.0, axis=1)
+        assert not vis[k][through].any()
 
 
 def test_contact_origins_leave_points_off_the_ground_alone():

@@ -110,3 +110,33 @@ def test_multiscatter_glossy_conserves_energy_and_reflectors_keep_their_glossy_s
     total = bounce.reflectance(m, diffuse_view_weight)
     base = bounce.diffuse_reflectance(m, diffuse_view_weight)
     assert np.all(total > base + 0.02) and np.all(total < 1.0)
+
+
+def test_a_compact_source_lights_as_the_disc_it_is():
+    """A World source (a disc of 2 degrees, uniform radiance) as a sun: its irradiance on
+    a tilted plane is the disc's radiance integrated over the disc times the cosine
+    (quadrature of the disc), and a blocked shadow ray takes it all."""
+    r, L = math.radians(2.0), np.array([50.0, 40.0, 30.0])
+    axis = np.array([0.3, -0.2, 0.93])
+    axis /= np.linalg.norm(axis)
+    lamp = bounce.distant_source(axis, L, r)
+    n = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
+    got = bounce.lamp_irradiance([lamp], np.zeros((2, 3)), n)
+    # the disc by quadrature: polar rings around the axis
+    t = (np.arange(200) + 0.5) * (r / 200)
+    ph = (np.arange(400) + 0.5) * (2 * math.pi / 400)
+    T, P = np.meshgrid(t, ph, indexing="ij")
+    u = np.cross(axis, [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    d = (np.cos(T)[..., None] * axis + (np.sin(T) * np.cos(P))[..., None] * u
+         + (np.sin(T) * np.sin(P))[..., None] * v)
+    dw = np.sin(T) * (r / 200) * (2 * math.pi / 400)
+    expected = [L * float((np.maximum(d @ nn, 0.0) * dw).sum()) for nn in n]
+    np.testing.assert_allclose(got, expected, rtol=1e-3)
+    blocked = bounce.lamp_irradiance([lamp], np.zeros((2, 3)), n,
+                                     lambda o, dd, dist: np.ones(len(o), bool))
+    np.testing.assert_array_equal(blocked, 0.0)
+    point = bounce.distant_source(axis, L, 0.0, point_like=True)
+    np.testing.assert_allclose(bounce.lamp_irradiance([point], np.zeros((1, 3)), n[:1]),
+                               [L * axis[2]], rtol=1e-9)
