@@ -68,3 +68,31 @@ def roughness_and_normal_images(res=256):
     n = np.stack([-su, -sv, np.ones_like(U)], -1)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
     return np.repeat(r[..., None], 3, axis=2).astype(np.float32), (0.5 * (n + 1)).astype(np.float32)
+
+
+#: the SSDF_SG Suzanne's frame size
+SSDF_SG_SIZE = (48, 36)
+
+
+def ssdf_sg_suzanne(principled=False):
+    """Suzanne (Beckmann Glossy 0.3, or a GGX Principled metal) on a coarse ground under a
+    turned 'sunset', SSDF_SG at 32^2, a 48 x 36 camera: the SSDF_SG add-on and GPU tests'
+    scene."""
+    scenes.reset()
+    scenes.add_world("sunset", rotation_z=0.4)
+    scenes.add_ground(size=6.0, cuts=12)
+    suz = scenes.add_suzanne(subdiv=1, location=(0.0, 0.0, 1.0))
+    if principled:              # GGX: the fitted view-slice lobes (ggx_specular)
+        suz.data.materials.append(scenes.bsdf_material(
+            "Metal", "ShaderNodeBsdfPrincipled", Metallic=1.0, Roughness=0.45,
+            **{"Base Color": (0.9, 0.7, 0.5, 1.0)}))
+    else:
+        suz.data.materials.append(scenes.bsdf_material("Glossy", "ShaderNodeBsdfGlossy",
+                                                       distribution="BECKMANN", Roughness=0.3))
+    scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
+    scenes.set_resolution(*SSDF_SG_SIZE)
+    scene = bpy.context.scene
+    scene.prt.method = "SSDF_SG"
+    scene.prt.resolution = "32"
+    return scene
+

@@ -15,30 +15,12 @@ from prt_relight.addon.methods.ssdf_sg import gpu as ssdf_sg_gpu
 from prt_relight.core.methods.ssdf_sg import shading as core_ssdf_sg, scene as ssdf_sg_scene
 from prt_relight.bench import scenes
 
+from ..cases.glossy import SSDF_SG_SIZE, ssdf_sg_suzanne
+
 
 pytestmark = [pytest.mark.usefixtures("registered_addon"), pytest.mark.slow]
 
-W, H = 48, 36
-
-
-def _scene(principled=False):
-    scenes.reset()
-    scenes.add_world("sunset", rotation_z=0.4)
-    scenes.add_ground(size=6.0, cuts=12)
-    suz = scenes.add_suzanne(subdiv=1, location=(0.0, 0.0, 1.0))
-    if principled:              # GGX: the fitted view-slice lobes (ggx_specular)
-        suz.data.materials.append(scenes.bsdf_material(
-            "Metal", "ShaderNodeBsdfPrincipled", Metallic=1.0, Roughness=0.45,
-            **{"Base Color": (0.9, 0.7, 0.5, 1.0)}))
-    else:
-        suz.data.materials.append(scenes.bsdf_material("Glossy", "ShaderNodeBsdfGlossy",
-                                                   distribution="BECKMANN", Roughness=0.3))
-    scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
-    scenes.set_resolution(W, H)
-    scene = bpy.context.scene
-    scene.prt.method = "SSDF_SG"
-    scene.prt.resolution = "32"
-    return scene
+W, H = SSDF_SG_SIZE
 
 
 def _gpu_ready():
@@ -69,7 +51,7 @@ def test_glsl_equals_numpy_per_pixel(principled):
     import embreex.rtcore_scene as rtcs
     from embreex.mesh_construction import TriangleMesh
 
-    scene = _scene(principled)
+    scene = ssdf_sg_suzanne(principled)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     _gpu_ready()
     state = _state()
@@ -140,7 +122,7 @@ def test_pair_table_holds_eq39_at_the_flat_points():
     the ground's flat triangles, sum_p w_p sigma(theta_p, k_p) over the (cosine lobe, light
     lobe) pairs equals numpy's eq. 39 (core.methods.ssdf_sg.shading.diffuse_transfer_per_cosine) there."""
     from prt_relight.core.sg import algebra as core_sg
-    scene = _scene()
+    scene = ssdf_sg_suzanne()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     _gpu_ready()
     state = _state()

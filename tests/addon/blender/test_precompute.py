@@ -11,35 +11,16 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon.blender import precompute, storage
+from prt_relight.addon.blender import precompute
 from prt_relight.addon.frame import state as runtime
 from prt_relight.core.common.parallel import Cancelled
 from prt_relight.core.pipeline import tracing
 from prt_relight.core.store import layouts
 from prt_relight.bench import scenes
+from ...cases.small import has_data, small_scene, stored
 
 
 pytestmark = pytest.mark.usefixtures("registered_addon")
-
-
-def _stored():
-    """(object, blob key) of every object's stored visibility: equal lists, same data."""
-    return sorted((o.name, storage.key(o, storage.VISIBILITY)) for o in bpy.data.objects
-                  if storage.has(o, storage.VISIBILITY))
-
-
-def _has_data(ob):
-    return storage.has(ob, storage.VISIBILITY)
-
-
-def _small_scene(hdri="sunset", cuts=16, subdiv=1):
-    scenes.reset()
-    scenes.add_world(hdri)
-    scenes.add_ground(size=6.0, cuts=cuts)
-    scenes.add_suzanne(subdiv=subdiv, location=(0.0, 0.0, 1.0))
-    scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
-    scenes.set_resolution(64, 48)
-    bpy.context.scene.prt.supersampling = 2
 
 
 def _frame_warnings():
@@ -49,10 +30,10 @@ def _frame_warnings():
 
 
 def test_precompute_render_save_reopen_same_pixels(tmp_path):
-    _small_scene()
+    small_scene()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     suzanne = bpy.data.objects["Suzanne"]
-    assert _has_data(suzanne)
+    assert has_data(suzanne)
     before = scenes.render_exr(tmp_path / "a.exr")
     assert np.isfinite(before).all()
     assert before[..., 3].max() == 1.0 and before[..., :3].max() > 0.05
@@ -68,11 +49,11 @@ def test_precompute_render_save_reopen_same_pixels(tmp_path):
 
 def test_shadows_differ_from_unshadowed(tmp_path):
     """Stored visibility is really used: clearing it brightens the contact region."""
-    _small_scene()
+    small_scene()
     bpy.ops.prt.precompute()
     shadowed = scenes.render_exr(tmp_path / "s.exr")
     bpy.ops.prt.clear()
-    assert _stored() == []
+    assert stored() == []
     state = _frame_warnings()
     assert any("Not precomputed" in w for w in state.warnings)
     open_sky = scenes.render_exr(tmp_path / "o.exr")
@@ -80,7 +61,7 @@ def test_shadows_differ_from_unshadowed(tmp_path):
 
 
 def test_mesh_edited_after_precompute_is_stale_not_broken(tmp_path):
-    _small_scene()
+    small_scene()
     bpy.ops.prt.precompute()
     suzanne = bpy.data.objects["Suzanne"]
     suzanne.data.vertices[0].co.z += 0.3                 # same topology: stale
@@ -98,27 +79,27 @@ def test_mesh_edited_after_precompute_is_stale_not_broken(tmp_path):
 
 
 def _assert_precompute_error(match):
-    images = _stored()
+    images = stored()
     with pytest.raises(RuntimeError, match=match):
         bpy.ops.prt.precompute()
-    assert _stored() == images
-    assert not any(_has_data(o) for o in bpy.data.objects)
+    assert stored() == images
+    assert not any(has_data(o) for o in bpy.data.objects)
 
 
 def test_no_world_is_a_clear_error():
-    _small_scene()
+    small_scene()
     bpy.context.scene.world = None
     _assert_precompute_error("no World")
 
 
 def test_environment_without_image_is_a_clear_error():
-    _small_scene()
+    small_scene()
     bpy.context.scene.world.node_tree.nodes["Environment Texture"].image = None
     _assert_precompute_error("has no image")
 
 
 def test_missing_image_file_is_a_clear_error(tmp_path):
-    _small_scene()
+    small_scene()
     env = bpy.context.scene.world.node_tree.nodes["Environment Texture"]
     env.image = bpy.data.images.load(str(scenes.hdri_path("forest")))
     env.image.filepath = str(tmp_path / "gone.exr")
@@ -127,7 +108,7 @@ def test_missing_image_file_is_a_clear_error(tmp_path):
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_non_finite_environment_pixels_are_a_clear_error(tmp_path, bad):
-    _small_scene()
+    small_scene()
     px = np.full((16, 32, 3), 0.5, dtype=np.float32)
     px[3, 7, 1] = bad
     env = bpy.context.scene.world.node_tree.nodes["Environment Texture"]
@@ -141,7 +122,7 @@ def test_non_finite_environment_pixels_are_a_clear_error(tmp_path, bad):
 
 
 def test_zero_area_faces_warn_and_stay_finite(tmp_path):
-    _small_scene()
+    small_scene()
     mesh = bpy.data.meshes.new("degenerate")
     verts = [(0, 0, 2.5), (1, 0, 2.5), (2, 0, 2.5), (0, 1, 2.5), (1, 1, 2.5)]
     mesh.from_pydata(verts, [], [(0, 1, 2), (0, 3, 4)])    # first face has zero area
@@ -155,11 +136,11 @@ def test_zero_area_faces_warn_and_stay_finite(tmp_path):
 
 
 def test_empty_mesh_is_skipped_and_only_empty_is_an_error():
-    _small_scene()
+    small_scene()
     ob = bpy.data.objects.new("Empty Mesh", bpy.data.meshes.new("nothing"))
     bpy.context.scene.collection.objects.link(ob)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
-    assert not _has_data(ob)
+    assert not has_data(ob)
     scenes.reset()
     scenes.add_world("forest")
     ob = bpy.data.objects.new("Empty Mesh", bpy.data.meshes.new("nothing"))
@@ -169,19 +150,19 @@ def test_empty_mesh_is_skipped_and_only_empty_is_an_error():
 
 def test_cancel_leaves_scene_unchanged():
     """ESC sets ``cancel_requested``; the worker stops and nothing is committed."""
-    _small_scene()
+    small_scene()
     job = precompute.gather(bpy.context.evaluated_depsgraph_get(), bpy.context.scene.prt)
     job.cancel_requested = True
     with pytest.raises(Cancelled):
         job.run()
-    assert _stored() == []
-    assert not any(_has_data(o) for o in bpy.data.objects)
+    assert stored() == []
+    assert not any(has_data(o) for o in bpy.data.objects)
 
 
 def test_precompute_again_replaces_cached_visibility(tmp_path):
     """Re-precomputing after removing an occluder must not reuse the old decoded bits
     (the ground's own geometry and image name are unchanged)."""
-    _small_scene()
+    small_scene()
     bpy.ops.prt.precompute()
     with_occluder = scenes.render_exr(tmp_path / "a.exr")
     bpy.data.objects.remove(bpy.data.objects["Suzanne"])
@@ -200,7 +181,7 @@ def test_precompute_again_replaces_cached_visibility(tmp_path):
 
 
 def test_text_objects_render_and_instances_are_reported(tmp_path):
-    _small_scene()
+    small_scene()
     bpy.ops.object.text_add(location=(1.5, -1.0, 0.01))
     coll = bpy.data.collections.new("inst")
     bpy.data.objects["Suzanne"].users_collection[0].objects.unlink(bpy.data.objects["Suzanne"])
@@ -210,7 +191,7 @@ def test_text_objects_render_and_instances_are_reported(tmp_path):
     empty.instance_collection = coll
     bpy.context.scene.collection.objects.link(empty)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
-    assert _has_data(bpy.data.objects["Text"])
+    assert has_data(bpy.data.objects["Text"])
     state = _frame_warnings()
     assert any("Instanced objects" in w and "Suzanne" in w for w in state.warnings)
     assert np.isfinite(scenes.render_exr(tmp_path / "a.exr")).all()

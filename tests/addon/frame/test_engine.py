@@ -8,36 +8,20 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon.blender import storage
 from prt_relight.bench import scenes
 
 from ... import viewport
+from ...cases.small import small_scene, stored
 
 
 pytestmark = pytest.mark.usefixtures("registered_addon")
 
 
-def _stored():
-    """(object, blob key) of every object's stored visibility: equal lists, same data."""
-    return sorted((o.name, storage.key(o, storage.VISIBILITY)) for o in bpy.data.objects
-                  if storage.has(o, storage.VISIBILITY))
-
-
-def _small_scene(hdri="sunset", cuts=16, subdiv=1):
-    scenes.reset()
-    scenes.add_world(hdri)
-    scenes.add_ground(size=6.0, cuts=cuts)
-    scenes.add_suzanne(subdiv=subdiv, location=(0.0, 0.0, 1.0))
-    scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
-    scenes.set_resolution(64, 48)
-    bpy.context.scene.prt.supersampling = 2
-
-
 def test_world_rotation_redraws_without_recompute(tmp_path):
-    _small_scene()
+    small_scene()
     bpy.ops.prt.precompute()
     a = scenes.render_exr(tmp_path / "a.exr")
-    images = _stored()
+    images = stored()
     world = bpy.context.scene.world
     nt = world.node_tree
     coord = nt.nodes.new("ShaderNodeTexCoord")
@@ -46,7 +30,7 @@ def test_world_rotation_redraws_without_recompute(tmp_path):
     nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
     nt.links.new(mapping.outputs["Vector"], nt.nodes["Environment Texture"].inputs["Vector"])
     b = scenes.render_exr(tmp_path / "b.exr")
-    assert _stored() == images
+    assert stored() == images
     assert np.abs(a - b)[..., :3].mean() > 0.01 * a[..., :3].mean()
 
 
@@ -59,7 +43,7 @@ def test_view_draw_path_draws_the_same_frame_as_f12(method):
     from prt_relight.addon.frame.engine import render_pixels
     from prt_relight.addon.methods.ssdf_sg import gpu as ssdf_sg_gpu
 
-    _small_scene()
+    small_scene()
     bpy.context.scene.prt.method = method
     bpy.ops.prt.precompute()
     ssdf_sg_gpu.PAIR_TABLES.clear()
@@ -86,7 +70,7 @@ def test_viewport_shades_view_dependent_materials_off_the_main_thread():
     exactly what F12 computes for that view."""
     from prt_relight.addon.frame.engine import render_pixels
 
-    _small_scene()                               # no materials: Principled, view dependent
+    small_scene()                               # no materials: Principled, view dependent
     bpy.ops.prt.precompute()
     scene = bpy.context.scene
     scene.render.engine = "BLENDER_WORKBENCH"

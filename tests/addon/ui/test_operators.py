@@ -6,31 +6,11 @@ from __future__ import annotations
 import bpy
 import pytest
 
-from prt_relight.addon.blender import precompute, storage
-from prt_relight.bench import scenes
+from prt_relight.addon.blender import precompute
+from ...cases.small import has_data, small_scene, stored
 
 
 pytestmark = pytest.mark.usefixtures("registered_addon")
-
-
-def _stored():
-    """(object, blob key) of every object's stored visibility: equal lists, same data."""
-    return sorted((o.name, storage.key(o, storage.VISIBILITY)) for o in bpy.data.objects
-                  if storage.has(o, storage.VISIBILITY))
-
-
-def _has_data(ob):
-    return storage.has(ob, storage.VISIBILITY)
-
-
-def _small_scene(hdri="sunset", cuts=16, subdiv=1):
-    scenes.reset()
-    scenes.add_world(hdri)
-    scenes.add_ground(size=6.0, cuts=cuts)
-    scenes.add_suzanne(subdiv=subdiv, location=(0.0, 0.0, 1.0))
-    scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
-    scenes.set_resolution(64, 48)
-    bpy.context.scene.prt.supersampling = 2
 
 
 def test_modal_precompute_esc_cancels_and_timer_finishes():
@@ -50,7 +30,7 @@ def test_modal_precompute_esc_cancels_and_timer_finishes():
         def report(self, kind, message):
             self.reports.append((set(kind), message))
 
-    _small_scene()
+    small_scene()
     wm = types.SimpleNamespace(progress_update=lambda v: None, progress_end=lambda: None,
                                event_timer_remove=lambda t: None)
     ctx = types.SimpleNamespace(window_manager=wm, scene=bpy.context.scene, screen=None,
@@ -92,10 +72,10 @@ def test_modal_precompute_esc_cancels_and_timer_finishes():
         result_esc = drive(op, "TIMER")
     assert result_esc == {"CANCELLED"}
     assert any("cancelled" in m for _, m in op.reports)
-    assert _stored() == [] and not any(_has_data(o) for o in bpy.data.objects)
+    assert stored() == [] and not any(has_data(o) for o in bpy.data.objects)
 
     op = Recorder()
     start(op).set()
     assert drive(op, "TIMER") == {"FINISHED"}
-    assert _has_data(bpy.data.objects["Suzanne"])
+    assert has_data(bpy.data.objects["Suzanne"])
     assert not operators.RUNNING

@@ -120,7 +120,7 @@ def test_image_sums_kept_every_few_rows_give_the_same_texels():
         np.testing.assert_allclose(m2, m1, rtol=1e-11, atol=1e-14)
 
 
-def _sun_image(h, w, row, col, value=1e6):
+def sun_image(h, w, row, col, value=1e6):
     img = np.zeros((h, w, 3), np.float32)
     img[row, col] = value
     return img
@@ -160,7 +160,7 @@ def brute_overlaps(h, w, row, col, n, R, k=1500):
 def test_one_pixel_sun_lands_in_its_texel(h, w, n, row, col):
     # Pixels inside one texel (no texel edge crosses them): the sun's energy and direction
     # go to that texel alone.
-    img = _sun_image(h, w, row, col)
+    img = sun_image(h, w, row, col)
     wl = envmap.WorldLighting(img)
     cl = wl.to_cubemap(n)
     cube = directions.cubemap(n)
@@ -190,7 +190,7 @@ def test_one_pixel_sun_keeps_its_direction_when_split(h, w, n, angles):
     split = 0
     for _ in range(6):
         row, col = int(rng.integers(0, h)), int(rng.integers(0, w))
-        cl = envmap.resample_equirect_to_cubemap(_sun_image(h, w, row, col), cube, R)
+        cl = envmap.resample_equirect_to_cubemap(sun_image(h, w, row, col), cube, R)
         area, mom = brute_overlaps(h, w, row, col, n, R, k=600)
         lit = np.nonzero(cl.radiance[:, 0])[0]
         np.testing.assert_array_equal(lit, np.nonzero(area)[0])
@@ -208,7 +208,7 @@ def test_one_pixel_sun_larger_than_a_texel():
     # A sun pixel larger than a texel: energy preserved, spread over the texels it overlaps.
     h, w, n = 64, 128, 32
     cube = directions.cubemap(n)
-    img = _sun_image(h, w, 20, 50)
+    img = sun_image(h, w, 20, 50)
     wl = envmap.WorldLighting(img)
     cl = wl.to_cubemap(n)
     assert np.all(np.isfinite(cl.radiance))

@@ -7,41 +7,12 @@ import pytest
 
 from prt_relight.core.sphere import directions, envmap
 
+from ...core.sphere.test_resample import brute_overlaps, sun_image
+
 
 def unit(v):
     v = np.asarray(v, dtype=np.float64)
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-def _sun_image(h, w, row, col, value=1e6):
-    img = np.zeros((h, w, 3), np.float32)
-    img[row, col] = value
-    return img
-
-
-def pixel_grid(h, w, row, col, k):
-    """k x k equal-area sample directions (texture frame) over pixel (row, col) and the
-    solid angle of each."""
-    z0, z1 = np.cos((row + 1) * np.pi / h), np.cos(row * np.pi / h)
-    z = z0 + (np.arange(k) + 0.5) / k * (z1 - z0)
-    u = (col + (np.arange(k) + 0.5) / k) / w
-    Z, U = np.meshgrid(z, u, indexing="ij")
-    phi = (0.5 - U) * 2.0 * np.pi
-    r = np.sqrt(1.0 - Z * Z)
-    dirs = np.stack([r * np.cos(phi), r * np.sin(phi), Z], axis=-1).reshape(-1, 3)
-    return dirs, (z1 - z0) * 2.0 * np.pi / w / (k * k)
-
-
-def brute_overlaps(h, w, row, col, n, R, k=1500):
-    """Solid angle and first moment (world) of pixel (row, col) in every texel, by a
-    k x k grid over the pixel."""
-    tex, dw = pixel_grid(h, w, row, col, k)
-    world = tex @ R                                     # tex = R @ world
-    t = directions.direction_to_texel(world, n)
-    size = 6 * n * n
-    area = np.bincount(t, minlength=size) * dw
-    mom = np.stack([np.bincount(t, weights=world[:, c], minlength=size) for c in range(3)], 1)
-    return area, mom * dw
 
 
 def pixel_of(d, h, w):
@@ -64,7 +35,7 @@ def test_overlap_weights_against_a_fine_grid(angles):
               pixel_of(corner, h, w), pixel_of(edge, h, w)]
     faces_seen = 0
     for row, col in pixels:
-        cl = envmap.resample_equirect_to_cubemap(_sun_image(h, w, row, col, 1.0), cube, R)
+        cl = envmap.resample_equirect_to_cubemap(sun_image(h, w, row, col, 1.0), cube, R)
         weights = cl.radiance[:, 0].astype(np.float64) * cube.solid_angles
         area, _ = brute_overlaps(h, w, row, col, n, R)
         omega = area.sum()

@@ -18,32 +18,12 @@ from prt_relight.core.report import metrics as report
 from prt_relight.bench import scenes
 from prt_relight.core.report.metrics import rel_l2
 
-from ....cases.glossy import glossy_object
+from ....cases.glossy import SSDF_SG_SIZE, glossy_object, ssdf_sg_suzanne
 
 
 pytestmark = pytest.mark.usefixtures("registered_addon")
 
-W, H = 48, 36
-
-
-def _scene(principled=False):
-    scenes.reset()
-    scenes.add_world("sunset", rotation_z=0.4)
-    scenes.add_ground(size=6.0, cuts=12)
-    suz = scenes.add_suzanne(subdiv=1, location=(0.0, 0.0, 1.0))
-    if principled:              # GGX: the fitted view-slice lobes (ggx_specular)
-        suz.data.materials.append(scenes.bsdf_material(
-            "Metal", "ShaderNodeBsdfPrincipled", Metallic=1.0, Roughness=0.45,
-            **{"Base Color": (0.9, 0.7, 0.5, 1.0)}))
-    else:
-        suz.data.materials.append(scenes.bsdf_material("Glossy", "ShaderNodeBsdfGlossy",
-                                                   distribution="BECKMANN", Roughness=0.3))
-    scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
-    scenes.set_resolution(W, H)
-    scene = bpy.context.scene
-    scene.prt.method = "SSDF_SG"
-    scene.prt.resolution = "32"
-    return scene
+W, H = SSDF_SG_SIZE
 
 
 def _state():
@@ -54,7 +34,7 @@ def _state():
 
 @pytest.mark.slow
 def test_f12_close_to_reference_and_sliders_need_no_recompute(tmp_path):
-    scene = _scene()
+    scene = ssdf_sg_suzanne()
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     ids = {ob.name: ob.prt.precompute_id for ob in bpy.data.objects if ob.type == "MESH"}
     assert len(storage.get(bpy.data.objects["Suzanne"], ssdf_sg_storage.BLOB)[0]["eigen"]) >= 4
@@ -96,7 +76,7 @@ def test_scene_fitted_lighting_is_closer_to_reference_than_the_environment_fit(t
     """Diffuse Suzanne on a ground under 'sunset': F12 of SSDF_SG with the amplitudes
     fitted to the scene's shadowed irradiance ('SCENE', default) against the
     environment-only fit of §6 ('ENVIRONMENT'), both against REFERENCE's F12."""
-    scene = _scene()
+    scene = ssdf_sg_suzanne()
     suz = bpy.data.objects["Suzanne"]
     suz.data.materials.clear()
     suz.data.materials.append(scenes.bsdf_material("Clay", "ShaderNodeBsdfDiffuse",
@@ -142,7 +122,7 @@ def test_scene_fitted_lighting_is_closer_to_reference_than_the_environment_fit(t
 def test_pca_tells_how_much_occlusion_it_keeps():
     """The PCA's share of blocked directions kept (core.methods.ssdf_sg.ssdf.SSDFBasis.occlusion_kept) is
     stored with the field, shown in the note, and grows with a smaller error budget."""
-    scene = _scene()
+    scene = ssdf_sg_suzanne()
     scene.prt.ssdf_occlusion_target = 0.0           # the RMS budget alone
     kept = {}
     for budget in (0.05, 0.005):
