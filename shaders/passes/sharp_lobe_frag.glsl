@@ -222,14 +222,17 @@ void main()
   vec3 smoothN = n;
   vec4 eye = param(0);
   vec3 o = view_direction(eye, vPos);
+  /* the triangle's own plane, on its shading normal's side: Cycles' reflection closures
+   * take no light from below it (a smooth normal bent at a crease otherwise reflects
+   * light from behind the face) */
+  vec3 ng = normalize(cross(dFdx(vPos), dFdy(vPos)));
+  ng = dot(ng, smoothN) < 0.0 ? -ng : ng;
 #ifdef NORMAL_MAP
   /* the mapped normal, corrected as Cycles' glossy closures take it; the visibility and
    * the horizon tests stay the surface's */
   vec4 nmap = param(15);
   bool mapped = nmap.x > 0.5;
   if (mapped) {
-    vec3 ng = normalize(cross(dFdx(vPos), dFdy(vPos)));
-    ng = dot(ng, n) < 0.0 ? -ng : ng;
     n = mapped_normal(normalTex, vUv, vPos, vNrm, vTng.xyz, vTng.w, nmap, param(16),
                       param(17).xyz, param(18).xyz, param(19));
     if (dot(ng, o) > 0.0) {
@@ -239,6 +242,9 @@ void main()
 #else
   const bool mapped = false;
 #endif
+  if (!mapped && dot(ng, o) > 0.0) {
+    n = valid_reflection_normal(ng, o, n);
+  }
   float cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
   o = bent_view(n, o);
   vec4 lobe = param(1);
@@ -256,6 +262,9 @@ void main()
   float lam_o = smith_lambda(dist, a, cos_o);
   vec3 color = vec3(0.0);
   vec2 shift = pixel_shift();      /* the sample set turned per pixel */
+  /* the solid angle of the mirror directions over this fragment (ray differentials) */
+  vec3 mirror = reflect(-o, n);
+  float footprint = length(cross(dFdx(mirror), dFdy(mirror)));
   for (int s = 0; s < K; s++) {
     vec3 h = n;
     if (a > 0.0) {
@@ -268,14 +277,19 @@ void main()
     }
     vec3 i = 2.0 * oh * h - o;
     float cos_i = dot(n, i);
-    /* a mapped normal's light from below the smooth normal's horizon reaches no closure */
-    if (cos_i <= 0.0 || (mapped && dot(smoothN, i) * dot(smoothN, n) < 0.0)) {
+    /* a mapped normal's light from below the smooth normal's horizon reaches no closure,
+     * nor light from below the triangle's plane */
+    if (cos_i <= 0.0 || (mapped && dot(smoothN, i) * dot(smoothN, n) < 0.0) ||
+        dot(ng, i) <= 0.0) {
       continue;
     }
     float nh = max(dot(n, h), 1e-6);
     float g2 = 1.0 / (1.0 + smith_lambda(dist, a, cos_i) + lam_o);
-    /* the sample's solid angle 1 / (K pdf), pdf = D (n.h) / (4 o.h); 0 for a mirror */
+    /* the sample's solid angle 1 / (K pdf), pdf = D (n.h) / (4 o.h), and at least the
+     * solid angle the (sub)pixel's mirror directions span: the environment is averaged
+     * over the footprint Cycles integrates the pixel over (a mirror's alone) */
     float omega = a > 0.0 ? 4.0 * oh / (float(K) * ndf(dist, a, nh) * nh) : 0.0;
+    omega = max(omega, footprint);
     vec3 light = env_filtered(i, omega) * visibility(i);
     vec3 f = vec3(0.0);
     for (int j = 0; j < min(lobes, 2); j++) {
