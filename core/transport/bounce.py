@@ -20,6 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..common.cache import Cache
 from ..sg.lamp_lobes import Lamp
 from ..shading import brdf
 
@@ -40,7 +41,8 @@ _GL_VIEWS = np.linspace(0.02, 1.0, 12)
 #: lobes narrower than the quadrature resolves are integrated at this roughness: a
 #: microfacet lobe's albedo changes by under 2 % between it and a mirror's
 GLOSSY_QUADRATURE_ROUGHNESS = 0.3
-_GLOSSY_TABLES: dict = {}
+#: the glossy albedo per material (its repr): a small table, computed in ~10 ms
+_GLOSSY_TABLES = Cache(256)
 
 
 def _hemisphere():
@@ -70,8 +72,6 @@ def _glossy_table(material) -> np.ndarray:
         if spec.ndim == 2:                           # a colourless lobe: times its colour
             spec = spec[..., None] * np.asarray(mat.specular_color, np.float64)
         table = np.einsum("vdc,d->vc", spec, w)
-    if len(_GLOSSY_TABLES) > 256:
-        _GLOSSY_TABLES.clear()
     _GLOSSY_TABLES[key] = table
     return table
 
