@@ -90,12 +90,13 @@ def stored_field(ob, note=None):
     return storage.load(ob, storage.SHADOW_FIELD, _FIELDS, _parse, note)
 
 
-def check(ob, positions, note):
+def check(orig, matrix, positions, note):
     """``(status, moving)`` of a synced object with respect to its field: ``"ok"`` when
     its dynamic flag matches what was precomputed and (for a dynamic one) it only moved,
     turned or scaled uniformly, ``moving`` then its stored data and motion ``(data, (T,
-    R, s))`` (None for a static object); otherwise ``"stale"`` (``note`` says why)."""
-    orig = ob.original
+    R, s))`` (None for a static object); otherwise ``"stale"`` (``note`` says why).
+    ``orig``: the original object (or an instance's storage record), ``matrix`` its world
+    matrix now."""
     data = stored_field(orig, note) if storage.has(orig, storage.SHADOW_FIELD) else None
     if orig.prt.dynamic != (data is not None):
         note(f"'{orig.name}' was {'marked' if orig.prt.dynamic else 'unmarked'} dynamic "
@@ -103,7 +104,7 @@ def check(ob, positions, note):
         return "stale", None
     if data is None:
         return "ok", None
-    now = np.array(ob.matrix_world, dtype=np.float64)
+    now = np.asarray(matrix, dtype=np.float64)
     motion = shadow_fields.relative_motion(data.matrix, now)
     if motion is None:
         note(f"'{orig.name}' is dynamic but scaled non-uniformly or sheared since the "
