@@ -134,8 +134,8 @@ def commit_steps(scene, job: PrecomputeJob):
         # what earlier runs stored (other methods' data too) is dropped with them
         storage.replace_all(ob, {storage.VISIBILITY: o.blob, **o.extra})
         yield (i + 1) / steps
-    for instancer, keys in kept.items():
-        storage.keep_instances(instancer, keys)
+    for ob in scene.objects:             # instances no longer there lose their records
+        storage.keep_instances(ob, kept.get(ob, ()))
     storage.remove_legacy()
     scene.prt.precomputed_resolution = job.resolution
     scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(o.fingerprint for o in job.objects)

@@ -208,14 +208,15 @@ def instance_name(instancer_name: str, key: str) -> str:
 
 class _InstanceFields:
     """``object.prt``'s precompute record for one instance, read from and written to its
-    group on the instancer (instances are never dynamic: they follow their instancer)."""
+    group on the instancer; ``dynamic`` is its instancer's flag (the instances of a dynamic
+    instancer carry shadow fields and follow it with live shadows)."""
 
     def __init__(self, record):
         object.__setattr__(self, "_record", record)
 
     def __getattr__(self, name):
         if name == "dynamic":
-            return False
+            return bool(self._record.instancer.prt.dynamic)
         if name not in _RECORD_FIELDS:
             raise AttributeError(name)
         group = self._record.group()
