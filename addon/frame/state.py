@@ -262,6 +262,7 @@ class FrameState:
         run = scene.prt.precompute_id
         listed = found + (shown_only or [])
         shared = surfaces.SharedArrays()
+        coarse = []                    # (tessellation note, instancer or None)
         for i, surface in enumerate(listed):
             self.tick(i / len(listed))          # F12's progress; ESC stops here
             ob, orig = surface.ob, surface.owner
@@ -313,7 +314,8 @@ class FrameState:
             if not unreadable:
                 notes.add(surface.name, status, status == "missing" and storage.legacy(orig))
             if data.coarse_warning and status == "ok":
-                self.warnings.append(data.coarse_warning)
+                coarse.append((data.coarse_warning,
+                               orig.instancer.name if surface.instance else None))
             st = ObjectState(surface.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
             st.matrix = surface.matrix
@@ -347,6 +349,7 @@ class FrameState:
                 slot.material.original.name if slot.material is not None else None
                 for slot in ob.material_slots] or [None]
             objects.append(st)
+        self.warnings += frame_status.grouped_notes(coarse)
         self.warnings += notes.messages(
             bool(run) and _traced_objects(scene, run) < scene.prt.precomputed_objects)
         self.objects = objects
