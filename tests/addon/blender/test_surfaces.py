@@ -205,3 +205,29 @@ def test_an_instance_record_reads_and_writes_like_an_object_record():
         rec.prt.nonsense = 1
     assert storage.clear_object(again) and not storage.has(again, "probe")
     assert again.prt.point_count == 0
+
+
+def test_instances_carry_their_bounce_rows():
+    """With bounces in the Light Paths every instance stores its bounce transfer, and the
+    frame's bounce reaches it (the ground lights the herd from below)."""
+    _small_herd(count=2)
+    scenes.light_paths(4)
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    for name in ("Herd 0#0", "Herd 1#0"):
+        assert storage.has(storage.owner(name), storage.BOUNCE), name
+    state = _sync()
+    bounced = dict(zip((st.name for st in state.objects), state.bounce.irradiance(state)))
+    for name in ("Herd 0#0", "Herd 1#0"):
+        st = next(st for st in state.objects if st.name == name)
+        assert st.bounce is not None and float(np.max(bounced[name])) > 0.0, name
+
+
+def test_an_instancer_hidden_from_renders_hides_its_instances_from_the_trace():
+    """Hidden from renders (the instancer's flag): not traced, casting nothing; the
+    viewport still draws its instances, unshadowed."""
+    herd = _small_herd(count=2)
+    herd[0].hide_render = True
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    assert storage.instance_records(herd[0]) == []
+    statuses = {st.name: st.status for st in _sync().objects}
+    assert statuses["Herd 0#0"] == "unshadowed" and statuses["Herd 1#0"] == "ok"
