@@ -114,7 +114,9 @@ bench: setup
 # Production scale (issue 20): Suzanne of 25k / 100k / 250k / 500k vertices on a 64^2
 # ground, one process per size: precompute, peak memory, stored bytes and .blend growth
 # per point, AUTO's choice against the precompute, F12 per method, ESC (long: an hour or
-# more on 2 cores; SCALE_ARGS="--vertices 25000 100000" for fewer sizes).
+# more on 2 cores; SCALE_ARGS="--vertices 25000 100000" for fewer sizes); then 16 and 64
+# collection instances of a 5k-vertex Suzanne, time and bytes per instance
+# (SCALE_ARGS="--instances 1000" for issue 31's target).
 SCALE_ARGS ?=
 bench-scale: setup
 	$(VENV_PY) bench/bench_scale.py $(SCALE_ARGS)

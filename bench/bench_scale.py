@@ -26,6 +26,13 @@ seconds and peak.  A method whose F12 would pass the memory budget at the next s
 
 then a table over the sizes and the growth per 100k vertices (least-squares slope of
 each column over the vertex counts).  Writes ``out/bench/scale.txt`` and ``.json``.
+
+Instances (issue 31, ``--instances``): N collection instances of one Suzanne of about
+``--instance-vertices`` vertices on a ground, each traced in place (addon/blender/surfaces.py),
+one process per count: the precompute's seconds and peak, REFERENCE's F12 and its peak, and
+per instance the seconds, the stored bytes, the transformed copies it holds (positions,
+normals, occluder triangles) against the source's shared arrays; the same table, and the
+growth per instance.
 """
 
 from __future__ import annotations
@@ -63,6 +70,10 @@ def parse_args(argv=None):
                    help="GiB an F12 may take; a method whose F12 would need more (from its "
                         "peak per point at the previous size) is skipped at the next "
                         "(default: 70 %% of the memory available now)")
+    p.add_argument("--instances", type=int, nargs="*", default=[16, 64],
+                   help="also N collection instances of one mesh (issue 31's target: 1000)")
+    p.add_argument("--instance-vertices", type=int, default=5000,
+                   help="vertices of the instanced mesh (about)")
     p.add_argument("--out-file", type=pathlib.Path, default=scenes.ROOT / "out/bench/scale.txt")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
     p.add_argument("--blend", default=None, help=argparse.SUPPRESS)
@@ -220,6 +231,88 @@ def child(spec: str, args) -> dict:
         out["auto_first_f12_s"] = out["auto_choice_s"] + out["f12_s"]["AUTO"]
     out.update(_bounces(scene, tmp, before))
     return out
+
+
+def child_instances(count: int, args) -> dict:
+    """``count`` collection instances of one Suzanne of about ``args.instance_vertices``
+    vertices, turned at random on a grid 1.2 m apart on a ground: the precompute and
+    REFERENCE's F12, their times and peaks, and the bytes per instance."""
+    import bpy
+    scenes.reset()
+    from prt_relight.addon.blender import storage, surfaces
+    from prt_relight.core.scene import mesh as core_mesh
+    scenes.add_world(args.hdri)
+    side = math.ceil(math.sqrt(count))
+    scenes.add_ground(size=1.2 * side + 1.0, cuts=64)
+    ob = add_suzanne(vertices=args.instance_vertices, height=0.8)
+    source = bpy.data.collections.new("Source")
+    bpy.context.scene.collection.children.link(source)
+    for c in list(ob.users_collection):
+        c.objects.unlink(ob)
+    source.objects.link(ob)
+    bpy.context.view_layer.layer_collection.children["Source"].exclude = True
+    rng = np.random.default_rng(1)
+    for i in range(count):
+        e = bpy.data.objects.new(f"I{i}", None)
+        e.instance_type, e.instance_collection = "COLLECTION", source
+        e.location = (1.2 * (i % side - (side - 1) / 2), 1.2 * (i // side - (side - 1) / 2), 0)
+        e.rotation_euler.z = rng.uniform(0.0, 2.0 * math.pi)
+        bpy.context.scene.collection.objects.link(e)
+    scenes.add_camera(target=(0.0, 0.0, 0.0), distance=1.6 * side + 3.0, elevation_deg=45.0,
+                      resolution=(args.size, args.size))
+    scene = bpy.context.scene
+    found = surfaces.scene_surfaces(bpy.context.evaluated_depsgraph_get())
+    shared = surfaces.SharedArrays()
+    one = shared.arrays(next(f for f in found if f.instance))
+    copies = (one.positions.nbytes + one.corner_normals.nbytes
+              + core_mesh.occluder_triangles(one)[0].nbytes)
+    out = dict(instances=count, vertices=len(ob.data.vertices), cores=os.cpu_count(),
+               shared_bytes=shared.nbytes(), copy_bytes_per_instance=copies)
+    tmp = pathlib.Path(args.blend).parent
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp / "before.blend"), copy=True)
+    before = os.path.getsize(tmp / "before.blend")
+    _reset_peak()
+    t = scenes.precompute(32)
+    out.update(points=t["points"], precompute_s=t["total"], precompute_peak=_peak())
+    records = [r for e in scene.objects for r in storage.instance_records(e)]
+    out["stored_bytes_per_instance"] = sum(storage.stored_bytes(r) for r in records) / count
+    bpy.ops.wm.save_as_mainfile(filepath=str(args.blend), copy=True)
+    out["blend_bytes_per_instance"] = (os.path.getsize(args.blend) - before) / count
+    print(json.dumps({k: out[k] for k in ("instances", "points", "precompute_s")}), flush=True)
+    out["f12_s"] = scenes.render_prt(tmp / "frame.exr")
+    out["precompute_f12_peak"] = _peak()
+    return out
+
+
+def instance_table(results) -> str:
+    rows = [("instances", lambda r: f"{r['instances']}"),
+            ("vertices per instance", lambda r: f"{r['vertices']}"),
+            ("shading points (all)", lambda r: f"{r['points']}"),
+            ("precompute s", lambda r: f"{r['precompute_s']:.1f}"),
+            ("  per instance s", lambda r: f"{r['precompute_s'] / r['instances']:.2f}"),
+            ("precompute peak MiB", lambda r: _mib(r["precompute_peak"])),
+            ("F12 REFERENCE s", lambda r: f"{r['f12_s']:.1f}"),
+            ("precompute + F12 peak MiB", lambda r: _mib(r["precompute_f12_peak"])),
+            ("stored KiB per instance", lambda r: f"{r['stored_bytes_per_instance'] / 1024:.0f}"),
+            (".blend KiB per instance", lambda r: f"{r['blend_bytes_per_instance'] / 1024:.0f}"),
+            ("transformed copies KiB per instance",
+             lambda r: f"{r['copy_bytes_per_instance'] / 1024:.0f}"),
+            ("shared source arrays KiB", lambda r: f"{r['shared_bytes'] / 1024:.0f}")]
+    width = max(len(n) for n, _ in rows)
+    lines = [f"{n:<{width}} " + "".join(f"{fn(r):>10}" for r in results) for n, fn in rows]
+    if len(results) >= 2:
+        x = np.array([r["instances"] for r in results], float)
+
+        def slope(key, scale=1.0):
+            return np.polyfit(x, np.array([r[key] for r in results], float) * scale, 1)
+
+        lines += ["", "growth per instance (least-squares slope over the counts), and at 1000:"]
+        for name, key, unit, scale in (("precompute", "precompute_s", "s", 1.0),
+                                       ("precompute + F12 peak", "precompute_f12_peak",
+                                        "MiB", 2 ** -20)):
+            a, b = slope(key, scale)
+            lines.append(f"  {name:<22} {a:+.3f} {unit}  (1000: ~{a * 1000 + b:.0f} {unit})")
+    return "\n".join(lines) + "\n"
 
 
 def _turn_world(scene, angle: float):
@@ -409,6 +502,9 @@ def _run(cmd) -> dict:
 
 def main(argv=None):
     args = parse_args(argv)
+    if args.child and args.child.startswith("instances="):
+        print("RESULT " + json.dumps(child_instances(int(args.child[10:]), args)), flush=True)
+        return 0
     if args.child or args.f12:
         result = child(args.child, args) if args.child else child_f12(args.blend, args.f12)
         print("RESULT " + json.dumps(result), flush=True)
@@ -444,13 +540,28 @@ def main(argv=None):
                                          result["auto_choice_peak"]]
                              + list(result["f12_peak"].values()) if np.isfinite(v))
         results.append(result)
+    placed = []
+    for count in args.instances:
+        print(f"== instances={count}", flush=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            got = _run([sys.executable, __file__, "--child", f"instances={count}",
+                        "--blend", str(pathlib.Path(tmp) / "instances.blend"),
+                        "--hdri", args.hdri, "--size", str(args.size),
+                        "--instance-vertices", str(args.instance_vertices)])
+        if "failed" in got:
+            raise SystemExit(f"instances={count} failed (exit {got['failed']})")
+        placed.append(got)
     import platform
     header = (f"bench_scale: Suzanne on a 64^2 ground, HDRI {args.hdri}, F12 {args.size}^2, "
               f"default settings; {os.cpu_count()} cores, {platform.processor() or platform.machine()}\n")
-    text = header + table(results, args.methods)
+    text = header + (table(results, args.methods) if results else "")
+    if placed:
+        text += (f"\ninstances: collection instances of a {placed[0]['vertices']}-vertex "
+                 "Suzanne on a grid, each traced in place:\n" + instance_table(placed))
     args.out_file.parent.mkdir(parents=True, exist_ok=True)
     args.out_file.write_text(text)
-    args.out_file.with_suffix(".json").write_text(json.dumps(results, indent=1))
+    args.out_file.with_suffix(".json").write_text(json.dumps(
+        {"sizes": results, "instances": placed}, indent=1))
     print(text, end="")
     print(f"(written to {args.out_file})")
     return 0

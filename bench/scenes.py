@@ -280,6 +280,97 @@ def glossy_bunny_scene(hdri: str = "city", roughness: float = 0.25, cuts: int = 
     return ob
 
 
+# ------------------------------------------------------------------ instances
+
+def instanced_herd(kind: str = "COLLECTION", count: int = 7, hdri: str = "city",
+                   size=(64, 48), subdiv: int = 1, seed: int = 3, spread: float = 2.2):
+    """``count`` instances of one Suzanne (``subdiv`` levels, 0.8 m tall) scattered and
+    turned at random (``seed``) on a diffuse 6 m ground, the source in a collection
+    excluded from the view layer: placed by ``kind`` ``"COLLECTION"`` (an empty per
+    instance instancing the collection), ``"PARTICLES"`` (a hidden emitter whose particles
+    render the object) or ``"NODES"`` (geometry nodes' Instance on Points with an Object
+    Info node).  Returns the instancers (the empties, the emitter, the points object)."""
+    import bpy
+    reset()
+    add_world(hdri)
+    ground = add_ground(cuts=64)
+    add_bsdf_material(ground, "Ground Diffuse", "ShaderNodeBsdfDiffuse",
+                      Color=(0.8, 0.8, 0.8, 1.0))
+    animal = add_suzanne(subdiv=subdiv, height=0.8)
+    animal.name = "Animal"
+    add_bsdf_material(animal, "Animal Diffuse", "ShaderNodeBsdfDiffuse",
+                      Color=(0.7, 0.5, 0.3, 1.0))
+    animal.location = (0.0, 0.0, animal.location.z)
+    source = bpy.data.collections.new("Herd source")
+    bpy.context.scene.collection.children.link(source)
+    for c in list(animal.users_collection):
+        c.objects.unlink(animal)
+    source.objects.link(animal)
+    bpy.context.view_layer.layer_collection.children[source.name].exclude = True
+    rng = np.random.default_rng(seed)
+    spots = rng.uniform(-spread, spread, (count, 2))
+    turns = rng.uniform(0.0, 2.0 * math.pi, count)
+    instancers = []
+    if kind == "COLLECTION":
+        for i, ((x, y), turn) in enumerate(zip(spots, turns)):
+            ob = bpy.data.objects.new(f"Herd {i}", None)
+            ob.instance_type, ob.instance_collection = "COLLECTION", source
+            ob.location, ob.rotation_euler = (x, y, 0.0), (0.0, 0.0, turn)
+            bpy.context.scene.collection.objects.link(ob)
+            instancers.append(ob)
+    elif kind in ("PARTICLES", "NODES"):
+        mesh = bpy.data.meshes.new("Herd points")
+        mesh.from_pydata([(x, y, 0.0) for x, y in spots], [], [])
+        ob = bpy.data.objects.new("Herd", mesh)
+        bpy.context.scene.collection.objects.link(ob)
+        instancers.append(ob)
+        if kind == "PARTICLES":
+            ps = ob.modifiers.new("Herd", "PARTICLE_SYSTEM").particle_system
+            st = ps.settings
+            st.count, st.emit_from, st.use_emit_random = count, "VERT", False
+            st.frame_start = st.frame_end = 1
+            st.lifetime, st.physics_type = 10000, "NO"
+            st.render_type, st.instance_object, st.particle_size = "OBJECT", animal, 1.0
+            st.use_rotations, st.rotation_mode = True, "GLOB_Z"    # lying on their side
+            st.phase_factor_random = 2.0           # turned at random about that axis
+            ob.show_instancer_for_render = ob.show_instancer_for_viewport = False
+        else:
+            _instance_on_points(ob, animal, turns)
+    else:
+        raise ValueError(f"unknown kind of instances: {kind}")
+    add_camera(target=(0.0, 0.0, 0.3), distance=7.5, elevation_deg=35.0, resolution=size)
+    bpy.context.view_layer.update()
+    return instancers
+
+
+def _instance_on_points(ob, source, turns):
+    """Geometry nodes on ``ob``: ``source`` (Object Info, as an instance) on each of its
+    points, turned about z by the point's ``turns``."""
+    import bpy
+    tree = bpy.data.node_groups.new("Herd nodes", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = tree.nodes, tree.links
+    given, out = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    info = nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value = source
+    info.inputs["As Instance"].default_value = True
+    info.transform_space = "RELATIVE"          # the source as it stands, placed per point
+    place = nodes.new("GeometryNodeInstanceOnPoints")
+    turn = nodes.new("GeometryNodeInputNamedAttribute")
+    turn.data_type = "FLOAT"
+    turn.inputs["Name"].default_value = "turn"
+    combine = nodes.new("ShaderNodeCombineXYZ")
+    links.new(given.outputs[0], place.inputs["Points"])
+    links.new(info.outputs["Geometry"], place.inputs["Instance"])
+    links.new(turn.outputs["Attribute"], combine.inputs["Z"])
+    links.new(combine.outputs["Vector"], place.inputs["Rotation"])
+    links.new(place.outputs["Instances"], out.inputs[0])
+    attr = ob.data.attributes.new("turn", "FLOAT", "POINT")
+    attr.data.foreach_set("value", np.asarray(turns, np.float32))
+    ob.modifiers.new("Herd", "NODES").node_group = tree
+
+
 # ------------------------------------------------------------------ scenes with bounced light
 
 def light_paths(bounces: int):

@@ -182,7 +182,7 @@ def gpu_name() -> str:
 def clear_objects(job):
     """Remove the data the report's precompute stored on objects that had none."""
     for o in job.objects:
-        ob = bpy.data.objects.get(o.name)
+        ob = storage.owner(o.name)
         if ob is not None:
             storage.clear_object(ob)
 

@@ -148,7 +148,7 @@ class ReportRun:
             yield "precompute (visibility)"
             scene.prt.method = "REFERENCE"
             job = precompute.gather(depsgraph, scene.prt)
-            had_data = all(storage.has(bpy.data.objects[o.name], storage.VISIBILITY)
+            had_data = all(storage.has(storage.owner(o.name), storage.VISIBILITY)
                            for o in job.objects)
             t0 = time.perf_counter()
             job.run()

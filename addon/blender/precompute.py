@@ -19,7 +19,7 @@ import numpy as np
 from ...core.scene import mesh as core_mesh, sides, visibility
 from ..frame import dynamic
 from .. import methods
-from . import scene_export, storage
+from . import scene_export, storage, surfaces
 from ...core.pipeline.tracing import ObjectJob, PrecomputeJob
 
 
@@ -31,37 +31,40 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     objects = []
     tri_blocks, all_tris = [], []
     empty = []
-    skipped = []
     hidden = scene_export.hidden_in_viewport(depsgraph.view_layer, depsgraph)
     if hidden:
         warnings.append("Hidden in the viewport but shown in renders, so not traced (their "
                         "shadows are missing; unhide them to precompute): " + ", ".join(hidden))
-    for ob in scene_export.visible_mesh_objects(depsgraph, skipped):
-        arrays = scene_export.mesh_arrays(ob)
+    shared = surfaces.SharedArrays()
+    found = surfaces.scene_surfaces(depsgraph)
+    # an instancer whose own geometry is empty (points that geometry nodes instance on)
+    instancers = {s.owner.instancer.name for s in found if s.instance}
+    for s in found:
+        arrays = shared.arrays(s)
         if not np.isfinite(arrays.positions).all():
-            raise scene_export.ExportError(f"Object '{ob.name}' has non-finite vertex positions")
+            raise scene_export.ExportError(f"Object '{s.name}' has non-finite vertex positions")
         if len(arrays.triangles) == 0:
-            empty.append(ob.original.name)
+            if s.name not in instancers:
+                empty.append(s.name)
             continue
         fixed = core_mesh.repair_normals(arrays)
         occluders, degenerate = core_mesh.occluder_triangles(arrays)
         if degenerate:
-            warnings.append(f"'{ob.original.name}': {degenerate} zero-area face(s) ignored as "
+            warnings.append(f"'{s.name}': {degenerate} zero-area face(s) ignored as "
                             "occluders")
         elif fixed:
-            warnings.append(f"'{ob.original.name}': {fixed} corner normal(s) repaired")
+            warnings.append(f"'{s.name}': {fixed} corner normal(s) repaired")
         points = core_mesh.shading_points(arrays)
-        job = ObjectJob(ob.original.name, arrays, points, core_mesh.fingerprint(arrays))
-        if ob.original.prt.dynamic:
+        job = ObjectJob(s.name, arrays, points, core_mesh.fingerprint(arrays), matrix=s.matrix)
+        if s.owner.prt.dynamic:
             job.dynamic, job.own = True, occluders
-            job.matrix = np.array(ob.matrix_world, dtype=np.float64)
         else:
             tri_blocks.append(occluders)
         all_tris.append(occluders)
         objects.append(job)
     if empty:
         warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
-    warnings += scene_export.instance_warning(skipped)
+    job_bytes = shared.nbytes()
     if not objects:
         raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")
     occluders = np.concatenate(tri_blocks) if tri_blocks else np.zeros((0, 3, 3))
@@ -79,7 +82,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
                              for name in methods.scene_properties()},
                          field_detail=settings.field_detail,
                          derive=method.shading.derive if method.derives else None,
-                         derive_label=method.label)
+                         derive_label=method.label, shared_bytes=job_bytes)
 
 
 def two_sided(objects, occluders, offset, camera):
@@ -111,14 +114,17 @@ def commit_steps(scene, job: PrecomputeJob):
 
     t0 = time.perf_counter()
     # Objects deleted while a modal precompute ran are dropped.
-    job.objects = [o for o in job.objects if o.name in bpy.data.objects]
+    job.objects = [o for o in job.objects if storage.owner(o.name) is not None]
     # Every blob was made in run(): from here on only assignments change the scene.
     if any(o.blob is None for o in job.objects):
         raise RuntimeError("precompute commit without run(): nothing was traced")
     run_id = uuid.uuid4().hex
     steps = len(job.objects) + 1
+    kept = {}                    # instancer -> keys of its instances in this run
     for i, o in enumerate(job.objects):
-        ob = bpy.data.objects[o.name]
+        ob = storage.owner(o.name)
+        if isinstance(ob, storage.InstanceRecord):
+            kept.setdefault(ob.instancer, set()).add(ob.key)
         ob.prt.resolution = job.resolution
         ob.prt.point_count = o.points.count
         ob.prt.fingerprint = o.fingerprint
@@ -128,6 +134,8 @@ def commit_steps(scene, job: PrecomputeJob):
         # what earlier runs stored (other methods' data too) is dropped with them
         storage.replace_all(ob, {storage.VISIBILITY: o.blob, **o.extra})
         yield (i + 1) / steps
+    for ob in scene.objects:             # instances no longer there lose their records
+        storage.keep_instances(ob, kept.get(ob, ()))
     storage.remove_legacy()
     scene.prt.precomputed_resolution = job.resolution
     scene.prt.scene_fingerprint = core_mesh.scene_fingerprint(o.fingerprint for o in job.objects)

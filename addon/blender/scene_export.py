@@ -44,40 +44,6 @@ class ExportError(RuntimeError):
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 
 
-def visible_mesh_objects(depsgraph, skipped: list | None = None,
-                         hidden_from_render: list | None = None):
-    """Evaluated geometry objects the render shows, in a stable (name) order.
-
-    A render depsgraph holds what the render shows; a viewport depsgraph what the
-    viewport shows, less the objects hidden from renders (``hide_render``): those are
-    never traced, so the precompute and F12 agree on which objects cast shadows.  When
-    ``hidden_from_render`` is given (the viewport, which shows them), they are appended
-    to it instead of being dropped.  Curves, text, surfaces and
-    metaballs come as their own object plus a mesh instance of themselves; the object is
-    used.  Other instances (collection instances, particles, geometry-node instances) are
-    not supported yet: their names are appended to ``skipped`` when it is given.
-    """
-    found = []
-    for inst in depsgraph.object_instances:
-        ob = inst.object
-        if ob.type not in GEOMETRY_TYPES:
-            continue
-        if inst.is_instance:
-            parent = inst.parent
-            if parent is not None and parent.original == ob.original:
-                continue                 # a curve/text object's own evaluated geometry
-            if skipped is not None and ob.original.name not in skipped:
-                skipped.append(ob.original.name)
-            continue
-        if ob.original.hide_render:
-            if hidden_from_render is not None:
-                hidden_from_render.append(ob)
-            continue
-        found.append(ob)
-    found.sort(key=lambda o: o.name)
-    return found
-
-
 def hidden_in_viewport(view_layer, depsgraph) -> list:
     """Names of the view layer's geometry objects that renders show but a viewport
     depsgraph does not evaluate (``hide_viewport`` or hidden with the eye): they cannot
@@ -92,15 +58,9 @@ def hidden_in_viewport(view_layer, depsgraph) -> list:
                   and (ob.hide_viewport or ob.hide_get(view_layer=view_layer)))
 
 
-def instance_warning(skipped: list) -> list:
-    if not skipped:
-        return []
-    return ["Instanced objects are not drawn yet (make them real to include them): "
-            + ", ".join(sorted(skipped)[:8]) + (" ..." if len(skipped) > 8 else "")]
-
-
-def mesh_arrays(ob_eval) -> MeshArrays:
-    """World-space arrays of an evaluated mesh object (modifiers applied)."""
+def mesh_arrays(ob_eval, matrix=None) -> MeshArrays:
+    """World-space arrays of an evaluated mesh object (modifiers applied), placed by
+    ``matrix`` (its own world matrix when None; the identity gives object space)."""
     mesh = ob_eval.to_mesh()
     try:
         mesh.calc_loop_triangles()
@@ -123,14 +83,21 @@ def mesh_arrays(ob_eval) -> MeshArrays:
     finally:
         ob_eval.to_mesh_clear()
     corner_mat = np.repeat(poly_mat, loop_total) if len(poly_mat) else np.zeros(nc, np.int32)
-    M = np.array(ob_eval.matrix_world, dtype=np.float64)
-    pos = co.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+    M = np.array(ob_eval.matrix_world if matrix is None else matrix, dtype=np.float64)
+    pos, nrm = transformed(co.reshape(-1, 3), normals.reshape(-1, 3), M)
+    return MeshArrays(pos, corner_verts, nrm, tris.reshape(-1, 3), corner_mat)
+
+
+def transformed(positions, normals, M):
+    """Positions and unit normals (float64) placed by the 4x4 matrix ``M`` (normals by its
+    inverse transpose)."""
+    pos = positions.astype(np.float64) @ M[:3, :3].T + M[:3, 3]
     N = np.linalg.inv(M[:3, :3]).T if abs(np.linalg.det(M[:3, :3])) > 1e-30 else M[:3, :3]
-    nrm = normals.reshape(-1, 3).astype(np.float64) @ N.T
+    nrm = normals.astype(np.float64) @ N.T
     length = np.linalg.norm(nrm, axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         nrm = nrm / length
-    return MeshArrays(pos, corner_verts, nrm, tris.reshape(-1, 3), corner_mat)
+    return pos, nrm
 
 
 def light_bounces(scene) -> int:

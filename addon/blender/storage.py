@@ -12,6 +12,12 @@ or full), delete, undo, save, append and link carry or drop them; nothing is loo
 by object name.  ``ob.prt`` stays the record of the precompute (resolution, point
 count, geometry fingerprint, run, tessellation note).
 
+An instance (a collection instance, a particle, a geometry-nodes instance) has no
+datablock of its own: its record and blobs live on its instancer, keyed by the instance's
+persistent id (:class:`InstanceRecord`), ``instancer["prt_instances"][key] = {"record":
+{...}, "prt_store": {...}}``; so they too are saved, duplicated and deleted with the
+instancer.  :func:`owner` finds what a name from a precompute or a frame stands for.
+
 Results of the earlier layout (packed float images, ``prt_rsl_*`` properties) are not
 read: such objects are reported as needing a precompute, and a precompute or Clear
 removes that data.
@@ -26,6 +32,10 @@ from ..frame import keys
 from ...core.store.layouts import BOUNCE, SHADOW_FIELD, VISIBILITY  # noqa: F401  (the blob names)
 
 STORE = "prt_store"
+#: the instances' records and blobs on their instancer (:class:`InstanceRecord`)
+INSTANCES = "prt_instances"
+#: an instance's name: its instancer's name, this, its key (``Herd#3``, ``Field#0.12``)
+INSTANCE_SEP = "#"
 #: blob that cannot be read (damaged, or written by a newer prt_relight)
 Unreadable = codec.FormatError
 #: images of the earlier layout: tagged with this ID property, or named with a prefix
@@ -124,7 +134,7 @@ def replace_all(ob, blobs: dict):
     run = ob.prt.precompute_id
     ob[STORE] = {name: {"blob": blob, "uid": uuid.uuid4().hex, "run": run}
                  for name, blob in blobs.items()}
-    for k in [k for k in ob.keys() if k.startswith("prt_") and k != STORE]:
+    for k in [k for k in ob.keys() if k.startswith("prt_") and k not in (STORE, INSTANCES)]:
         del ob[k]
 
 
@@ -182,3 +192,139 @@ def clear_all() -> int:
             prt.last_report = ""
             prt.auto_choice = ""
     return count
+
+
+# ------------------------------------------------------------------ per instance
+
+#: an instance's record and its default values (the fields of ``object.prt`` a precompute
+#: writes and a frame reads)
+_RECORD_FIELDS = {"resolution": 0, "point_count": 0, "fingerprint": "", "precompute_id": "",
+                  "coarse_warning": "", "back_sides": False}
+
+
+def instance_name(instancer_name: str, key: str) -> str:
+    return f"{instancer_name}{INSTANCE_SEP}{key}"
+
+
+class _InstanceFields:
+    """``object.prt``'s precompute record for one instance, read from and written to its
+    group on the instancer; ``dynamic`` is its instancer's flag (the instances of a dynamic
+    instancer carry shadow fields and follow it with live shadows)."""
+
+    def __init__(self, record):
+        object.__setattr__(self, "_record", record)
+
+    def __getattr__(self, name):
+        if name == "dynamic":
+            return bool(self._record.instancer.prt.dynamic)
+        if name not in _RECORD_FIELDS:
+            raise AttributeError(name)
+        group = self._record.group()
+        got = group.get("record", {}).get(name) if group is not None else None
+        return _RECORD_FIELDS[name] if got is None else type(_RECORD_FIELDS[name])(got)
+
+    def __setattr__(self, name, value):
+        if name not in _RECORD_FIELDS:
+            raise AttributeError(f"an instance's record has no '{name}'")
+        group = self._record.group(create=True)
+        if "record" not in group:
+            group["record"] = {}
+        group["record"][name] = value
+
+
+class InstanceRecord:
+    """Where one instance's precompute record and blobs are kept: the group ``key`` (its
+    persistent id) of its instancer's ``prt_instances``.  Stands in for an object wherever
+    this module and the methods store or read per object: ``.prt``, ``.name``,
+    ``.hide_render``, ``.library`` and the ID-property access (``get``, ``[]``, ``keys``)."""
+
+    def __init__(self, instancer, key: str):
+        self.instancer = instancer
+        self.key = key
+        self.name = instance_name(instancer.name, key)
+        self.prt = _InstanceFields(self)
+
+    def group(self, create: bool = False):
+        groups = self.instancer.get(INSTANCES)
+        if not hasattr(groups, "keys"):
+            if not create:
+                return None
+            self.instancer[INSTANCES] = {}
+            groups = self.instancer[INSTANCES]
+        if self.key not in groups:
+            if not create:
+                return None
+            groups[self.key] = {}
+        return groups[self.key]
+
+    @property
+    def original(self):
+        return self
+
+    @property
+    def hide_render(self) -> bool:
+        return bool(self.instancer.hide_render)
+
+    @property
+    def library(self):
+        return self.instancer.library
+
+    def get(self, name, default=None):
+        group = self.group()
+        return default if group is None else group.get(name, default)
+
+    def keys(self):
+        group = self.group()
+        return [] if group is None else list(group.keys())
+
+    def __contains__(self, name):
+        return name in self.keys()
+
+    def __getitem__(self, name):
+        group = self.group()
+        if group is None:
+            raise KeyError(name)
+        return group[name]
+
+    def __setitem__(self, name, value):
+        self.group(create=True)[name] = value
+
+    def __delitem__(self, name):
+        del self.group()[name]
+
+    def property_unset(self, name):
+        group = self.group()
+        if group is not None and "record" in group:
+            del group["record"]
+
+
+def owner(name: str):
+    """The object named ``name``, or the :class:`InstanceRecord` an instance's name
+    (:func:`instance_name`) stands for; None when neither exists."""
+    ob = bpy.data.objects.get(name)
+    if ob is not None:
+        return ob
+    instancer, sep, key = name.rpartition(INSTANCE_SEP)
+    ob = bpy.data.objects.get(instancer) if sep else None
+    return None if ob is None else InstanceRecord(ob, key)
+
+
+def instancer_of(name: str) -> str | None:
+    """The instancer's name when ``name`` is an instance's, else None."""
+    got = owner(name)
+    return got.instancer.name if isinstance(got, InstanceRecord) else None
+
+
+def instance_records(instancer) -> list:
+    """The :class:`InstanceRecord` of every instance ``instancer`` stores."""
+    groups = instancer.get(INSTANCES)
+    return [InstanceRecord(instancer, k) for k in groups.keys()] if hasattr(groups, "keys") else []
+
+
+def keep_instances(instancer, keys):
+    """Drop the records of ``instancer``'s instances not in ``keys`` (a precompute no
+    longer found them)."""
+    groups = instancer.get(INSTANCES)
+    if hasattr(groups, "keys"):
+        for k in [k for k in groups.keys() if k not in keys]:
+            del groups[k]

@@ -386,10 +386,11 @@ def normal_source(material):
     return None, "", src
 
 
-def corner_tangents(ob_eval, uv_map: str = ""):
+def corner_tangents(ob_eval, uv_map: str = "", matrix=None):
     """(C, 4) world-space unit tangents per face corner and the bitangent sign (MikkTSpace,
     ``mesh.calc_tangents`` on ``uv_map`` or the render's UV map), or None when the mesh has
-    no such UV map or a face of more than four corners."""
+    no such UV map or a face of more than four corners.  ``matrix``: where the mesh is
+    placed (an instance's world matrix; the object's own when None)."""
     mesh = ob_eval.to_mesh()
     try:
         layers = mesh.uv_layers
@@ -407,7 +408,7 @@ def corner_tangents(ob_eval, uv_map: str = ""):
         mesh.loops.foreach_get("bitangent_sign", sign)
     finally:
         ob_eval.to_mesh_clear()
-    M = np.array(ob_eval.matrix_world, dtype=np.float64)[:3, :3]
+    M = np.array(ob_eval.matrix_world if matrix is None else matrix, dtype=np.float64)[:3, :3]
     tw = t.reshape(-1, 3).astype(np.float64) @ M.T          # a surface direction: M t
     length = np.linalg.norm(tw, axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -417,9 +418,10 @@ def corner_tangents(ob_eval, uv_map: str = ""):
     return np.concatenate([tw, (sign * flip)[:, None]], axis=1).astype(np.float32)
 
 
-def slot_normals(ob_eval, warnings: list) -> dict:
+def slot_normals(ob_eval, warnings: list, matrix=None) -> dict:
     """{slot: (NormalSource, per-corner UVs (C, 2), per-corner tangents (C, 4))} of an
-    evaluated object's normal- or bump-mapped slots; other nodes driving Normal warned."""
+    evaluated object's normal- or bump-mapped slots, its mesh placed by ``matrix`` (its
+    own world matrix when None); other nodes driving Normal warned."""
     out = {}
     for slot, ms in enumerate(ob_eval.material_slots):
         mat = ms.material
@@ -435,7 +437,7 @@ def slot_normals(ob_eval, warnings: list) -> dict:
         if src is None:
             continue
         uvs = _resolved_uvs(ob_eval, src.source.texture)
-        tangents = corner_tangents(ob_eval, uv_map) if uvs is not None else None
+        tangents = corner_tangents(ob_eval, uv_map, matrix) if uvs is not None else None
         if tangents is None:
             warnings.append(f"Material '{mat.name}': '{ob_eval.name}' has no UV map (or a "
                             "face of more than 4 corners) for its normal map; drawn with "

@@ -38,6 +38,13 @@ def _bbox_world(ob) -> np.ndarray:
     return corners @ M[:3, :3].T + M[:3, 3]
 
 
+def _moved_box(positions, M) -> np.ndarray:
+    """The 8 corners of the box of ``positions`` moved by the 4x4 ``M``."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    corners = np.array([[(lo, hi)[(k >> i) & 1][i] for i in range(3)] for k in range(8)])
+    return corners @ M[:3, :3].T + M[:3, 3]
+
+
 def set_reach(scene, jobs, static_triangles):
     """Each dynamic job's ``reach``: the box its bounding box sweeps over the scene's
     frame range (sampled at :data:`REACH_FRAMES` frames and the current one), widened by a
@@ -47,6 +54,12 @@ def set_reach(scene, jobs, static_triangles):
     if not jobs:
         return
     boxes = {j.name: [] for j in jobs}
+    # an instance goes where its instancer takes it: its box moved by the instancer's
+    # motion since now (its own motion relative to the instancer is not sampled)
+    owners = {j.name: storage.owner(j.name) for j in jobs}
+    dg = bpy.context.evaluated_depsgraph_get()
+    start = {j.name: np.linalg.inv(np.array(o.instancer.evaluated_get(dg).matrix_world))
+             for j in jobs for o in [owners[j.name]] if isinstance(o, storage.InstanceRecord)}
     frame, sub = scene.frame_current, scene.frame_subframe
     frames = {frame}
     if scene.frame_end > scene.frame_start:
@@ -58,8 +71,11 @@ def set_reach(scene, jobs, static_triangles):
                 scene.frame_set(int(f))
             dg = bpy.context.evaluated_depsgraph_get()
             for j in jobs:
-                ob = bpy.data.objects.get(j.name)
-                if ob is not None:
+                ob = owners[j.name]
+                if j.name in start:
+                    M = np.array(ob.instancer.evaluated_get(dg).matrix_world) @ start[j.name]
+                    boxes[j.name].append(_moved_box(j.arrays.positions, M))
+                elif ob is not None:
                     boxes[j.name].append(_bbox_world(ob.evaluated_get(dg)))
     finally:
         if len(frames) > 1:
@@ -90,12 +106,13 @@ def stored_field(ob, note=None):
     return storage.load(ob, storage.SHADOW_FIELD, _FIELDS, _parse, note)
 
 
-def check(ob, positions, note):
+def check(orig, matrix, positions, note):
     """``(status, moving)`` of a synced object with respect to its field: ``"ok"`` when
     its dynamic flag matches what was precomputed and (for a dynamic one) it only moved,
     turned or scaled uniformly, ``moving`` then its stored data and motion ``(data, (T,
-    R, s))`` (None for a static object); otherwise ``"stale"`` (``note`` says why)."""
-    orig = ob.original
+    R, s))`` (None for a static object); otherwise ``"stale"`` (``note`` says why).
+    ``orig``: the original object (or an instance's storage record), ``matrix`` its world
+    matrix now."""
     data = stored_field(orig, note) if storage.has(orig, storage.SHADOW_FIELD) else None
     if orig.prt.dynamic != (data is not None):
         note(f"'{orig.name}' was {'marked' if orig.prt.dynamic else 'unmarked'} dynamic "
@@ -103,7 +120,7 @@ def check(ob, positions, note):
         return "stale", None
     if data is None:
         return "ok", None
-    now = np.array(ob.matrix_world, dtype=np.float64)
+    now = np.asarray(matrix, dtype=np.float64)
     motion = shadow_fields.relative_motion(data.matrix, now)
     if motion is None:
         note(f"'{orig.name}' is dynamic but scaled non-uniformly or sheared since the "

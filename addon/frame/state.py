@@ -24,7 +24,7 @@ from ...core.scene import mesh as core_mesh, textures, visibility
 from . import bounce, dynamic, keys
 from . import sources
 from .. import methods
-from ..blender import scene_export, storage, texture_export
+from ..blender import scene_export, storage, surfaces, texture_export
 from ...core.common.parallel import Cancelled  # noqa: F401  (raised by FrameState.tick)
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
@@ -52,11 +52,13 @@ def open_visibility(normals: np.ndarray, cube) -> np.ndarray:
 
 
 def _traced_objects(scene, run: str) -> int:
-    """How many of the scene's objects that renders show carry the precompute ``run``
-    (objects hidden in the viewport count: they still render)."""
-    return sum(1 for ob in scene.objects
-               if ob.type in scene_export.GEOMETRY_TYPES and not ob.hide_render
-               and ob.prt.precompute_id == run)
+    """How many of the scene's objects and instances that renders show carry the
+    precompute ``run`` (objects hidden in the viewport count: they still render)."""
+    shown = [ob for ob in scene.objects if not ob.hide_render]
+    return (sum(1 for ob in shown if ob.type in scene_export.GEOMETRY_TYPES
+                and ob.prt.precompute_id == run)
+            + sum(1 for ob in shown for r in storage.instance_records(ob)
+                  if r.prt.precompute_id == run))
 
 
 # core.scene.mesh.closed_side per geometry fingerprint (a cheap key: every sync exports anew)
@@ -118,7 +120,7 @@ def _with_base(state, value: float):
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "_bits", "_pose", "status", "data",
                  "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of", "dynamic",
-                 "bounce",
+                 "bounce", "matrix",
                  "shape", "near")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
@@ -160,6 +162,8 @@ class ObjectState:
         self.slot_of = np.arange(len(materials))
         #: the stored bounce transfer of its precompute (addon.frame.bounce.stored_rows)
         self.bounce = None
+        #: its world matrix (4x4; an instance's placed by its instancer)
+        self.matrix = np.eye(4)
 
     @property
     def bits(self):
@@ -253,18 +257,20 @@ class FrameState:
         nbytes = cube.size // 8
         objects = []
         notes = frame_status.SyncNotes()
-        skipped = []
         shown_only = [] if depsgraph.mode != "RENDER" else None
-        found = scene_export.visible_mesh_objects(depsgraph, skipped, shown_only)
+        found = surfaces.scene_surfaces(depsgraph, shown_only)
         run = scene.prt.precompute_id
         listed = found + (shown_only or [])
-        for i, ob in enumerate(listed):
+        shared = surfaces.SharedArrays()
+        coarse = []                    # (tessellation note, instancer or None)
+        for i, surface in enumerate(listed):
             self.tick(i / len(listed))          # F12's progress; ESC stops here
-            arrays = scene_export.mesh_arrays(ob)
+            ob, orig = surface.ob, surface.owner
+            arrays = shared.arrays(surface)
             if len(arrays.triangles) == 0:
                 continue
             core_mesh.repair_normals(arrays)
-            if ob.original.prt.back_sides and not ob.original.hide_render:
+            if orig.prt.back_sides and not surface.hidden:
                 arrays = core_mesh.with_back_sides(arrays)    # as its precompute traced it
             corners = core_mesh.corner_source(arrays) if arrays.two_sided else None
             points = core_mesh.shading_points(arrays)
@@ -279,13 +285,12 @@ class FrameState:
             # lobes too narrow for the cubemap are drawn per pixel (addon/gpu/sharp.py)
             mats = [core_brdf.with_sharp_lobe(m, self.resolution)
                     for m in scene_export.object_materials(ob, self.warnings, colours, means)]
-            orig = ob.original
             data = orig.prt
             bits = None
             status = "ok"
             moving = None
             unreadable = False
-            if orig.hide_render:
+            if surface.hidden:
                 status = "unshadowed"          # viewport only: never traced, casts nothing
             elif storage.has(orig, storage.VISIBILITY) and data.resolution == self.resolution:
                 why = []
@@ -298,20 +303,24 @@ class FrameState:
                         bits is not None, data.dynamic or storage.has(orig, storage.SHADOW_FIELD),
                         data.fingerprint == fingerprint)
                     if status == "dynamic":
-                        status, moving = dynamic.check(ob, arrays.positions, self.note)
+                        status, moving = dynamic.check(orig, surface.matrix, arrays.positions,
+                                                       self.note)
                     elif status == "ok" and run and data.precompute_id != run:
-                        notes.earlier.append(orig.name)
+                        notes.earlier.append(surface.name)
             else:
                 status = "missing"
             if bits is None:
                 bits = open_visibility(points.normals, cube)
             if not unreadable:
-                notes.add(orig.name, status, status == "missing" and storage.legacy(orig))
+                notes.add(surface.name, status, status == "missing" and storage.legacy(orig))
             if data.coarse_warning and status == "ok":
-                self.warnings.append(data.coarse_warning)
-            st = ObjectState(orig.name, arrays, points, mats, bits, status, fingerprint)
+                coarse.append((data.coarse_warning,
+                               orig.instancer.name if surface.instance else None))
+            st = ObjectState(surface.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
-            st.normals = _per_corner(texture_export.slot_normals(ob, self.warnings), corners)
+            st.matrix = surface.matrix
+            st.normals = _per_corner(texture_export.slot_normals(ob, self.warnings,
+                                                                 surface.matrix), corners)
             if status == "ok" and moving is None:
                 st.bounce = bounce.stored_rows(orig, points.count, self.note)
             st.dynamic = moving if status == "ok" else None
@@ -340,7 +349,7 @@ class FrameState:
                 slot.material.original.name if slot.material is not None else None
                 for slot in ob.material_slots] or [None]
             objects.append(st)
-        self.warnings += scene_export.instance_warning(skipped)
+        self.warnings += frame_status.grouped_notes(coarse)
         self.warnings += notes.messages(
             bool(run) and _traced_objects(scene, run) < scene.prt.precomputed_objects)
         self.objects = objects

@@ -18,6 +18,7 @@ import bpy
 from ...core.scene import visibility
 from ...core.common.parallel import Cancelled
 from .. import methods
+from ...core.pipeline import frame_status
 from ..blender import precompute, scene_export, storage
 
 #: Modal precomputes in progress (kept out of the .blend, unlike a scene property).
@@ -46,7 +47,9 @@ def _finish(context, op, job):
 
 
 def _finished(context, op, job):
-    for w in job.warnings + [o.coarse_warning for o in job.objects if o.coarse_warning]:
+    coarse = [(o.coarse_warning, storage.instancer_of(o.name))
+              for o in job.objects if o.coarse_warning]
+    for w in job.warnings + frame_status.grouped_notes(coarse):
         op.report({"WARNING"}, w)
     t = job.timings
     op.report({"INFO"}, f"PRT precompute: {context.scene.prt.last_report}; export "

@@ -27,7 +27,7 @@ def draw_settings(layout, context):
     if prt.light_sources > 0 and not sources.LAST_SOURCES:
         sub.label(text="None found: the whole World goes through the method")
     col.prop(prt, "resolution")
-    if any(o.prt.dynamic for o in scene.objects if o.type == "MESH"):
+    if any(o.prt.dynamic for o in scene.objects if o.type in ("MESH", "EMPTY")):
         col.prop(prt, "field_detail")
     col.prop(prt, "ray_offset")
     col.prop(prt, "supersampling")
@@ -49,6 +49,13 @@ def draw_settings(layout, context):
     for message in LAST_MESSAGES[:6]:
         layout.label(text=message, icon="ERROR")
     ob = context.active_object
+    if ob is not None and ob.type == "EMPTY" and ob.instance_type == "COLLECTION":
+        box = layout.box()
+        box.prop(ob.prt, "dynamic", text="Dynamic Instances")
+        records = storage.instance_records(ob)
+        box.label(text=f"{len(records)} instance(s) stored: "
+                       f"{sum(storage.stored_bytes(r) for r in records) / 2**20:.1f} MiB",
+                  icon="OUTLINER_OB_GROUP_INSTANCE")
     if ob is not None and ob.type == "MESH":
         box = layout.box()
         data = ob.prt

@@ -76,7 +76,8 @@ class PRTObjectData(bpy.types.PropertyGroup):
                           description="Precompute a shadow field for this object, so that it "
                                       "can move, turn and scale uniformly (keyframed or by "
                                       "hand) with live shadows on itself and on others, "
-                                      "with no new precompute")
+                                      "with no new precompute (an instancer: each of its "
+                                      "instances, following it)")
 
 
 CLASSES = (PRTSceneSettings, PRTObjectData)

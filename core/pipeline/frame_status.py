@@ -67,3 +67,21 @@ class SyncNotes:
             out.append("Objects were removed or hidden from renders since the precompute: "
                        "their shadows are stale, press Precompute")
         return out
+
+
+def grouped_notes(notes) -> list[str]:
+    """Per-surface notes ``(message, group)`` as the panels show them: an object's
+    (``group`` None) as it is, the notes of one instancer's instances (``group`` its name)
+    as one line that counts them and quotes the first, so a scatter of a thousand
+    instances gives one line, not a thousand."""
+    out, groups = [], {}
+    for message, group in notes:
+        if group is None:
+            out.append(message)
+        else:
+            groups.setdefault(group, []).append(message)
+    for group, messages in groups.items():
+        out.append(messages[0] if len(messages) == 1 else
+                   f"{len(messages)} instances of '{group}' have notes, the first: "
+                   + messages[0])
+    return out

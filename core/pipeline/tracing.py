@@ -31,10 +31,11 @@ class ObjectJob:
     coarse_warning: str = ""
     #: the traced bits, kept when the job's method derives from them
     kept: np.ndarray | None = field(default=None, repr=False)
-    #: a dynamic object (shadow fields): its own triangles, its world matrix now, the box
-    #: it reaches over the animation, and its field's blob (made in run())
+    #: a dynamic object (shadow fields): its own triangles, the box it reaches over the
+    #: animation, and its field's blob (made in run())
     dynamic: bool = False
     own: np.ndarray | None = field(default=None, repr=False)
+    #: its world matrix at the precompute (4x4; an instance's placed by its instancer)
     matrix: np.ndarray | None = None
     reach: tuple | None = None
     extra: dict = field(default_factory=dict, repr=False)
@@ -82,6 +83,9 @@ class PrecomputeJob:
     #: diffuse bounces of the scene's light paths: > 0 stores each static object's bounce
     #: transfer (core.transport), traced from the same rays as the visibility
     bounces: int = 0
+    #: bytes of the instanced sources' object-space arrays, shared by their instances
+    #: (each instance holds transformed copies of the positions and normals only)
+    shared_bytes: int = 0
 
     @property
     def point_count(self):

@@ -183,6 +183,7 @@ def test_curves_and_text_are_drawn_not_listed_as_instances():
     bpy.ops.prt.precompute()
     state = _sync()
     assert {"BézierCircle", "Text"} <= {st.name for st in state.objects}
+    assert not any("#" in st.name for st in state.objects)     # no instance of themselves
     assert not any("Instanced" in w for w in state.warnings), state.warnings
     assert all(st.status == "ok" for st in state.objects)
 

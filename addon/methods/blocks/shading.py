@@ -73,7 +73,6 @@ class BlocksShading(Shading):
         return out
 
     def store(self, scene, job, derived):
-        import bpy
         if not derived:
             return
         for o in job.objects:
@@ -81,14 +80,13 @@ class BlocksShading(Shading):
             if data is None:
                 continue
             stream = np.asarray(data, dtype=np.uint8).reshape(-1)
-            storage.put(bpy.data.objects[o.name], BLOB, storage.pack({"stream": stream}))
+            storage.put(storage.owner(o.name), BLOB, storage.pack({"stream": stream}))
 
     # ------------------------------------------------------------ frames
     def sync(self, state):
-        import bpy
         for st in state.objects:
             st.data.pop("blocks_dv", None)
-            ob = bpy.data.objects.get(st.name)
+            ob = storage.owner(st.name)
             if st.status != "ok" or ob is None:
                 continue
             got = storage.load(ob, BLOB, STORED, _stored_visibility, state.note)

@@ -189,27 +189,25 @@ class RSLShading(Shading):
         return out
 
     def store(self, scene, job, derived):
-        import bpy
         for name, (model, _err, _ratio) in (derived or {}).items():
-            ob = bpy.data.objects.get(name)
+            ob = storage.owner(name)
             if ob is None:
                 continue
             # pose at precompute: the VDTs live in vertex frames that turn with the object
             job_ob = next(o for o in job.objects if o.name == name)
-            M = np.array(ob.matrix_world, dtype=np.float64)
+            M = np.asarray(job_ob.matrix, dtype=np.float64)
             storage.put(ob, BLOB, cpca_blob(model, DISK_RESOLUTION, rigid.rotation_part(M),
                                             rigid.local_probe(job_ob.arrays.positions, M)))
 
     def sync(self, state):
-        import bpy
         for st in state.objects:
-            ob = bpy.data.objects.get(st.name)
+            ob = storage.owner(st.name)
             got = storage.load(ob, BLOB, STORED, _stored_tables, state.note)
             if got is None or len(got[0]) != st.points.count:
                 continue
             vdt, R0, probe = got
             if st.status != "ok":
-                turn = rigid.rigid_turn(np.array(ob.matrix_world, dtype=np.float64),
+                turn = rigid.rigid_turn(np.asarray(st.matrix, dtype=np.float64),
                                         st.arrays.positions, R0, probe)
                 if turn is None:
                     continue

@@ -32,6 +32,7 @@ import numpy as np
 from ....core.sphere import directions
 from ....core.methods.ssdf_sg import ssdf, shading as ssdf_sg
 from ....core.methods.ssdf_sg import scene as scene
+from ...blender import storage
 from ...blender.texture_export import shader_inputs
 from ...frame import keys
 from ...ui import sg_material
@@ -162,14 +163,13 @@ class SSDFSGShading(Shading):
         return out
 
     def store(self, scene, job, derived):
-        import bpy
         if not derived:
             return
         for o in job.objects:
             if o.name not in derived:
                 continue
             basis, coeffs = derived[o.name]
-            write_field(bpy.data.objects[o.name], basis, coeffs, job.resolution)
+            write_field(storage.owner(o.name), basis, coeffs, job.resolution)
 
     # ------------------------------------------------------------- sync
     def sync(self, state):
@@ -202,7 +202,7 @@ class SSDFSGShading(Shading):
         LAST_TERMS.clear()
         for st in state.objects:
             field = None
-            loaded = read_field(bpy.data.objects.get(st.name), st.points.count,
+            loaded = read_field(storage.owner(st.name), st.points.count,
                                 state.resolution, res, budget, max_terms, occlusion, state.note)
             if loaded is not None and st.status == "ok":
                 field = loaded

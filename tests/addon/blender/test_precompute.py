@@ -180,7 +180,9 @@ def test_precompute_again_replaces_cached_visibility(tmp_path):
     np.testing.assert_array_equal(grid.bits, open_bits)
 
 
-def test_text_objects_render_and_instances_are_reported(tmp_path):
+def test_text_objects_and_instances_are_traced_and_drawn(tmp_path):
+    """A text object is traced as its own mesh; a collection instance is traced in place
+    and stored on its instancer under its persistent id (addon.blender.surfaces)."""
     small_scene()
     bpy.ops.object.text_add(location=(1.5, -1.0, 0.01))
     coll = bpy.data.collections.new("inst")
@@ -192,8 +194,11 @@ def test_text_objects_render_and_instances_are_reported(tmp_path):
     bpy.context.scene.collection.objects.link(empty)
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     assert has_data(bpy.data.objects["Text"])
+    assert storage.has(storage.owner("Instancer#0"), storage.VISIBILITY)
     state = _frame_warnings()
-    assert any("Instanced objects" in w and "Suzanne" in w for w in state.warnings)
+    assert not any("Suzanne" in w or "Instancer" in w for w in state.warnings), state.warnings
+    drawn = {st.name: st for st in state.objects}
+    assert drawn["Instancer#0"].status == "ok" and "Suzanne" not in drawn
     assert np.isfinite(scenes.render_exr(tmp_path / "a.exr")).all()
 
 
