@@ -354,6 +354,10 @@ class FrameState:
         self.lamps = [lamp for lamp in lamps if lamp.kind in mine]
         self.drawn_lamps = [lamp for lamp in lamps if lamp.kind not in mine]
         self.warnings += lamp_warnings
+        # every source and lamp is drawn; the panel and the log say what the shadow maps'
+        # budget changed (smaller tiles; past it, no shadow)
+        self.warnings += sources.shadow_plan(
+            list(self.sources) + sources.lamp_sources(self.drawn_lamps)).messages
         self.method_impl.sync(self)
         self.bounce = bounce.FrameBounce.of(self, scene_export.light_bounces(scene))
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
