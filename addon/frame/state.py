@@ -348,8 +348,8 @@ class FrameState:
         lamp_warnings = []
         lamps = scene_export.export_lamps(depsgraph, lamp_warnings)
         # lamps are drawn per pixel (addon/gpu/lights.py), except the point and spot lamps of a
-        # method that draws them itself (SSDF_SG: its spherical Gaussians, eq. 32-33)
-        own = self.method_impl.draws_lamps
+        # method set to draw them itself (SSDF_SG's spherical Gaussians, eq. 32-33)
+        own = self.method_impl.draws_lamps(self.settings)
         mine = ("POINT", "SPOT") if own else ()
         self.lamps = [lamp for lamp in lamps if lamp.kind in mine]
         self.drawn_lamps = [lamp for lamp in lamps if lamp.kind not in mine]
