@@ -5,7 +5,7 @@
 slope, the cost of one more lamp.
 
     python bench/bench_lamps.py [--counts 0,1,4,16,64] [--method SH] [--size 128x96]
-                                [--append docs/measurements.md]
+                                [--spot-deg 50] [--append docs/measurements.md]
 
 Per count: "frame" draws the frame again with the shadow maps cached (the World or the
 camera changed), "lamps moved" moves every lamp first (its shadow faces drawn again),
@@ -38,11 +38,11 @@ def best_time(fn, repeats=5):
     return min(out)
 
 
-def measure(count, method, width, height):
+def measure(count, method, width, height, spot_deg=50.0):
     """(viewport frame, viewport frame with the lamps moved, F12 frame, F12 frame with the
     lamps moved) in seconds, and the shadow plan's messages, for ``count`` spots."""
     import bpy
-    scene = scenes.spot_rows_scene(count)
+    scene = scenes.spot_rows_scene(count, spot_deg=spot_deg)
     scenes.set_resolution(width, height)
     scene.prt.method = method
     scenes.precompute(32, method=method)
@@ -80,6 +80,8 @@ def main():
     ap.add_argument("--counts", default="0,1,4,16,64")
     ap.add_argument("--method", default="SH")
     ap.add_argument("--size", default="128x96")
+    ap.add_argument("--spot-deg", type=float, default=50.0,
+                    help="the spots' cone (50°: 64 spots light each floor point ~6 times)")
     ap.add_argument("--append", default=None, help="append the table to this markdown file")
     args = ap.parse_args(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else None)
     width, height = map(int, args.size.split("x"))
@@ -87,7 +89,7 @@ def main():
     rows, times = [], []
     aa = 1
     for n in counts:
-        got, messages, aa = measure(n, args.method, width, height)
+        got, messages, aa = measure(n, args.method, width, height, args.spot_deg)
         times.append(got)
         row = (f"| {n} | " + " | ".join(f"{1e3 * t:.0f} ms" for t in got) + " | "
                + ("; ".join(messages) or "full-size shadow maps") + " |")
@@ -98,7 +100,8 @@ def main():
     T = np.asarray(times)[lit]
     A = np.stack([np.ones(len(lit)), np.asarray(counts, float)[lit]], 1)
     slope = np.linalg.lstsq(A, T, rcond=None)[0][1] if len(lit) > 1 else np.zeros(4)
-    lines = [f"Frame cost per lamp ({args.method}, {width}×{height}, spots in rows over a "
+    lines = [f"Frame cost per lamp ({args.method}, {width}×{height}, {args.spot_deg:g}° spots in "
+             f"rows over a "
              f"floor with three Suzannes, `make bench-lamps`):", "",
              f"| lamps | viewport frame | lamps moved | F12 ({aa}² samples) | F12, lamps moved "
              "| shadow maps |", "|---|---|---|---|---|---|", *rows,

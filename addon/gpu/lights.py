@@ -18,7 +18,7 @@ import numpy as np
 from ...core.shading import brdf as core_brdf
 from ...core.shading.materials import Material
 from ...core.scene import textures
-from . import drawing, shaders, shadow_maps
+from . import drawing, light_tiles, shaders, shadow_maps
 from ..blender import texture_export
 from ..frame.sources import lamp_sources, shadow_plan
 
@@ -75,6 +75,8 @@ def frame_features(sources, supersampling: int = 1) -> tuple:
         out.append("LOCAL_LAMPS")
     if any(s.area is not None for s in sources):
         out.append("AREA_LAMPS")
+    if len(sources) >= light_tiles.TILED_FROM:
+        out.append("LIGHT_TILES")
     return tuple(out)
 
 
@@ -271,6 +273,7 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
                 src[k, 8 + 4 * face:12 + 4 * face] = M.T
             src[k, 32:35] = np.asarray(origins, np.float32).reshape(3, 4)
     src_tex = _texture(src)
+    tile_tex = _tile_texture(state, distant + local, supersampling)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
     per_frame = frame_features(sources, supersampling)
     out = []
@@ -301,7 +304,31 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
                                        else drawing.white_texture())
                 sh.uniform_sampler("roughTex", rough)
                 sh.uniform_sampler("normalTex", bump)
+                sh.uniform_sampler("tileTex", tile_tex(view_projection))
                 batch.draw(sh)
 
         out.append(draw)
     return out
+
+
+def _tile_texture(state, sources, supersampling):
+    """``tiles(view_projection)``: the LIGHT_TILES texture of the frame's view (made once per
+    view and viewport, shared by every object's draw); a white texture with few lights."""
+    if "LIGHT_TILES" not in frame_features(sources, supersampling):
+        white = drawing.white_texture()
+        return lambda view_projection: white
+    allp = np.concatenate([st.arrays.positions for st in state.objects])
+    boxes = light_tiles.influence_boxes(sources, allp.min(axis=0), allp.max(axis=0))
+    made = {}
+
+    def tiles(view_projection):
+        import gpu
+        x, y, w, h = gpu.state.viewport_get()
+        M = np.array(view_projection, np.float64)
+        key = (M.round(9).tobytes(), x, y, w, h)
+        if key not in made:
+            made.clear()
+            rects = light_tiles.screen_rects(boxes, M, w, h)
+            made[key] = _texture(light_tiles.tile_table(rects, w, h, origin=(x, y)))
+        return made[key]
+    return tiles

@@ -40,7 +40,8 @@
  * way it faces), 4, 5 (its half axes), and its cube shadow map as a local lamp's.
  *
  * Features are compiled in only where a draw has them (addon/gpu/lights.py _shader: GLOSSY,
- * ROUGH_TEX, NORMAL_MAP, ALBEDO_TEX per slot, LOCAL_LAMPS, AREA_LAMPS per frame): a branch
+ * ROUGH_TEX, NORMAL_MAP, ALBEDO_TEX per slot, LOCAL_LAMPS, AREA_LAMPS, LIGHT_TILES (many
+ * lights: a list per screen tile, tileTex) per frame): a branch
  * no fragment takes still costs registers on a GPU and its whole body on llvmpipe, which
  * runs both sides of a branch under a mask. */
 
@@ -503,7 +504,30 @@ void main()
   tangent_frame(n, tx, ty);
   vec2 shift = pixel_shift();
   vec3 color = vec3(0.0);
-  for (int s = 0; s < sourceCount; s++) {
+#ifdef LIGHT_TILES
+  /* many lights: only those that can reach this pixel's screen tile (addon/gpu/light_tiles.py:
+   * per tile a texel (count) and the indices four a texel; the last row's first texel the
+   * viewport's origin, the tile size and the texels per tile) */
+  ivec2 tiles = textureSize(tileTex, 0);
+  vec4 tinfo = texelFetch(tileTex, ivec2(0, tiles.y - 1), 0);
+  int stride = int(tinfo.w);
+  ivec2 cell = clamp(ivec2((gl_FragCoord.xy - tinfo.xy) / tinfo.z), ivec2(0),
+                     ivec2(tiles.x / stride - 1, tiles.y - 2));
+  int base = cell.x * stride;
+  int lightCount = int(texelFetch(tileTex, ivec2(base, cell.y), 0).x);
+  vec4 four = vec4(0.0);
+#else
+  int lightCount = sourceCount;
+#endif
+  for (int k = 0; k < lightCount; k++) {
+#ifdef LIGHT_TILES
+    if (k % 4 == 0) {
+      four = texelFetch(tileTex, ivec2(base + 1 + k / 4, cell.y), 0);
+    }
+    int s = int(four[k % 4]);
+#else
+    int s = k;
+#endif
     vec4 s0 = source(s, 0);
     vec4 s1 = source(s, 1);
     vec3 c = s0.xyz;
