@@ -133,7 +133,7 @@ bench-dynamic: setup
 # cores; LAMPS_ARGS="--append docs/measurements.md" records the run).
 LAMPS_ARGS ?=
 bench-lamps: setup
-	$(VENV_PY) bench/bench_lamps.py $(LAMPS_ARGS)
+	$(VENV_PY) bench/bench_lights.py --lamps $(LAMPS_ARGS)
 
 # Each method against REFERENCE on its held-out scenes (long: tens of minutes on 2 cores).
 bench-methods: setup
