@@ -13,6 +13,7 @@
 #   make bench-scale  production scale: 25k-500k vertices (time, memory, storage, AUTO)
 #   make bench-dynamic  shadow fields: precompute/storage per detail, frames with 1/4/16 dynamic objects
 #   make bench-bounces  bounced light: every method against Cycles with bounces and direct, F12 both ways
+#   make bench-lamps  frame cost per lamp: 0 to 64 spots in rows, every one with its shadow
 #   make report  speed/error report of every method into out/report
 #   make clean   remove dist/, out/, caches   (make distclean: also .venv, wheels/)
 
@@ -38,7 +39,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-methods bench-bounces report clean distclean
+.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-lamps bench-methods bench-bounces report clean distclean
 
 setup: apt venv
 
@@ -128,6 +129,13 @@ bench-scale: setup
 DYNAMIC_ARGS ?=
 bench-dynamic: setup
 	$(VENV_PY) bench/bench_dynamic.py $(DYNAMIC_ARGS)
+
+# Frame cost per lamp (issue 31): an interior under 0/1/4/16/64 spots, frames with the shadow
+# maps cached and with every lamp moved, the least-squares ms per lamp (about a minute on 2
+# cores; LAMPS_ARGS="--append docs/measurements.md" records the run).
+LAMPS_ARGS ?=
+bench-lamps: setup
+	$(VENV_PY) bench/bench_lights.py --lamps $(LAMPS_ARGS)
 
 # Each method against REFERENCE on its held-out scenes (long: tens of minutes on 2 cores).
 bench-methods: setup

@@ -461,6 +461,32 @@ def coloured_ground(size=(80, 60), hdri: str = "courtyard", subdiv: int = 1):
     return suzanne
 
 
+# ------------------------------------------------------------------ scenes with many lamps
+
+def spot_rows_scene(count: int, power: float = 60.0, spot_deg: float = 50.0):
+    """An interior lit by rows of spots (issue 31's many lamps): a 10 m floor with three
+    Suzannes, ``count`` spots of ``power`` W in a square grid 3 m up pointing down (cone
+    ``spot_deg``, blend 0.3, radius 5 cm, named Spot00...), a dim uniform World and a
+    camera looking down the room.  Returns the scene."""
+    import bpy
+    scene = reset()
+    add_world(image=float_image("dim", np.full((8, 16, 3), 0.02, np.float32)))
+    add_ground(size=10.0, cuts=32)
+    for k, x in enumerate((-2.5, 0.0, 2.5)):
+        add_suzanne(subdiv=1, location=(x, 0.5 * k, 0.8))
+    side = max(1, round(math.sqrt(count)))
+    for i in range(count):
+        r, c = divmod(i, side)
+        light = bpy.data.lights.new(f"Spot{i:02d}", "SPOT")
+        light.energy, light.shadow_soft_size = power, 0.05
+        light.spot_size, light.spot_blend = math.radians(spot_deg), 0.3
+        ob = bpy.data.objects.new(f"Spot{i:02d}", light)
+        ob.location = (-4.0 + 8.0 * (c + 0.5) / side, -4.0 + 8.0 * (r + 0.5) / side, 3.0)
+        scene.collection.objects.link(ob)
+    add_camera(location=(0.0, -8.0, 5.0), rotation=(1.0, 0.0, 0.0), resolution=None)
+    return scene
+
+
 # ------------------------------------------------------------------ rendering
 
 def _save_render(path):

@@ -259,10 +259,10 @@ def export_lamps(depsgraph, warnings: list | None = None) -> list:
         color = np.asarray(tuple(light.color), dtype=np.float64) * float(light.energy)
         if light.type == "SUN":
             lamps.append(lamp_lobes.Lamp("SUN", color=color, direction=direction,
-                                          angle=float(light.angle)))
+                                          angle=float(light.angle), name=ob.name))
         elif light.type in ("POINT", "SPOT"):
             kw = dict(color=color, position=M[:3, 3], direction=direction,
-                      radius=float(light.shadow_soft_size))
+                      radius=float(light.shadow_soft_size), name=ob.name)
             if light.type == "SPOT":
                 kw.update(spot_size=float(light.spot_size), spot_blend=float(light.spot_blend))
             lamps.append(lamp_lobes.Lamp(light.type, **kw))
@@ -274,7 +274,8 @@ def export_lamps(depsgraph, warnings: list | None = None) -> list:
                                 "as 180°")
             lamp = lamp_lobes.Lamp("AREA", color=color, position=M[:3, 3],
                                     direction=direction, half_x=0.5 * sx * M[:3, 0],
-                                    half_y=0.5 * sy * M[:3, 1], shape=light.shape)
+                                    half_y=0.5 * sy * M[:3, 1], shape=light.shape,
+                                    name=ob.name)
             if lamp.area > 0.0:
                 lamps.append(lamp)
         else:

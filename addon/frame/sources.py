@@ -1,11 +1,14 @@
 """The lights a frame draws per pixel, described in world space: the World's compact sources
 split off its image (core.sphere.sources) and Blender's lamps, each a DrawnSource (a distant
-disc, a sphere, a spot or an area), with the panel's line per source."""
+disc, a sphere, a spot or an area), with the panel's line per source; and the plan of their
+shadow maps (:func:`shadow_plan`): every source gets one, in atlases whose tiles shrink, as
+the panel and the render log say, when many sources would pass the atlases' budgets."""
 
 from __future__ import annotations
 
 import copy
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -116,7 +119,7 @@ def lamp_sources(lamps) -> list:
             ellipse = lamp.shape in ("DISK", "ELLIPSE")
             out.append(DrawnSource(lamp.direction, math.sqrt(A / math.pi),
                                    np.asarray(lamp.color, np.float64) / (math.pi * A),
-                                   "area lamp", position=lamp.position,
+                                   _lamp_name(lamp), position=lamp.position,
                                    area=(np.asarray(lamp.half_x, np.float64),
                                          np.asarray(lamp.half_y, np.float64), ellipse)))
             continue
@@ -128,7 +131,7 @@ def lamp_sources(lamps) -> list:
                         (1.0 - cos_half) * lamp.spot_blend)
             out.append(DrawnSource(lamp.direction, max(float(lamp.radius), 0.0),
                                    np.asarray(lamp.color, np.float64),
-                                   f"{lamp.kind.lower()} lamp", position=lamp.position,
+                                   _lamp_name(lamp), position=lamp.position,
                                    spot=spot))
             continue
         if lamp.kind != "SUN":
@@ -136,8 +139,125 @@ def lamp_sources(lamps) -> list:
         r = 0.5 * float(lamp.angle)
         E = np.asarray(lamp.color, np.float64)
         if r < POINT_RADIUS:
-            out.append(DrawnSource(-np.asarray(lamp.direction), 0.0, E, "sun lamp"))
+            out.append(DrawnSource(-np.asarray(lamp.direction), 0.0, E, _lamp_name(lamp)))
         else:
             out.append(DrawnSource(-np.asarray(lamp.direction), r,
-                                   E / (math.pi * math.sin(r) ** 2), "sun lamp"))
+                                   E / (math.pi * math.sin(r) ** 2), _lamp_name(lamp)))
     return out
+
+
+def _lamp_name(lamp) -> str:
+    kind = f"{lamp.kind.lower()} lamp"
+    return f"{kind} '{lamp.name}'" if getattr(lamp, "name", "") else kind
+
+
+# --------------------------------------------------------------------------- shadow maps
+
+#: the six 90-degree faces of a local lamp's shadow cube, in lights_frag.glsl's order
+CUBE_AXES = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0],
+                      [0, 0, -1.0]])
+#: every direction of a cube face lies within acos(1 / sqrt 3) of its axis
+FACE_CONE = math.acos(1.0 / math.sqrt(3.0))
+#: the face choice's margin: the look-up offsets the receiver along its normal
+FACE_MARGIN = math.radians(3.0)
+
+#: texels per side of a distant source's shadow tile (an orthographic view of the scene),
+#: and of a local lamp's cube face, at full size and at least
+SHADOW_TILE, SHADOW_TILE_MIN = 2048, 256
+CUBE_TILE, CUBE_TILE_MIN = 1024, 128
+#: the atlases' budgets in texels (float32 maps: 4 bytes a texel, the cube faces' depth
+#: buffer as much again): 8 distant tiles, or 48 faces (eight point lamps), at full size
+SHADOW_BUDGET = 8 * SHADOW_TILE ** 2
+CUBE_BUDGET = 48 * CUBE_TILE ** 2
+#: an atlas's side at most (every OpenGL 4.3 device has 16384)
+ATLAS_SIDE = 16384
+
+
+def lamp_faces(source) -> tuple:
+    """Which faces of a local lamp's shadow cube it can light through (True per face of
+    :data:`CUBE_AXES`): a spot the faces meeting its cone, an area lamp those meeting the
+    half-space in front of it, a point lamp all six."""
+    if source.area is not None:
+        axis, reach = source.direction, 0.5 * math.pi
+    elif source.spot is not None:
+        axis, reach = source.spot[0], math.acos(max(-1.0, min(1.0, float(source.spot[1]))))
+    else:
+        return (True,) * 6
+    angle = np.arccos(np.clip(CUBE_AXES @ np.asarray(axis, np.float64), -1.0, 1.0))
+    return tuple(bool(a) for a in angle < reach + FACE_CONE + FACE_MARGIN)
+
+
+def tile_size(count: int, full: int, least: int, budget: int) -> int:
+    """The largest power-of-two halving of ``full``, down to ``least``, at which ``count``
+    tiles fit ``budget`` texels."""
+    size = full
+    while size > least and count * size * size > budget:
+        size //= 2
+    return size
+
+
+def atlas_grid(count: int, size: int) -> tuple[int, int]:
+    """(columns, rows) of ``count`` square tiles of ``size`` texels in a near-square atlas
+    whose sides stay within :data:`ATLAS_SIDE`."""
+    cols = max(1, min(math.ceil(math.sqrt(max(count, 1))), ATLAS_SIDE // size))
+    return cols, max(1, math.ceil(count / cols))
+
+
+@dataclass
+class ShadowPlan:
+    """How a frame's sources get their shadow maps (addon/gpu/lights.py draws them):
+    ``distant_tile`` texels per side of each distant source's tile, ``face_tile`` of each
+    local lamp's cube face, ``faces`` per local lamp (in the frame's order) the faces it
+    draws (none: drawn without a shadow, past the budget), ``distant_shadowed`` how many
+    distant sources (the first) have a tile, and the messages saying what the budget
+    changed."""
+
+    distant_tile: int = SHADOW_TILE
+    face_tile: int = CUBE_TILE
+    faces: list = field(default_factory=list)
+    distant_shadowed: int = 0
+    messages: list = field(default_factory=list)
+
+
+def _names(sources) -> str:
+    names = [s.name for s in sources]
+    return ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+
+
+def shadow_plan(sources) -> ShadowPlan:
+    """Every source's shadow map within the atlases' budgets: at full size while they fit,
+    else every tile of that atlas halved until they do (down to the least size); sources
+    past even that are drawn without a shadow.  Both are said in ``messages``."""
+    distant = [s for s in sources if not s.local]
+    local = [s for s in sources if s.local]
+    plan = ShadowPlan()
+    plan.distant_tile = tile_size(len(distant), SHADOW_TILE, SHADOW_TILE_MIN, SHADOW_BUDGET)
+    plan.distant_shadowed = min(len(distant), SHADOW_BUDGET // plan.distant_tile ** 2)
+    if plan.distant_tile < SHADOW_TILE:
+        plan.messages.append(
+            f"Shadow maps: {len(distant)} distant sources share the atlas at "
+            f"{plan.distant_tile}² texels each ({SHADOW_TILE}² up to "
+            f"{SHADOW_BUDGET // SHADOW_TILE ** 2})")
+    if plan.distant_shadowed < len(distant):
+        plan.messages.append(
+            f"Shadow maps: {len(distant) - plan.distant_shadowed} distant sources past the "
+            f"atlas's budget cast no shadow: {_names(distant[plan.distant_shadowed:])}")
+    wanted = [lamp_faces(s) for s in local]
+    count = sum(sum(f) for f in wanted)
+    plan.face_tile = size = tile_size(count, CUBE_TILE, CUBE_TILE_MIN, CUBE_BUDGET)
+    room, unshadowed = CUBE_BUDGET // (size * size), []
+    for s, faces in zip(local, wanted):
+        if sum(faces) > room:
+            faces = (False,) * 6
+            unshadowed.append(s)
+        room -= sum(faces)
+        plan.faces.append(faces)
+    if size < CUBE_TILE:
+        plan.messages.append(
+            f"Shadow maps: {len(local)} local lamps draw {count} cube faces at {size}² "
+            f"texels each ({CUBE_TILE}² up to {CUBE_BUDGET // CUBE_TILE ** 2} faces)")
+    if unshadowed:
+        plan.messages.append(
+            f"Shadow maps: {len(unshadowed)} local lamps past the atlas's budget cast no "
+            f"shadow: {_names(unshadowed)}")
+    return plan

@@ -357,12 +357,16 @@ class FrameState:
         lamp_warnings = []
         lamps = scene_export.export_lamps(depsgraph, lamp_warnings)
         # lamps are drawn per pixel (addon/gpu/lights.py), except the point and spot lamps of a
-        # method that draws them itself (SSDF_SG: its spherical Gaussians, eq. 32-33)
-        own = self.method_impl.draws_lamps
+        # method set to draw them itself (SSDF_SG's spherical Gaussians, eq. 32-33)
+        own = self.method_impl.draws_lamps(self.settings)
         mine = ("POINT", "SPOT") if own else ()
         self.lamps = [lamp for lamp in lamps if lamp.kind in mine]
         self.drawn_lamps = [lamp for lamp in lamps if lamp.kind not in mine]
         self.warnings += lamp_warnings
+        # every source and lamp is drawn; the panel and the log say what the shadow maps'
+        # budget changed (smaller tiles; past it, no shadow)
+        self.warnings += sources.shadow_plan(
+            list(self.sources) + sources.lamp_sources(self.drawn_lamps)).messages
         self.method_impl.sync(self)
         self.bounce = bounce.FrameBounce.of(self, scene_export.light_bounces(scene))
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings

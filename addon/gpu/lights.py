@@ -18,22 +18,17 @@ import numpy as np
 from ...core.shading import brdf as core_brdf
 from ...core.shading.materials import Material
 from ...core.scene import textures
-from . import drawing, shaders
+from . import drawing, light_tiles, shaders, shadow_maps
 from ..blender import texture_export
-from ..frame.sources import lamp_sources
+from ..frame.sources import lamp_sources, shadow_plan
 
-#: shadow map tile per source (texels per side)
-SHADOW_TILE = 2048
-#: sources drawn per frame at most (the extracted ones plus sun lamps)
-MAX_DRAWN = 8
 #: view-cosine nodes of the per-material tables (lights_frag.glsl table)
 TABLE_NODES = 32
 
 _GPU = drawing.gpu_cache({})
 _BATCHES = drawing.gpu_cache({})
-_SHADOWS = drawing.gpu_cache({})
-# the atlas's depth texture and framebuffer, drawn into again after a turn (same size)
-_SHADOW_TARGET = drawing.gpu_cache({}, limit=1)
+#: texels per source in srcTex (lights_frag.glsl's layout)
+SOURCE_TEXELS = 36
 
 
 # --------------------------------------------------------------------------- shaders
@@ -80,6 +75,8 @@ def frame_features(sources, supersampling: int = 1) -> tuple:
         out.append("LOCAL_LAMPS")
     if any(s.area is not None for s in sources):
         out.append("AREA_LAMPS")
+    if len(sources) >= light_tiles.TILED_FROM:
+        out.append("LIGHT_TILES")
     return tuple(out)
 
 
@@ -95,11 +92,6 @@ def _surface_batch(pos, nrm, uv, attr, tng):
     for ident, data in (("pos", pos), ("nrm", nrm), ("uv", uv), ("attr", attr), ("tng", tng)):
         vbo.attr_fill(ident, np.ascontiguousarray(data, dtype=np.float32))
     return gpu.types.GPUBatch(type="TRIS", buf=vbo)
-
-
-def _distance_shader():
-    """Writes each fragment's distance to ``lamp`` (a local lamp's shadow faces)."""
-    return shaders.shader("shadow_distance")
 
 
 def _depth_shader():
@@ -147,147 +139,6 @@ def _object_batches(st):
     if len(_BATCHES) >= 64:
         _BATCHES.pop(next(iter(_BATCHES)))
     got = _BATCHES[key] = (depth, surfaces)
-    return got
-
-
-def light_matrix(direction, centre, radius) -> np.ndarray:
-    """World -> clip of an orthographic view from ``direction`` (toward the light) that
-    holds the sphere (``centre``, ``radius``): depth 0 at the light's side."""
-    c = np.asarray(direction, np.float64)
-    u = np.cross(c, [0.0, 0.0, 1.0] if abs(c[2]) < 0.9 else [1.0, 0.0, 0.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(c, u)
-    M = np.eye(4)
-    for row, axis in enumerate((u, v, -c)):
-        M[row, :3] = axis / radius
-        M[row, 3] = -axis @ np.asarray(centre, np.float64) / radius
-    return M
-
-
-def _shadow_atlas(state, sources, casters):
-    """Render every source's shadow map into one depth atlas: (texture, per-source
-    (matrix, tile (u, v, size), depth range, texel size)).  Cached per geometry and
-    directions."""
-    import gpu
-    import mathutils
-    positions = [st.arrays.positions for st in casters]
-    allp = np.concatenate(positions) if positions else np.zeros((1, 3))
-    lo, hi = allp.min(axis=0), allp.max(axis=0)
-    centre = 0.5 * (lo + hi)
-    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6) * 1.01
-    key = (tuple(st.fingerprint for st in casters),
-           tuple(np.round(s.direction, 7).tobytes() for s in sources))
-    got = _SHADOWS.get(key)
-    if got is not None:
-        return got
-    cols = min(len(sources), 4)
-    rows = -(-len(sources) // 4)
-    width, height = SHADOW_TILE * cols, SHADOW_TILE * rows
-    tex = _SHADOW_TARGET.get((width, height))
-    if tex is None:
-        _SHADOW_TARGET.clear()
-        tex = _SHADOW_TARGET[(width, height)] = gpu.types.GPUTexture((width, height),
-                                                                     format="DEPTH_COMPONENT32F")
-    # a framebuffer belongs to the GPU context that made it (F12's and the viewport's
-    # differ; textures are shared): made here, in the context that draws the atlas
-    fb = gpu.types.GPUFrameBuffer(depth_slot=tex)
-    tiles = []
-    saved = gpu.state.viewport_get()
-    sh = _depth_shader()
-    with fb.bind():
-        fb.clear(depth=1.0)
-        gpu.state.depth_test_set("LESS_EQUAL")
-        gpu.state.depth_mask_set(True)
-        gpu.state.face_culling_set("NONE")
-        for k, s in enumerate(sources):
-            x, y = (k % 4) * SHADOW_TILE, (k // 4) * SHADOW_TILE
-            gpu.state.viewport_set(x, y, SHADOW_TILE, SHADOW_TILE)
-            M = light_matrix(s.direction, centre, radius)
-            sh.bind()
-            sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
-            for st in casters:
-                _object_batches(st)[0].draw(sh)
-            tiles.append((M, (x, y, SHADOW_TILE), 2.0 * radius, 2.0 * radius / SHADOW_TILE))
-    gpu.state.viewport_set(*saved)
-    gpu.state.depth_test_set("NONE")
-    got = (tex, tiles)
-    _SHADOWS.clear()
-    _SHADOWS[key] = got
-    return got
-
-
-#: a local lamp's shadow faces (texels per side; six per lamp)
-CUBE_TILE = 1024
-_CUBES = drawing.gpu_cache({})
-#: the six 90-degree faces around a local lamp, in lights_frag.glsl's order
-CUBE_AXES = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0],
-                      [0, 0, -1.0]])
-
-
-def face_matrix(position, axis, near, far) -> np.ndarray:
-    """World -> clip of a square 90-degree perspective view from ``position`` along
-    ``axis`` (one face of a local lamp's shadow cube)."""
-    f = np.asarray(axis, np.float64)
-    up = np.array([0.0, 0.0, 1.0]) if abs(f[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    right = np.cross(f, up)
-    right /= np.linalg.norm(right)
-    up = np.cross(right, f)
-    view = np.eye(4)
-    view[0, :3], view[1, :3], view[2, :3] = right, up, -f
-    view[:3, 3] = -view[:3, :3] @ np.asarray(position, np.float64)
-    proj = np.zeros((4, 4))
-    proj[0, 0] = proj[1, 1] = 1.0
-    proj[2, 2] = -(far + near) / (far - near)
-    proj[2, 3] = -2.0 * far * near / (far - near)
-    proj[3, 2] = -1.0
-    return proj @ view
-
-
-def _cube_atlas(sources, casters):
-    """Render each local lamp's six faces (distance to the lamp) into one R32F atlas: one
-    row of six tiles per lamp.  (texture, per lamp (tile origin x, y, face size, the six
-    matrices)); cached per geometry and lamp positions."""
-    import gpu
-    import mathutils
-    key = (tuple(st.fingerprint for st in casters),
-           tuple(np.round(s.position, 7).tobytes() for s in sources))
-    got = _CUBES.get(key)
-    if got is not None:
-        return got
-    allp = np.concatenate([st.arrays.positions for st in casters]) if casters else \
-        np.zeros((1, 3))
-    width, height = 6 * CUBE_TILE, CUBE_TILE * len(sources)
-    colour = gpu.types.GPUTexture((width, height), format="R32F")
-    depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
-    fb = gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=colour)
-    saved = gpu.state.viewport_get()
-    sh = _distance_shader()
-    out = []
-    with fb.bind():
-        fb.clear(color=(1e30, 1e30, 1e30, 1e30), depth=1.0)
-        gpu.state.depth_test_set("LESS_EQUAL")
-        gpu.state.depth_mask_set(True)
-        gpu.state.face_culling_set("NONE")
-        gpu.state.blend_set("NONE")
-        for k, s in enumerate(sources):
-            reach = float(np.max(np.linalg.norm(allp - s.position, axis=1))) * 1.01 + 1e-3
-            near = max(min(0.5 * s.radius, 0.05 * reach), 1e-4 * reach)
-            mats = []
-            for face, axis in enumerate(CUBE_AXES):
-                gpu.state.viewport_set(face * CUBE_TILE, k * CUBE_TILE, CUBE_TILE, CUBE_TILE)
-                M = face_matrix(s.position, axis, near, reach)
-                mats.append(M)
-                sh.bind()
-                sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
-                sh.uniform_float("lamp", tuple(map(float, s.position)))
-                for st in casters:
-                    _object_batches(st)[0].draw(sh)
-            out.append(((0.0, float(k * CUBE_TILE), float(CUBE_TILE)), mats))
-    gpu.state.viewport_set(*saved)
-    gpu.state.depth_test_set("NONE")
-    got = (colour, out)
-    _CUBES.clear()
-    _CUBES[key] = got
     return got
 
 
@@ -377,23 +228,32 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
     """``draw(view_projection)`` callables adding every source to the objects (empty when
     there is none), for a frame of ``supersampling``² samples per pixel.  Renders the
     sources' shadow maps first (cached)."""
-    sources = (list(state.sources) + lamp_sources(state.drawn_lamps))[:MAX_DRAWN]
+    sources = list(state.sources) + lamp_sources(state.drawn_lamps)
     casters = [st for st in state.objects if st.status != "unshadowed"]
     if not sources or not state.objects:
         return []
+    # every source is drawn, each with its shadow map unless the plan's budget says not
+    plan = shadow_plan(sources)
     distant = [s for s in sources if not s.local]
     local = [s for s in sources if s.local]
-    shadow_tex, tiles = _shadow_atlas(state, distant, casters) if distant else \
-        (drawing.white_texture(), [])
-    cube_tex, cubes = _cube_atlas(local, casters) if local else (drawing.white_texture(), [])
-    src = np.zeros((len(sources), 32, 4), np.float32)
-    for k, (s, (M, tile, depth_range, texel)) in enumerate(zip(distant, tiles)):
+    depth = [_object_batches(st)[0] for st in casters]
+    mapped = distant[:plan.distant_shadowed]
+    shadow_tex, tiles = shadow_maps.distant_atlas(mapped, casters, depth, plan.distant_tile) \
+        if mapped else (drawing.white_texture(), [])
+    cube_tex, cubes = shadow_maps.cube_atlas(local, plan.faces, casters, depth,
+                                             plan.face_tile) \
+        if any(any(f) for f in plan.faces) else (drawing.white_texture(), [])
+    src = np.zeros((len(sources), SOURCE_TEXELS, 4), np.float32)
+    for k, s in enumerate(distant):
         src[k, 0] = (*s.direction, s.radius)
         src[k, 1] = (*s.radiance, 1.0 if s.point_like else 0.0)
-        src[k, 2:6] = M.T                       # columns of the matrix (GLSL mat4 order)
-        src[k, 6] = (*tile, depth_range)
-        src[k, 7] = (texel, *(M[0, :3] / np.linalg.norm(M[0, :3])))   # the map's x axis
-    for k, (s, (tile, mats)) in enumerate(zip(local, cubes), start=len(distant)):
+        if k < len(tiles):                      # else tile size 0: no shadow
+            M, tile, depth_range, texel = tiles[k]
+            src[k, 2:6] = M.T                   # columns of the matrix (GLSL mat4 order)
+            src[k, 6] = (*tile, depth_range)
+            src[k, 7] = (texel, *(M[0, :3] / np.linalg.norm(M[0, :3])))   # the map's x axis
+    for j, s in enumerate(local):
+        k = len(distant) + j
         src[k, 0] = (*s.position, s.radius)
         src[k, 1] = (*s.radiance, 2.0 if s.spot is None else 3.0)
         if s.area is not None:
@@ -406,10 +266,14 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
             axis, cos_half, smooth = s.spot
             src[k, 2] = (*axis, cos_half)
             src[k, 3, 0] = smooth
-        src[k, 6, :3] = tile
-        for face, M in enumerate(mats):
-            src[k, 8 + 4 * face:12 + 4 * face] = M.T
+        if any(plan.faces[j]):                  # else face size 0: no shadow
+            origins, mats = cubes[j]
+            src[k, 6, 2] = plan.face_tile
+            for face, M in enumerate(mats):
+                src[k, 8 + 4 * face:12 + 4 * face] = M.T
+            src[k, 32:35] = np.asarray(origins, np.float32).reshape(3, 4)
     src_tex = _texture(src)
+    tile_tex = _tile_texture(state, distant + local, supersampling)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
     per_frame = frame_features(sources, supersampling)
     out = []
@@ -440,7 +304,31 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
                                        else drawing.white_texture())
                 sh.uniform_sampler("roughTex", rough)
                 sh.uniform_sampler("normalTex", bump)
+                sh.uniform_sampler("tileTex", tile_tex(view_projection))
                 batch.draw(sh)
 
         out.append(draw)
     return out
+
+
+def _tile_texture(state, sources, supersampling):
+    """``tiles(view_projection)``: the LIGHT_TILES texture of the frame's view (made once per
+    view and viewport, shared by every object's draw); a white texture with few lights."""
+    if "LIGHT_TILES" not in frame_features(sources, supersampling):
+        white = drawing.white_texture()
+        return lambda view_projection: white
+    allp = np.concatenate([st.arrays.positions for st in state.objects])
+    boxes = light_tiles.influence_boxes(sources, allp.min(axis=0), allp.max(axis=0))
+    made = {}
+
+    def tiles(view_projection):
+        import gpu
+        x, y, w, h = gpu.state.viewport_get()
+        M = np.array(view_projection, np.float64)
+        key = (M.round(9).tobytes(), x, y, w, h)
+        if key not in made:
+            made.clear()
+            rects = light_tiles.screen_rects(boxes, M, w, h)
+            made[key] = _texture(light_tiles.tile_table(rects, w, h, origin=(x, y)))
+        return made[key]
+    return tiles

@@ -100,7 +100,8 @@ SPECS: dict[str, Spec] = {
                             "passes/lights_frag.glsl"),
         push_constants=_VIEW + _TEXTURED,
         samplers=tuple(("FLOAT_2D", n) for n in ("paramTex", "srcTex", "shadowTex", "albedoTex",
-                                                 "cubeTex", "roughTex", "normalTex")),
+                                                 "cubeTex", "roughTex", "normalTex",
+                                                 "tileTex")),
         vertex_inputs=(("VEC3", "pos"), ("VEC3", "nrm"), ("VEC2", "uv"), ("VEC4", "attr"),
                        ("VEC4", "tng")),
         varyings=tuple(("smooth", kind, n) for kind, n in (
@@ -108,7 +109,7 @@ SPECS: dict[str, Spec] = {
             ("VEC4", "vTng"))),
         # what a draw lacks is left out of its shader, not branched around
         switches=("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "LOCAL_LAMPS",
-                  "AREA_LAMPS"),
+                  "AREA_LAMPS", "LIGHT_TILES"),
         values=(("PCF_TAPS", ("12", "4")),)),
     # a sun-like source's shadow map: depth only
     "shadow_depth": Spec(

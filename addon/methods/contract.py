@@ -34,9 +34,11 @@ from dataclasses import dataclass, field
 class Shading(ABC):
     """A method's numerics: precompute-time derivation and per-frame shading."""
 
-    #: Whether ``shade``/``draw_objects`` draw Blender's point and spot lights
-    #: (``state.lamps``); the per-pixel lamp pass draws them for the other methods.
-    draws_lamps = False
+    def draws_lamps(self, settings: dict) -> bool:
+        """Whether ``shade``/``draw_objects`` draw Blender's point and spot lights
+        (``state.lamps``) with these ``scene.prt`` settings; else the per-pixel lamp pass
+        every method shares draws them."""
+        return False
 
     def view_dependent(self, state) -> bool:
         """Whether the frame changes with the camera (glossy or layered materials)."""

@@ -27,6 +27,7 @@ class Lamp:
     half_x, half_y: AREA: the world vectors from its centre to the middle of its edges
                (its local x and y axes times half its size, object scale included).
     shape:     AREA: "SQUARE", "RECTANGLE", "DISK" or "ELLIPSE".
+    name:      the Blender object's name (what the panel and the render log call it).
     """
 
     kind: str
@@ -40,6 +41,7 @@ class Lamp:
     half_x: tuple = (0.0, 0.0, 0.0)
     half_y: tuple = (0.0, 0.0, 0.0)
     shape: str = "SQUARE"
+    name: str = ""
 
     def __post_init__(self):
         self.kind = str(self.kind).upper()

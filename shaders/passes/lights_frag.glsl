@@ -29,15 +29,19 @@
  * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, kind:
  * 0 a disc, 1 point-like (radiance is then its irradiance)), 2..5 world-to-shadow-clip
  * columns, 6 (atlas tile origin x, y and size in texels, depth range in world units),
- * 7 (shadow texel size in world units, the map's x axis in world space).  A local lamp:
+ * 7 (shadow texel size in world units, the map's x axis in world space); tile size 0:
+ * no shadow map (past the atlas's budget, addon/frame/sources.py shadow_plan).  A local lamp:
  * 0 (position, sphere radius), 1 (power times colour, kind 2 point / 3 spot), 2 (spot
- * axis, cos of its half angle), 3 (spot smoothstep width), 6 (cubeTex tile origin x, y
- * and face size), 8..31 the six faces' world-to-clip columns.  An area lamp (kind 4 a
+ * axis, cos of its half angle), 3 (spot smoothstep width), 6 (-, -, cubeTex face size; 0:
+ * no shadow map), 8..31 the six faces' world-to-clip columns, 32..34 the faces' tile
+ * origins in cubeTex (x, y of faces 2k and 2k + 1; x < 0 a face not drawn).  Every
+ * source is drawn (no cap): the loop runs over srcTex's rows.  An area lamp (kind 4 a
  * rectangle, 5 an ellipse): 0 (centre, radius of a disc of its area), 1 (radiance), 2 (the
  * way it faces), 4, 5 (its half axes), and its cube shadow map as a local lamp's.
  *
  * Features are compiled in only where a draw has them (addon/gpu/lights.py _shader: GLOSSY,
- * ROUGH_TEX, NORMAL_MAP, ALBEDO_TEX per slot, LOCAL_LAMPS, AREA_LAMPS per frame): a branch
+ * ROUGH_TEX, NORMAL_MAP, ALBEDO_TEX per slot, LOCAL_LAMPS, AREA_LAMPS, LIGHT_TILES (many
+ * lights: a list per screen tile, tileTex) per frame): a branch
  * no fragment takes still costs registers on a GPU and its whole body on llvmpipe, which
  * runs both sides of a branch under a mask. */
 
@@ -269,7 +273,11 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
   vec4 lc = mat4(source(s, 8 + 4 * face), source(s, 9 + 4 * face), source(s, 10 + 4 * face),
                  source(s, 11 + 4 * face)) * vec4(q, 1.0);
   vec2 uv = clamp(lc.xy / lc.w * 0.5 + 0.5, 0.0, 1.0);
-  vec4 ftile = vec4(tile.x + float(face) * tile.z, tile.y, tile.z, 0.0);
+  vec4 origins = source(s, 32 + face / 2);
+  vec4 ftile = vec4(face % 2 == 0 ? origins.xy : origins.zw, tile.z, 0.0);
+  if (ftile.x < 0.0) {
+    return 1.0;             /* a face the lamp does not light through (a spot's, an area's) */
+  }
   float d = length(v);
   float bias = 2.0 * texel;
   /* receiver-plane bias: a tap `k` texels off reads the receiver's own plane up to
@@ -496,7 +504,30 @@ void main()
   tangent_frame(n, tx, ty);
   vec2 shift = pixel_shift();
   vec3 color = vec3(0.0);
-  for (int s = 0; s < sourceCount; s++) {
+#ifdef LIGHT_TILES
+  /* many lights: only those that can reach this pixel's screen tile (addon/gpu/light_tiles.py:
+   * per tile a texel (count) and the indices four a texel; the last row's first texel the
+   * viewport's origin, the tile size and the texels per tile) */
+  ivec2 tiles = textureSize(tileTex, 0);
+  vec4 tinfo = texelFetch(tileTex, ivec2(0, tiles.y - 1), 0);
+  int stride = int(tinfo.w);
+  ivec2 cell = clamp(ivec2((gl_FragCoord.xy - tinfo.xy) / tinfo.z), ivec2(0),
+                     ivec2(tiles.x / stride - 1, tiles.y - 2));
+  int base = cell.x * stride;
+  int lightCount = int(texelFetch(tileTex, ivec2(base, cell.y), 0).x);
+  vec4 four = vec4(0.0);
+#else
+  int lightCount = sourceCount;
+#endif
+  for (int k = 0; k < lightCount; k++) {
+#ifdef LIGHT_TILES
+    if (k % 4 == 0) {
+      four = texelFetch(tileTex, ivec2(base + 1 + k / 4, cell.y), 0);
+    }
+    int s = int(four[k % 4]);
+#else
+    int s = k;
+#endif
     vec4 s0 = source(s, 0);
     vec4 s1 = source(s, 1);
     vec3 c = s0.xyz;

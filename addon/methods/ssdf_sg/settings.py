@@ -50,6 +50,17 @@ class SSDFSGSettings(Settings):
                         "Lobes and amplitudes from the environment alone (the paper's §6): "
                         "keeps the unshadowed irradiance")],
                 description="How the diffuse term's SG lighting (eq. 39) is fitted"),
+            "ssdf_lamps": EnumProperty(
+                name="Lamps", default="PASS", update=drawing.redraw_viewports,
+                items=[("PASS", "Shadow Maps",
+                        "Point and spot lamps drawn per pixel by the lamp pass every method "
+                        "shares (shadow maps, the lamp's exact irradiance); SSDF_SG's own "
+                        "shading stays per pixel"),
+                       ("SG", "Spherical Gaussians",
+                        "Point and spot lamps as SG lobes with SSDF visibility (Wang et al. "
+                        "2009, eq. 32-33, 42-43); the frame is then shaded per vertex")],
+                description="How SSDF_SG draws point and spot lamps (sun and area lamps and "
+                            "the World's compact sources always go through the lamp pass)"),
             "sg_environment_lobes": IntProperty(
                 name="Environment Lobes", default=8, min=1, max=16,
                 update=drawing.redraw_viewports,

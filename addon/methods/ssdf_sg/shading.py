@@ -132,11 +132,11 @@ def scene_fit(state, fields, fit, cosine):
 
 
 class SSDFSGShading(Shading):
-    #: Blender point/sun/spot lights are drawn (eq. 32-33, 42-43); FrameState notes
-    #: that other methods light the scene from the World only
-    draws_lamps = True
-
-
+    def draws_lamps(self, settings: dict) -> bool:
+        """Point and spot lamps as SG lobes with SSDF visibility (eq. 32-33, 42-43, per
+        vertex) when ``ssdf_lamps`` asks for them; by default the shared lamp pass draws
+        them per pixel and SSDF_SG's own pass stays per pixel."""
+        return settings.get("ssdf_lamps", "PASS") == "SG"
 
     def view_dependent(self, state) -> bool:
         return any(scene.is_glossy(m) for st in state.objects for m in object_sg_materials(st))
@@ -282,8 +282,9 @@ class SSDFSGShading(Shading):
                        + ", ".join(unsupported))
             return None
         if state.lamps:
-            state.note("SSDF_SG: scenes with lights are shaded per vertex (eq. 42-43; the "
-                       "per-pixel shader draws the World only)")
+            state.note("SSDF_SG: lamps as spherical Gaussians (eq. 42-43) are shaded per "
+                       "vertex (the per-pixel shader draws the World only; Lamps: Shadow "
+                       "Maps keeps it per pixel)")
             return None
         fields = []
         for st in state.objects:

@@ -241,3 +241,55 @@ def test_sun_lamp_lights_an_open_plane_like_lambert_and_moves_live(tmp_path):
                                    err_msg=method)
         assert not _state().lamps and len(_state().drawn_lamps) == 1
     assert ground.prt.precompute_id == pid
+
+
+def test_every_lamp_is_drawn_with_its_shadow_past_the_old_cap_of_eight(tmp_path, monkeypatch):
+    """Twelve point lamps 3 m over a Lambert ground, a plate 2 m up under the last one:
+    every pixel is the sum of the lamps that see it, Phi / (4 pi d^2) cos each (the plate's
+    shadow found segment by segment).  With the cube atlas's budget cut to one lamp, the
+    other eleven are still drawn, unshadowed, and the render log names them."""
+    scenes.reset()
+    black_world()
+    ground = scenes.add_ground(size=8.0, cuts=8)
+    ground.data.materials.append(scenes.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
+                                                      Color=(0.8, 0.8, 0.8, 1.0)))
+    lamps = np.array([(-2.25 + 1.5 * (k % 4), -1.5 + 1.5 * (k // 4), 3.0) for k in range(12)])
+    for k, p in enumerate(lamps):
+        local_lamp("POINT", 100.0 + 10.0 * k, tuple(p), radius=0.01).name = f"Lamp{k:02d}"
+    plate = lamps[-1] - (0.0, 0.0, 1.0)
+    bpy.ops.mesh.primitive_plane_add(size=0.6, location=tuple(plate))
+    cam = scenes.add_camera(location=(0.0, 0.0, 1.5), rotation=(0.0, 0.0, 0.0), resolution=None)
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 6.0
+    scenes.set_resolution(32, 32)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 1
+    scene.render.filter_size = 0.0
+    bpy.ops.prt.precompute()
+    xs = (np.arange(32) + 0.5) / 32 * 6.0 - 3.0
+    X, Y = np.meshgrid(xs, xs, indexing="xy")
+    P = np.stack([X, Y, np.zeros_like(X)], -1)                  # row 0 at y = -3
+    w = lamps[None, None] - P[:, :, None]                       # (32, 32, 12, 3)
+    d2 = (w * w).sum(-1)
+    each = 0.8 / math.pi * (100.0 + 10.0 * np.arange(12)) / (4 * math.pi * d2) * \
+        w[..., 2] / np.sqrt(d2)
+    # where the segment to each lamp crosses the plate's height (1 m below the lamps)
+    cross = lamps[None, None, :, :2] - w[..., :2] / 3.0
+    inf = np.abs(cross - plate[:2]).max(-1)
+    blocked = inf < 0.3
+    clear = (np.abs(inf - 0.3) > 0.03).all(-1)                  # no pixel on a shadow's edge
+    assert blocked[..., -1].sum() > 8                          # the last lamp's shadow
+
+    frame = scenes.render_exr(tmp_path / "twelve.exr")[::-1, :, 0]
+    expected = np.where(blocked, 0.0, each).sum(-1)
+    np.testing.assert_allclose(frame[clear], expected[clear], rtol=0.01)
+    assert any("12 local lamps draw 72 cube faces at 512²" in m for m in runtime.LAST_MESSAGES)
+
+    from prt_relight.addon.frame import sources
+    monkeypatch.setattr(sources, "CUBE_BUDGET", 6 * sources.CUBE_TILE_MIN ** 2)
+    frame = scenes.render_exr(tmp_path / "budget.exr")[::-1, :, 0]
+    expected = np.where(blocked & (np.arange(12) == 0), 0.0, each).sum(-1)
+    np.testing.assert_allclose(frame[clear], expected[clear], rtol=0.01)
+    named = [m for m in runtime.LAST_MESSAGES if "past the atlas's budget" in m]
+    assert len(named) == 1 and "11 local lamps" in named[0] and "'Lamp" in named[0] \
+        and "and 5 more" in named[0], runtime.LAST_MESSAGES
