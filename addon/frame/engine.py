@@ -14,6 +14,7 @@ from ...core.sphere import envmap
 from ...core.shading import pixel_filter
 from ...core.common.parallel import Cancelled
 from ..gpu import drawing, lights, sharp
+from . import passes
 from .state import FrameState, TexturedRadiance
 
 
@@ -318,19 +319,65 @@ class PRTRenderEngine(bpy.types.RenderEngine):
                 self.report({"ERROR"}, "PRT Relight: " + state.error)
             for w in state.warnings:
                 self.report({"WARNING"}, "PRT Relight: " + w)
+            layer = depsgraph.view_layer
+            groups = passes.light_groups(state) if passes.groups_wanted(scene, layer) else []
+            frame = (view, projection, width, height, r.film_transparent, persp,
+                     scene.prt.supersampling, r.filter_size)
+            # Combined, then each light group's frame (as costly as Combined each)
+            share = 0.9 / (1 + len(groups))
             self.update_stats("PRT Relight", f"Shading ({state.method}; ESC stops)")
-            with state.span(0.1, 1.0):
-                pixels = render_pixels(state, view, projection, width, height,
-                                       r.film_transparent, persp, scene.prt.supersampling,
-                                       r.filter_size)
+            with state.span(0.1, 0.1 + share):
+                pixels = render_pixels(state, *frame)
+            extra = {}
+            for k, group in enumerate(groups):
+                self.update_stats("PRT Relight", f"Light group {group} ({k + 1}/{len(groups)}; "
+                                  "ESC stops)")
+                with state.span(0.1 + share * (k + 1), 0.1 + share * (k + 2)):
+                    extra[f"Combined_{group}"] = render_pixels(passes.muted(state, group),
+                                                               *frame)[..., :3]
+            extra.update(self._data_passes(state, layer, frame))
         except Cancelled:
             self.update_stats("PRT Relight", "Stopped")
             self.report({"WARNING"}, "PRT Relight: render stopped (ESC); nothing was drawn")
             return
-        result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
+        channels = {name: (n, chan) for name, n, chan, _ in passes.wanted(scene, layer)}
+        for name, px in extra.items():
+            n = px.shape[-1]
+            self.add_pass(name, n, channels.get(name, (n, "RGB" if n == 3 else "Z"))[1],
+                          layer=layer.name)
+        result = self.begin_result(0, 0, width, height, layer=layer.name)
         result.layers[0].passes["Combined"].rect.foreach_set(
             np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1))
+        for name, px in extra.items():
+            result.layers[0].passes[name].rect.foreach_set(
+                np.ascontiguousarray(px, dtype=np.float32).reshape(-1))
         self.end_result(result)
+
+    @staticmethod
+    def _data_passes(state, layer, frame) -> dict:
+        """The view layer's data passes, Ambient Occlusion and Environment (passes.py)."""
+        view, projection, width, height, _, _, s, filter_width = frame
+        out = {}
+        for attr, name, _, _, _ in passes.DATA_PASSES:
+            if not getattr(layer, attr, False):
+                continue
+            state.tick()
+            if name == "Environment":     # the World seen directly, the objects black
+                black = [np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+                         for st in state.objects]
+                out[name] = draw_pixels(state, black, view, projection, width, height, False,
+                                        s, filter_width=filter_width)[..., :3]
+            else:
+                out[name] = passes.data_pass(state, name, view, projection, width, height, s,
+                                             filter_width)
+        return out
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        """The passes F12 writes, registered so the compositor's Render Layers node shows
+        them (as Cycles registers its own)."""
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        for name, n, chan, kind in passes.wanted(scene, renderlayer):
+            self.register_pass(scene, renderlayer, name, n, chan, kind)
 
     # ------------------------------------------------------------- viewport
     def view_update(self, context, depsgraph):

@@ -27,6 +27,8 @@ class Lamp:
     half_x, half_y: AREA: the world vectors from its centre to the middle of its edges
                (its local x and y axes times half its size, object scale included).
     shape:     AREA: "SQUARE", "RECTANGLE", "DISK" or "ELLIPSE".
+    group:     the light group whose ``Combined_<group>`` render pass it is drawn in
+               (no part of its light).
     """
 
     kind: str
@@ -40,6 +42,7 @@ class Lamp:
     half_x: tuple = (0.0, 0.0, 0.0)
     half_y: tuple = (0.0, 0.0, 0.0)
     shape: str = "SQUARE"
+    group: str = ""
 
     def __post_init__(self):
         self.kind = str(self.kind).upper()
