@@ -19,7 +19,7 @@ import numpy as np
 from ...core.scene import mesh as core_mesh, sides, visibility
 from ..frame import dynamic
 from .. import methods
-from . import scene_export, storage
+from . import attributes, scene_export, storage
 from ...core.pipeline.tracing import ObjectJob, PrecomputeJob
 
 
@@ -127,6 +127,10 @@ def commit_steps(scene, job: PrecomputeJob):
         ob.prt.back_sides = o.arrays.two_sided
         # what earlier runs stored (other methods' data too) is dropped with them
         storage.replace_all(ob, {storage.VISIBILITY: o.blob, **o.extra})
+        if scene.prt.write_attributes:
+            attributes.write_precompute(ob, o.arrays, o.points, attributes.precompute_values(
+                o.bits, o.points.normals, job.resolution, scene.prt.attribute_sh_order),
+                job.warnings.append)
         yield (i + 1) / steps
     storage.remove_legacy()
     scene.prt.precomputed_resolution = job.resolution

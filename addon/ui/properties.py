@@ -54,6 +54,15 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
                     "compact source of it, each lamp, or the view layer's Light Groups -- "
                     "summing to Combined, for the compositor; each group costs another "
                     "frame (on as well when the view layer has Light Groups)")
+    write_attributes: BoolProperty(
+        name="Mesh Attributes", default=True,
+        description="Precompute writes each object's PRT AO, PRT Bent Normal and SH transfer "
+                    "(PRT SH 0, ...) as Face Corner attributes of its mesh (the Spreadsheet, "
+                    "the Attribute node, Geometry Nodes); Clear removes them")
+    attribute_sh_order: IntProperty(
+        name="SH Attribute Order", default=3, min=0, max=5,
+        description="Order of the SH transfer vector written as attributes (order² of "
+                    "them, PRT SH 0 ...; 0 = none)")
     # Written by the precompute operator (read-only in the UI).
     precomputed_resolution: IntProperty(name="Precomputed Directions", default=0)
     last_report: StringProperty(name="Last Precompute", default="")

@@ -45,18 +45,33 @@ def _scene(bounces=0, method="REFERENCE"):
     return scene
 
 
-def _render_layers(path):
+def interior(mask, steps=2):
+    """``mask`` less ``steps`` pixels at its border (beyond a pixel filter's reach)."""
+    inner = mask.copy()
+    for _ in range(steps):
+        inner[1:] &= inner[:-1].copy()
+        inner[:-1] &= inner[1:].copy()
+        inner[:, 1:] &= inner[:, :-1].copy()
+        inner[:, :-1] &= inner[:, 1:].copy()
+    return inner
+
+
+def render_layers(path):
     """F12 written as a multilayer EXR: {pass name: (H, W, C)}."""
     import OpenImageIO as oiio
     scene = bpy.context.scene
     scene.render.engine = "PRT_RELIGHT"
     scene.render.film_transparent = False
     settings = scene.render.image_settings
+    saved = (settings.media_type, scene.render.filepath)
     settings.media_type = "MULTI_LAYER_IMAGE"          # Blender 5's multilayer EXR
     settings.color_depth = "32"
     scene.render.filepath = str(path)
     scene.render.use_file_extension = False
-    bpy.ops.render.render(write_still=True)
+    try:
+        bpy.ops.render.render(write_still=True)
+    finally:
+        settings.media_type, scene.render.filepath = saved
     out = {}
     inp = oiio.ImageInput.open(str(path))          # a part per pass
     part = 0
@@ -77,7 +92,7 @@ def test_light_group_passes_sum_to_combined(tmp_path, bounces, method):
     """Per-vertex methods (with bounced light) and the per-pixel SSDF_SG (its own lamps)."""
     scene = _scene(bounces, method)
     scene.prt.light_group_passes = True
-    got = _render_layers(tmp_path / "passes.exr")
+    got = render_layers(tmp_path / "passes.exr")
     groups = {k: v for k, v in got.items() if k.startswith("Combined_")}
     # the World, its sun (split off the sunset), each lamp
     assert {"Combined_World", "Combined_Key_Lamp", "Combined_Rim"} <= set(groups)
@@ -101,7 +116,7 @@ def test_blender_light_groups_gather_lamps_and_world(tmp_path):
     bpy.data.objects["Key Lamp"].lightgroup = "lamps"
     bpy.data.objects["Rim"].lightgroup = "lamps"
     scene.world.lightgroup = "sky"
-    got = _render_layers(tmp_path / "groups.exr")
+    got = render_layers(tmp_path / "groups.exr")
     groups = {k: v for k, v in got.items() if k.startswith("Combined_")}
     assert set(groups) == {"Combined_lamps", "Combined_sky"}
     combined = got["Combined"][..., :3]
@@ -114,7 +129,7 @@ def test_data_passes(tmp_path):
     layer = bpy.context.view_layer
     layer.use_pass_z = layer.use_pass_normal = layer.use_pass_position = True
     layer.use_pass_ambient_occlusion = layer.use_pass_environment = True
-    got = _render_layers(tmp_path / "data.exr")
+    got = render_layers(tmp_path / "data.exr")
     depth, pos, nrm = got["Depth"][..., 0], got["Position"], got["Normal"]
     covered = depth < 1e9
     assert covered.mean() > 0.5 and (~covered).any()       # ground and Suzanne, and sky
@@ -135,12 +150,7 @@ def test_data_passes(tmp_path):
     # under Suzanne the ground sees less sky than at the frame's open ground
     assert ao[ground][:, 0].min() < 0.8 < ao[ground][:, 0].max()
     env = got["Environment"]
-    inner = covered.copy()                 # beyond the pixel filter's reach of the sky
-    for _ in range(2):
-        inner[1:] &= inner[:-1].copy()
-        inner[:-1] &= inner[1:].copy()
-        inner[:, 1:] &= inner[:, :-1].copy()
-        inner[:, :-1] &= inner[:, 1:].copy()
+    inner = interior(covered)              # beyond the pixel filter's reach of the sky
     assert inner.sum() > 100
     assert np.abs(env[inner]).max() == 0.0 and env[~covered].min() > 0.0
     # the sky pixels of Combined are the environment's
