@@ -26,7 +26,7 @@ AO, BENT, SH = "PRT AO", "PRT Bent Normal", "PRT SH "
 IRRADIANCE, RADIANCE = "PRT Irradiance", "PRT Radiance"
 
 
-def _mesh_for(ob, corners: int, note=None):
+def mesh_for(ob, corners: int, note=None):
     """``ob``'s mesh when its corners are the evaluated mesh's ``corners``, else None
     (``note`` told why)."""
     mesh = getattr(ob, "data", None)
@@ -66,10 +66,12 @@ def write_precompute(ob, arrays, points, values: dict, note=None) -> bool:
     """Write :func:`precompute_values` of an object's points on its mesh's corners (the
     front corners of a two-sided one); False when its mesh cannot take them."""
     corners = arrays.front_corners
-    mesh = _mesh_for(ob, corners, note)
+    mesh = mesh_for(ob, corners, note)
     if mesh is None:
         return False
-    remove(mesh)
+    for old in [a.name for a in mesh.attributes if a.name in (AO, BENT)
+                or a.name.startswith(SH)]:    # an earlier precompute's (another SH order)
+        mesh.attributes.remove(mesh.attributes[old])
     of = points.point_of_corner[:corners]
     write(mesh, AO, values["ao"][of], "FLOAT")
     # object space: the bent normal turns with the object as a normal does

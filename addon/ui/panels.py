@@ -30,6 +30,11 @@ def draw_settings(layout, context):
     if any(o.prt.dynamic for o in scene.objects if o.type == "MESH"):
         col.prop(prt, "field_detail")
     col.prop(prt, "ray_offset")
+    row = col.row()
+    row.prop(prt, "write_attributes")
+    sub = row.row()
+    sub.active = prt.write_attributes
+    sub.prop(prt, "attribute_sh_order", text="SH Order")
     col.prop(prt, "supersampling")
     sub = col.row()
     sub.active = prt.supersampling > 1
@@ -39,6 +44,7 @@ def draw_settings(layout, context):
     row.operator("prt.precompute", icon="LIGHT_SUN")
     row.operator("prt.clear", text="", icon="TRASH")
     layout.operator("prt.report", icon="GRAPH")
+    layout.operator("prt.bake", icon="RENDER_STILL")
     if prt.last_report:
         layout.label(text=prt.last_report, icon="INFO")
     if prt.precomputed_resolution and str(prt.precomputed_resolution) != prt.resolution:
