@@ -242,6 +242,25 @@ class ViewportShading:
                 self.version += 1
 
 
+def data_passes(state, layer, frame) -> dict:
+    """The view layer's data passes, Ambient Occlusion and Environment (passes.py)."""
+    view, projection, width, height, _, _, s, filter_width = frame
+    out = {}
+    for attr, name, _, _, _ in passes.DATA_PASSES:
+        if not getattr(layer, attr, False):
+            continue
+        state.tick()
+        if name == "Environment":     # the World seen directly, the objects black
+            black = [np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+                     for st in state.objects]
+            out[name] = draw_pixels(state, black, view, projection, width, height, False,
+                                    s, filter_width=filter_width)[..., :3]
+        else:
+            out[name] = passes.data_pass(state, name, view, projection, width, height, s,
+                                         filter_width)
+    return out
+
+
 #: a function to run inside the next render() instead of drawing (:func:`in_render`)
 _RENDER_TASK: list = []
 
@@ -335,7 +354,7 @@ class PRTRenderEngine(bpy.types.RenderEngine):
                 with state.span(0.1 + share * (k + 1), 0.1 + share * (k + 2)):
                     extra[f"Combined_{group}"] = render_pixels(passes.muted(state, group),
                                                                *frame)[..., :3]
-            extra.update(self._data_passes(state, layer, frame))
+            extra.update(data_passes(state, layer, frame))
         except Cancelled:
             self.update_stats("PRT Relight", "Stopped")
             self.report({"WARNING"}, "PRT Relight: render stopped (ESC); nothing was drawn")
@@ -352,25 +371,6 @@ class PRTRenderEngine(bpy.types.RenderEngine):
             result.layers[0].passes[name].rect.foreach_set(
                 np.ascontiguousarray(px, dtype=np.float32).reshape(-1))
         self.end_result(result)
-
-    @staticmethod
-    def _data_passes(state, layer, frame) -> dict:
-        """The view layer's data passes, Ambient Occlusion and Environment (passes.py)."""
-        view, projection, width, height, _, _, s, filter_width = frame
-        out = {}
-        for attr, name, _, _, _ in passes.DATA_PASSES:
-            if not getattr(layer, attr, False):
-                continue
-            state.tick()
-            if name == "Environment":     # the World seen directly, the objects black
-                black = [np.zeros((len(st.arrays.corner_verts), 3), np.float32)
-                         for st in state.objects]
-                out[name] = draw_pixels(state, black, view, projection, width, height, False,
-                                        s, filter_width=filter_width)[..., :3]
-            else:
-                out[name] = passes.data_pass(state, name, view, projection, width, height, s,
-                                             filter_width)
-        return out
 
     def update_render_passes(self, scene=None, renderlayer=None):
         """The passes F12 writes, registered so the compositor's Render Layers node shows
