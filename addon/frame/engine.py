@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import threading
 
 import bpy
@@ -261,6 +262,44 @@ def data_passes(state, layer, frame) -> dict:
     return out
 
 
+def light_passes(state, frame) -> dict:
+    """Diffuse / Glossy Direct, Indirect and Color (passes.LIGHT_PASSES): the frame drawn
+    again without bounced light with its own base colours and with black ones (glossy),
+    the bounced light alone, and the base colours; each light pass is its part over its
+    colour pass (Cycles' division).  The bounce reaches the diffuse base only: Glossy
+    Indirect is zero."""
+    view, projection, width, height, _, persp, s, filter_width = frame
+    drawn = (view, projection, width, height, True, persp, s, filter_width)
+    direct = render_pixels(_without_bounce(state), *drawn)
+    glossy = render_pixels(passes.with_base(state, 0.0), *drawn)
+    colour = draw_pixels(state, passes.base_colours(state), view, projection, width, height,
+                         True, s, filter_width=filter_width)
+    bounced = np.zeros_like(colour)
+    if state.bounce is not None:
+        plain, white = state.bounced_radiance(*_eye(view, persp))
+        rad = []
+        for st, b, w in zip(state.objects, plain, white):
+            if b is None:
+                b = w = np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+            rad.append(TexturedRadiance.of(b, w, np.zeros_like(b)) if st.textures else b)
+        bounced = draw_pixels(state, rad, view, projection, width, height, True, s,
+                              filter_width=filter_width)
+    cover = np.repeat(colour[..., 3:4], 3, axis=2)
+    return {"Diffuse Direct": passes.divided(direct[..., :3] - glossy[..., :3],
+                                             colour[..., :3]),
+            "Diffuse Indirect": passes.divided(bounced[..., :3], colour[..., :3]),
+            "Diffuse Color": colour[..., :3],
+            "Glossy Direct": passes.divided(glossy[..., :3], cover),
+            "Glossy Indirect": np.zeros_like(cover),
+            "Glossy Color": cover}
+
+
+def _without_bounce(state):
+    sub = copy.copy(state)
+    sub.bounce = None
+    return sub
+
+
 #: a function to run inside the next render() instead of drawing (:func:`in_render`)
 _RENDER_TASK: list = []
 
@@ -355,6 +394,11 @@ class PRTRenderEngine(bpy.types.RenderEngine):
                     extra[f"Combined_{group}"] = render_pixels(passes.muted(state, group),
                                                                *frame)[..., :3]
             extra.update(data_passes(state, layer, frame))
+            wanted = {name for attr, name, *_ in passes.LIGHT_PASSES if getattr(layer, attr, False)}
+            if wanted:
+                self.update_stats("PRT Relight", "Diffuse and glossy passes (ESC stops)")
+                extra.update({k: v for k, v in light_passes(state, frame).items()
+                              if k in wanted})
         except Cancelled:
             self.update_stats("PRT Relight", "Stopped")
             self.report({"WARNING"}, "PRT Relight: render stopped (ESC); nothing was drawn")

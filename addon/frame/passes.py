@@ -18,6 +18,7 @@ import numpy as np
 
 from ...core.methods.reference import shading as reference
 from ...core.shading import pixel_filter
+from ...core.shading.materials import slot_material
 from ...core.sphere import directions
 from ..blender import scene_export
 from ..gpu import drawing
@@ -31,6 +32,16 @@ DATA_PASSES = (
     ("use_pass_normal", "Normal", 3, "XYZ", "VECTOR"),
     ("use_pass_ambient_occlusion", "Ambient Occlusion", 3, "RGB", "COLOR"),
     ("use_pass_environment", "Environment", 3, "RGB", "COLOR"),
+)
+#: the light passes Cycles splits Combined into: (Diffuse Direct + Indirect) × Diffuse Color
+#: + (Glossy Direct + Indirect) × Glossy Color + Environment (``light_split``)
+LIGHT_PASSES = (
+    ("use_pass_diffuse_direct", "Diffuse Direct", 3, "RGB", "COLOR"),
+    ("use_pass_diffuse_indirect", "Diffuse Indirect", 3, "RGB", "COLOR"),
+    ("use_pass_diffuse_color", "Diffuse Color", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_direct", "Glossy Direct", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_indirect", "Glossy Indirect", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_color", "Glossy Color", 3, "RGB", "COLOR"),
 )
 #: the Depth of a pixel no surface covers (Cycles writes 1e10 there)
 FAR_DEPTH = 1e10
@@ -65,7 +76,7 @@ def scene_light_groups(scene, view_layer) -> list[str]:
 
 def wanted(scene, view_layer) -> list[tuple]:
     """(name, channels, channel ids, type) of every pass beside Combined F12 writes."""
-    out = [(name, n, chan, kind) for attr, name, n, chan, kind in DATA_PASSES
+    out = [(name, n, chan, kind) for attr, name, n, chan, kind in DATA_PASSES + LIGHT_PASSES
            if getattr(view_layer, attr, False)]
     if groups_wanted(scene, view_layer):
         out += [(f"Combined_{g}", 3, "RGB", "COLOR") for g in scene_light_groups(scene,
@@ -99,6 +110,50 @@ def muted(state, group: str):
     sub.drawn_lamps = [lamp if lamp.group == group else replace(lamp, color=dark)
                        for lamp in state.drawn_lamps]
     return sub
+
+
+def with_base(state, base: float):
+    """A copy of ``state`` without bounced light whose every slot has the diffuse base
+    colour ``base`` (0 or 1; textured colours dropped): its frame is the glossy light
+    (0) or the glossy light plus the diffuse light of a white base (1).  A frame is linear
+    in each slot's base colour (``FrameState.shade``), so the diffuse part of a frame is
+    its own minus the one of base 0."""
+    sub = copy.copy(state)
+    sub.bounce = None
+    sub.objects = []
+    for st in state.objects:
+        twin = copy.copy(st)
+        twin.data = st.data
+        twin.materials = [replace(m, diffuse_albedo=(base, base, base)) for m in st.materials]
+        twin.textures = {}
+        sub.objects.append(twin)
+    return sub
+
+
+def base_colours(state) -> list:
+    """Per object the per-corner base colour (C, 3) a frame's diffuse light is multiplied
+    by; a textured slot's as ``TexturedRadiance`` whose texture multiplies 1 per pixel."""
+    from .state import TexturedRadiance
+    out = []
+    for st in state.objects:
+        pts = st.points
+        table = np.array([slot_material(st.materials, m).diffuse_albedo
+                          for m in range(max(len(st.materials), 1))], np.float32)
+        colour = table[np.clip(pts.materials, 0, len(table) - 1)][pts.point_of_corner]
+        if st.textures:
+            textured = np.isin(st.slot_of[np.clip(pts.materials, 0, len(st.slot_of) - 1)],
+                               list(st.textures))[pts.point_of_corner]
+            unit = np.where(textured[:, None], 1.0, colour).astype(np.float32)
+            colour = TexturedRadiance.of(colour, unit, np.zeros_like(colour))
+        out.append(colour)
+    return out
+
+
+def divided(light: np.ndarray, colour: np.ndarray) -> np.ndarray:
+    """A light pass: ``light`` (a colour times the light, filtered) over its filtered
+    ``colour``, 0 where the colour is (Cycles' division, so pass × colour = ``light``)."""
+    safe = np.abs(colour) > 1e-8
+    return np.where(safe, light / np.where(safe, colour, 1.0), 0.0).astype(np.float32)
 
 
 # --------------------------------------------------------------------------- data passes

@@ -56,11 +56,11 @@ def interior(mask, steps=2):
     return inner
 
 
-def render_layers(path):
-    """F12 written as a multilayer EXR: {pass name: (H, W, C)}."""
+def render_layers(path, engine="PRT_RELIGHT"):
+    """F12 (of ``engine``) written as a multilayer EXR: {pass name: (H, W, C)}."""
     import OpenImageIO as oiio
     scene = bpy.context.scene
-    scene.render.engine = "PRT_RELIGHT"
+    scene.render.engine = engine
     scene.render.film_transparent = False
     settings = scene.render.image_settings
     saved = (settings.media_type, scene.render.filepath)
@@ -156,3 +156,46 @@ def test_data_passes(tmp_path):
     # the sky pixels of Combined are the environment's
     comb = got["Combined"][..., :3]
     assert metrics.rel_l2(env, comb, ~covered & (ao[..., 0] == 0)) < 1e-3
+
+
+def _checker_ground():
+    """The ground's base colour an image texture (a checker on its UV map)."""
+    px = np.full((8, 8, 4), 1.0, np.float32)
+    px[..., :3] = 0.15
+    px[(np.add.outer(np.arange(8), np.arange(8)) % 2) == 0, :3] = (0.8, 0.5, 0.2)
+    image = scenes.float_image("checker", px, is_data=False)
+    mat = bpy.data.materials.new("Checker")
+    nt = mat.node_tree
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.interpolation = "Closest"
+    nt.links.new(tex.outputs["Color"], nt.nodes["Principled BSDF"].inputs["Base Color"])
+    ground = bpy.data.objects["Ground"]
+    ground.data.materials.clear()
+    ground.data.materials.append(mat)
+
+
+@pytest.mark.parametrize("method", ["REFERENCE", "SH"])
+def test_light_passes_compose_combined(tmp_path, method):
+    """(Diffuse Direct + Indirect) × Diffuse Color + (Glossy Direct + Indirect) × Glossy
+    Color + Environment is Combined: a textured ground, a glossy Suzanne, the World with
+    its sun drawn per pixel, two lamps, a bounce."""
+    scene = _scene(1, method)
+    _checker_ground()
+    scenes.add_bsdf_material(bpy.data.objects["Suzanne"], "Glossy", "ShaderNodeBsdfPrincipled",
+                             Roughness=0.3)
+    layer = bpy.context.view_layer
+    for attr in ("diffuse_direct", "diffuse_indirect", "diffuse_color", "glossy_direct",
+                 "glossy_indirect", "glossy_color", "environment"):
+        setattr(layer, f"use_pass_{attr}", True)
+    got = render_layers(tmp_path / "light.exr")
+    rebuilt = ((got["Diffuse Direct"] + got["Diffuse Indirect"]) * got["Diffuse Color"]
+               + (got["Glossy Direct"] + got["Glossy Indirect"]) * got["Glossy Color"]
+               + got["Environment"])
+    combined = got["Combined"][..., :3]
+    assert metrics.rel_l2(rebuilt, combined, np.ones(combined.shape[:2], bool)) < 1e-3
+    # each part is there: the checker's two colours, light bounced, a glossy Suzanne
+    ground = got["Diffuse Color"][..., 0]
+    assert np.any(np.abs(ground - 0.8) < 1e-3) and np.any(np.abs(ground - 0.15) < 1e-3)
+    assert got["Diffuse Indirect"].max() > 0.0
+    assert got["Glossy Direct"].max() > 0.05 * combined.max()
