@@ -266,31 +266,35 @@ def light_passes(state, frame) -> dict:
     """Diffuse / Glossy Direct, Indirect and Color (passes.LIGHT_PASSES): the frame drawn
     again without bounced light with its own base colours and with black ones (glossy),
     the bounced light alone, and the base colours; each light pass is its part over its
-    colour pass (Cycles' division).  The bounce reaches the diffuse base only: Glossy
-    Indirect is zero."""
+    colour pass (Cycles' division).  The bounced light's glossy part (FrameState.
+    bounced_radiance) is Glossy Indirect."""
     view, projection, width, height, _, persp, s, filter_width = frame
     drawn = (view, projection, width, height, True, persp, s, filter_width)
     direct = render_pixels(_without_bounce(state), *drawn)
     glossy = render_pixels(passes.with_base(state, 0.0), *drawn)
     colour = draw_pixels(state, passes.base_colours(state), view, projection, width, height,
                          True, s, filter_width=filter_width)
-    bounced = np.zeros_like(colour)
+    bounced = glossy_bounced = np.zeros_like(colour)
     if state.bounce is not None:
-        plain, white = state.bounced_radiance(*_eye(view, persp))
-        rad = []
-        for st, b, w in zip(state.objects, plain, white):
+        plain, white, glossy_part = state.bounced_radiance(*_eye(view, persp))
+        diffuse, shiny = [], []
+        for st, b, w, g in zip(state.objects, plain, white, glossy_part):
             if b is None:
-                b = w = np.zeros((len(st.arrays.corner_verts), 3), np.float32)
-            rad.append(TexturedRadiance.of(b, w, np.zeros_like(b)) if st.textures else b)
-        bounced = draw_pixels(state, rad, view, projection, width, height, True, s,
+                b = w = g = np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+            d = np.asarray(b) - np.asarray(g)           # the diffuse base's, coloured
+            diffuse.append(TexturedRadiance.of(d, w, np.zeros_like(d)) if st.textures else d)
+            shiny.append(np.asarray(g))
+        bounced = draw_pixels(state, diffuse, view, projection, width, height, True, s,
                               filter_width=filter_width)
+        glossy_bounced = draw_pixels(state, shiny, view, projection, width, height, True, s,
+                                     filter_width=filter_width)
     cover = np.repeat(colour[..., 3:4], 3, axis=2)
     return {"Diffuse Direct": passes.divided(direct[..., :3] - glossy[..., :3],
                                              colour[..., :3]),
             "Diffuse Indirect": passes.divided(bounced[..., :3], colour[..., :3]),
             "Diffuse Color": colour[..., :3],
             "Glossy Direct": passes.divided(glossy[..., :3], cover),
-            "Glossy Indirect": np.zeros_like(cover),
+            "Glossy Indirect": passes.divided(glossy_bounced[..., :3], cover),
             "Glossy Color": cover}
 
 

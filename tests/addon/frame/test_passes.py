@@ -197,5 +197,5 @@ def test_light_passes_compose_combined(tmp_path, method):
     # each part is there: the checker's two colours, light bounced, a glossy Suzanne
     ground = got["Diffuse Color"][..., 0]
     assert np.any(np.abs(ground - 0.8) < 1e-3) and np.any(np.abs(ground - 0.15) < 1e-3)
-    assert got["Diffuse Indirect"].max() > 0.0
+    assert got["Diffuse Indirect"].max() > 0.0 and got["Glossy Indirect"].max() > 0.0
     assert got["Glossy Direct"].max() > 0.05 * combined.max()

@@ -1,8 +1,11 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Demo of the results Blender users reach for (issue 33): light group passes rebalanced,
-a baked lightmap in EEVEE, the mesh attributes and what they cost in the .blend.
+"""Draw docs/images/outputs/, the pictures and figures of the results Blender users reach
+for (issue 33): light group passes rebalanced, a baked lightmap in EEVEE, the mesh
+attributes and what they cost in the .blend.
 
-    python bench/outputs_demo.py --out out/outputs [--resolution 320x240]
+    .venv/bin/python tools/draw_outputs.py --out /tmp/outputs [--resolution 320x240]
+
+(then copy its PNGs into docs/images/outputs/)
 
 Writes groups.png (Combined | World | its sun | the lamp | the groups rebalanced | a new
 F12 with the lights changed so), lightmap.png (F12 | EEVEE with the baked radiance
@@ -19,7 +22,7 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "bench"))
 import scenes  # noqa: E402
 from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
 
