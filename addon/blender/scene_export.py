@@ -294,6 +294,15 @@ def light_group(id_block, view_layer, fallback: str) -> str:
     return pass_name(fallback)
 
 
+def world_groups(scene, view_layer, sources: int) -> tuple[str, list]:
+    """(the World's light group, each of its ``sources`` compact sources'): in the World's
+    Blender Light Group its sources go with it, else each is ``<World>_Source_<k>``."""
+    world = light_group(scene.world, view_layer, "World")
+    grouped = scene.world is not None and view_layer is not None and \
+        scene.world.lightgroup in {g.name for g in view_layer.lightgroups}
+    return world, [world if grouped else f"{world}_Source_{k + 1}" for k in range(sources)]
+
+
 def export_lamps(depsgraph, warnings: list | None = None) -> list:
     """Visible point/spot/sun/area lights as :class:`core.sg.lighting.Lamp` (eq. 32-33 for
     point and spot lamps; others are reported in ``warnings`` and skipped)."""

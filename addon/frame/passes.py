@@ -1,7 +1,8 @@
 """F12's render passes beside Combined, named as Cycles names them: the data passes (Depth,
-Position, Normal), Ambient Occlusion, Environment, and one ``Combined_<group>`` pass per
-light group (the World, each compact source of it, each lamp, or the view layer's Light
-Groups), so a compositor can rebalance the lights after the render.
+Position, Normal), Ambient Occlusion, Environment, Diffuse / Glossy Direct, Indirect and
+Color, and one ``Combined_<group>`` pass per light group (the World, each compact source of
+it, each lamp, or the view layer's Light Groups), so a compositor can rebalance the lights
+after the render.
 
 A light group's pass is the frame drawn again with every light outside the group muted
 (its radiance zero; the World's strength zero): every part of a frame (the method's World
@@ -34,7 +35,7 @@ DATA_PASSES = (
     ("use_pass_environment", "Environment", 3, "RGB", "COLOR"),
 )
 #: the light passes Cycles splits Combined into: (Diffuse Direct + Indirect) × Diffuse Color
-#: + (Glossy Direct + Indirect) × Glossy Color + Environment (``light_split``)
+#: + (Glossy Direct + Indirect) × Glossy Color + Environment (``engine.light_passes``)
 LIGHT_PASSES = (
     ("use_pass_diffuse_direct", "Diffuse Direct", 3, "RGB", "COLOR"),
     ("use_pass_diffuse_indirect", "Diffuse Indirect", 3, "RGB", "COLOR"),
@@ -64,10 +65,9 @@ def scene_light_groups(scene, view_layer) -> list[str]:
     """:func:`light_groups` as the scene describes them before a frame is drawn (the
     compositor's sockets): the sources of the newest split (``frame.sources.LAST_SOURCES``)
     and the view layer's visible lamps."""
-    world = scene_export.light_group(scene.world, view_layer, "World")
-    grouped = scene.world is not None and world == scene.world.lightgroup
-    names = [world] + [world if grouped else f"{world}_Source_{k + 1}"
-                       for k in range(len(frame_sources.LAST_SOURCES))]
+    world, source_groups = scene_export.world_groups(scene, view_layer,
+                                                     len(frame_sources.LAST_SOURCES))
+    names = [world, *source_groups]
     for ob in scene.objects:
         if ob.type == "LIGHT" and ob.visible_get(view_layer=view_layer):
             names.append(scene_export.light_group(ob, view_layer, ob.name))

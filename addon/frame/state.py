@@ -252,11 +252,8 @@ class FrameState:
         self.full_world = self.world
         self.world, self.sources = sources.split_world(self.world,
                                                       sources.extraction_settings(scene.prt))
-        self.world_group = scene_export.light_group(scene.world, depsgraph.view_layer, "World")
-        # in the World's Blender Light Group its sources go with it; else each has its own
-        grouped = scene.world is not None and self.world_group == scene.world.lightgroup
-        self.source_groups = [self.world_group if grouped else f"{self.world_group}_Source_{k + 1}"
-                              for k in range(len(self.sources))]
+        self.world_group, self.source_groups = scene_export.world_groups(
+            scene, depsgraph.view_layer, len(self.sources))
         self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
         self.method = scene.prt.method
         self.settings = {name: getattr(scene.prt, name) for name in methods.scene_properties()}
