@@ -19,7 +19,7 @@ import numpy as np
 from ...core.scene import mesh as core_mesh, sides, visibility
 from ..frame import dynamic
 from .. import methods
-from . import scene_export, storage, surfaces
+from . import attributes, scene_export, storage, surfaces
 from ...core.pipeline.tracing import ObjectJob, PrecomputeJob
 
 
@@ -133,6 +133,11 @@ def commit_steps(scene, job: PrecomputeJob):
         ob.prt.back_sides = o.arrays.two_sided
         # what earlier runs stored (other methods' data too) is dropped with them
         storage.replace_all(ob, {storage.VISIBILITY: o.blob, **o.extra})
+        # an instance shares its source's mesh: attributes go on real objects only
+        if scene.prt.write_attributes and not isinstance(ob, storage.InstanceRecord):
+            attributes.write_precompute(ob, o.arrays, o.points, attributes.precompute_values(
+                o.bits, o.points.normals, job.resolution, scene.prt.attribute_sh_order),
+                job.warnings.append)
         yield (i + 1) / steps
     for ob in scene.objects:             # instances no longer there lose their records
         storage.keep_instances(ob, kept.get(ob, ()))

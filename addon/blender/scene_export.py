@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import bpy
 import numpy as np
@@ -244,6 +245,31 @@ def object_materials(ob_eval, warnings: list, colours=None, scalars=None) -> lis
 
 # --------------------------------------------------------------------------- lamps
 
+def pass_name(name: str) -> str:
+    """``name`` as a render pass / light group name: letters, digits and underscores (the
+    characters Blender allows in a Light Group's name; a dot would split an EXR layer)."""
+    return re.sub(r"[^A-Za-z0-9_]", "_", str(name)) or "_"
+
+
+def light_group(id_block, view_layer, fallback: str) -> str:
+    """The light group a lamp or the World (``id_block``) is drawn in for the
+    ``Combined_<group>`` passes: its Blender Light Group (Object / World properties) when
+    the view layer has one of that name, else ``fallback`` (its own name) made a pass name."""
+    name = getattr(id_block, "lightgroup", "") or ""
+    if name and view_layer is not None and name in {g.name for g in view_layer.lightgroups}:
+        return name
+    return pass_name(fallback)
+
+
+def world_groups(scene, view_layer, sources: int) -> tuple[str, list]:
+    """(the World's light group, each of its ``sources`` compact sources'): in the World's
+    Blender Light Group its sources go with it, else each is ``<World>_Source_<k>``."""
+    world = light_group(scene.world, view_layer, "World")
+    grouped = scene.world is not None and view_layer is not None and \
+        scene.world.lightgroup in {g.name for g in view_layer.lightgroups}
+    return world, [world if grouped else f"{world}_Source_{k + 1}" for k in range(sources)]
+
+
 def export_lamps(depsgraph, warnings: list | None = None) -> list:
     """Visible point/spot/sun/area lights as :class:`core.sg.lighting.Lamp` (eq. 32-33 for
     point and spot lamps; others are reported in ``warnings`` and skipped)."""
@@ -254,15 +280,16 @@ def export_lamps(depsgraph, warnings: list | None = None) -> list:
         if ob.type != "LIGHT":
             continue
         light = ob.data
+        group = light_group(ob.original, depsgraph.view_layer, ob.original.name)
         M = np.array(inst.matrix_world, dtype=np.float64)
         direction = -M[:3, 2]
         color = np.asarray(tuple(light.color), dtype=np.float64) * float(light.energy)
         if light.type == "SUN":
             lamps.append(lamp_lobes.Lamp("SUN", color=color, direction=direction,
-                                          angle=float(light.angle), name=ob.name))
+                                          angle=float(light.angle), name=ob.name, group=group))
         elif light.type in ("POINT", "SPOT"):
             kw = dict(color=color, position=M[:3, 3], direction=direction,
-                      radius=float(light.shadow_soft_size), name=ob.name)
+                      radius=float(light.shadow_soft_size), name=ob.name, group=group)
             if light.type == "SPOT":
                 kw.update(spot_size=float(light.spot_size), spot_blend=float(light.spot_blend))
             lamps.append(lamp_lobes.Lamp(light.type, **kw))
@@ -275,7 +302,7 @@ def export_lamps(depsgraph, warnings: list | None = None) -> list:
             lamp = lamp_lobes.Lamp("AREA", color=color, position=M[:3, 3],
                                     direction=direction, half_x=0.5 * sx * M[:3, 0],
                                     half_y=0.5 * sy * M[:3, 1], shape=light.shape,
-                                    name=ob.name)
+                                    name=ob.name, group=group)
             if lamp.area > 0.0:
                 lamps.append(lamp)
         else:

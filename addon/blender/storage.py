@@ -29,6 +29,7 @@ import bpy
 
 from ...core.common import codec
 from ..frame import keys
+from . import attributes
 from ...core.store.layouts import BOUNCE, SHADOW_FIELD, VISIBILITY  # noqa: F401  (the blob names)
 
 STORE = "prt_store"
@@ -178,9 +179,11 @@ def remove_legacy() -> int:
 def clear_all() -> int:
     """Remove everything the add-on stored in the .blend: every object's blobs, ``prt_*``
     properties and record (also of objects no scene shows), the earlier layout's images,
-    the scenes' precompute record.  Objects linked from a library keep theirs (that
-    file holds it).  Returns how many objects had data."""
+    the scenes' precompute record, the meshes' PRT attributes (:mod:`.attributes`).
+    Objects linked from a library keep theirs (that file holds it).  Returns how many
+    objects had data."""
     count = sum(clear_object(ob) for ob in bpy.data.objects if ob.library is None)
+    attributes.remove_all(bpy.data)
     remove_legacy()
     for scene in bpy.data.scenes:
         prt = getattr(scene, "prt", None)

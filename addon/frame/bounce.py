@@ -47,6 +47,23 @@ def stored_rows(ob, points: int, note=None):
     return got, k
 
 
+def occlusion_test(objs):
+    """``occluded(origins, dirs, dists)`` -> (N,) bool against the synced objects ``objs``
+    (lamps' shadow rays; the Embree scene kept per geometry)."""
+    key = tuple(st.fingerprint for st in objs)
+    scene = keys.held(_OCCLUDERS, key, (), lambda: visibility.build_occluder_scene(
+        np.concatenate([core_mesh.occluder_triangles(st.arrays)[0] for st in objs])))
+    diag = core_mesh.bounding_diagonal(np.concatenate([st.arrays.positions for st in objs]))
+    step = 1e-4 * max(diag, 1e-6)
+
+    def occluded(origins, dirs, dists):
+        o = np.ascontiguousarray(origins + step * dirs, np.float32)
+        d = np.ascontiguousarray(dirs, np.float32)
+        far = np.ascontiguousarray(np.minimum(dists - 2 * step, 1e30), np.float32)
+        return scene.run(o, d, dists=far, query="OCCLUDED") != -1
+    return occluded
+
+
 class FrameBounce:
     """The bounce transfer of the objects synced into a frame state."""
 
@@ -129,19 +146,7 @@ class FrameBounce:
 
     def _occluded(self, state):
         """``occluded(origins, dirs, dists)`` against the static objects (lamps' shadows)."""
-        objs = [state.objects[i] for i, _ in self.receivers]
-        key = tuple(st.fingerprint for st in objs)
-        scene = keys.held(_OCCLUDERS, key, (), lambda: visibility.build_occluder_scene(
-            np.concatenate([core_mesh.occluder_triangles(st.arrays)[0] for st in objs])))
-        diag = core_mesh.bounding_diagonal(np.concatenate([st.arrays.positions for st in objs]))
-        step = 1e-4 * max(diag, 1e-6)
-
-        def occluded(origins, dirs, dists):
-            o = np.ascontiguousarray(origins + step * dirs, np.float32)
-            d = np.ascontiguousarray(dirs, np.float32)
-            far = np.ascontiguousarray(np.minimum(dists - 2 * step, 1e30), np.float32)
-            return scene.run(o, d, dists=far, query="OCCLUDED") != -1
-        return occluded
+        return occlusion_test([state.objects[i] for i, _ in self.receivers])
 
     def cluster_radiance(self, state) -> np.ndarray:
         """(K, 3) the radiance the clusters send, all bounces summed."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import threading
 
 import bpy
@@ -14,6 +15,7 @@ from ...core.sphere import envmap
 from ...core.shading import pixel_filter
 from ...core.common.parallel import Cancelled
 from ..gpu import drawing, lights, sharp
+from . import passes
 from .state import FrameState, TexturedRadiance
 
 
@@ -241,6 +243,67 @@ class ViewportShading:
                 self.version += 1
 
 
+def data_passes(state, layer, frame) -> dict:
+    """The view layer's data passes, Ambient Occlusion and Environment (passes.py)."""
+    view, projection, width, height, _, _, s, filter_width = frame
+    out = {}
+    for attr, name, _, _, _ in passes.DATA_PASSES:
+        if not getattr(layer, attr, False):
+            continue
+        state.tick()
+        if name == "Environment":     # the World seen directly, the objects black
+            black = [np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+                     for st in state.objects]
+            out[name] = draw_pixels(state, black, view, projection, width, height, False,
+                                    s, filter_width=filter_width)[..., :3]
+        else:
+            out[name] = passes.data_pass(state, name, view, projection, width, height, s,
+                                         filter_width)
+    return out
+
+
+def light_passes(state, frame) -> dict:
+    """Diffuse / Glossy Direct, Indirect and Color (passes.LIGHT_PASSES): the frame drawn
+    again without bounced light with its own base colours and with black ones (glossy),
+    the bounced light alone, and the base colours; each light pass is its part over its
+    colour pass (Cycles' division).  The bounced light's glossy part (FrameState.
+    bounced_radiance) is Glossy Indirect."""
+    view, projection, width, height, _, persp, s, filter_width = frame
+    drawn = (view, projection, width, height, True, persp, s, filter_width)
+    direct = render_pixels(_without_bounce(state), *drawn)
+    glossy = render_pixels(passes.with_base(state, 0.0), *drawn)
+    colour = draw_pixels(state, passes.base_colours(state), view, projection, width, height,
+                         True, s, filter_width=filter_width)
+    bounced = glossy_bounced = np.zeros_like(colour)
+    if state.bounce is not None:
+        plain, white, glossy_part = state.bounced_radiance(*_eye(view, persp))
+        diffuse, shiny = [], []
+        for st, b, w, g in zip(state.objects, plain, white, glossy_part):
+            if b is None:
+                b = w = g = np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+            d = np.asarray(b) - np.asarray(g)           # the diffuse base's, coloured
+            diffuse.append(TexturedRadiance.of(d, w, np.zeros_like(d)) if st.textures else d)
+            shiny.append(np.asarray(g))
+        bounced = draw_pixels(state, diffuse, view, projection, width, height, True, s,
+                              filter_width=filter_width)
+        glossy_bounced = draw_pixels(state, shiny, view, projection, width, height, True, s,
+                                     filter_width=filter_width)
+    cover = np.repeat(colour[..., 3:4], 3, axis=2)
+    return {"Diffuse Direct": passes.divided(direct[..., :3] - glossy[..., :3],
+                                             colour[..., :3]),
+            "Diffuse Indirect": passes.divided(bounced[..., :3], colour[..., :3]),
+            "Diffuse Color": colour[..., :3],
+            "Glossy Direct": passes.divided(glossy[..., :3], cover),
+            "Glossy Indirect": passes.divided(glossy_bounced[..., :3], cover),
+            "Glossy Color": cover}
+
+
+def _without_bounce(state):
+    sub = copy.copy(state)
+    sub.bounce = None
+    return sub
+
+
 #: a function to run inside the next render() instead of drawing (:func:`in_render`)
 _RENDER_TASK: list = []
 
@@ -318,19 +381,51 @@ class PRTRenderEngine(bpy.types.RenderEngine):
                 self.report({"ERROR"}, "PRT Relight: " + state.error)
             for w in state.warnings:
                 self.report({"WARNING"}, "PRT Relight: " + w)
+            layer = depsgraph.view_layer
+            groups = passes.light_groups(state) if passes.groups_wanted(scene, layer) else []
+            frame = (view, projection, width, height, r.film_transparent, persp,
+                     scene.prt.supersampling, r.filter_size)
+            # Combined, then each light group's frame (as costly as Combined each)
+            share = 0.9 / (1 + len(groups))
             self.update_stats("PRT Relight", f"Shading ({state.method}; ESC stops)")
-            with state.span(0.1, 1.0):
-                pixels = render_pixels(state, view, projection, width, height,
-                                       r.film_transparent, persp, scene.prt.supersampling,
-                                       r.filter_size)
+            with state.span(0.1, 0.1 + share):
+                pixels = render_pixels(state, *frame)
+            extra = {}
+            for k, group in enumerate(groups):
+                self.update_stats("PRT Relight", f"Light group {group} ({k + 1}/{len(groups)}; "
+                                  "ESC stops)")
+                with state.span(0.1 + share * (k + 1), 0.1 + share * (k + 2)):
+                    extra[f"Combined_{group}"] = render_pixels(passes.muted(state, group),
+                                                               *frame)[..., :3]
+            extra.update(data_passes(state, layer, frame))
+            wanted = {name for attr, name, *_ in passes.LIGHT_PASSES if getattr(layer, attr, False)}
+            if wanted:
+                self.update_stats("PRT Relight", "Diffuse and glossy passes (ESC stops)")
+                extra.update({k: v for k, v in light_passes(state, frame).items()
+                              if k in wanted})
         except Cancelled:
             self.update_stats("PRT Relight", "Stopped")
             self.report({"WARNING"}, "PRT Relight: render stopped (ESC); nothing was drawn")
             return
-        result = self.begin_result(0, 0, width, height, layer=depsgraph.view_layer.name)
+        channels = {name: (n, chan) for name, n, chan, _ in passes.wanted(scene, layer)}
+        for name, px in extra.items():
+            n = px.shape[-1]
+            self.add_pass(name, n, channels.get(name, (n, "RGB" if n == 3 else "Z"))[1],
+                          layer=layer.name)
+        result = self.begin_result(0, 0, width, height, layer=layer.name)
         result.layers[0].passes["Combined"].rect.foreach_set(
             np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1))
+        for name, px in extra.items():
+            result.layers[0].passes[name].rect.foreach_set(
+                np.ascontiguousarray(px, dtype=np.float32).reshape(-1))
         self.end_result(result)
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        """The passes F12 writes, registered so the compositor's Render Layers node shows
+        them (as Cycles registers its own)."""
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        for name, n, chan, kind in passes.wanted(scene, renderlayer):
+            self.register_pass(scene, renderlayer, name, n, chan, kind)
 
     # ------------------------------------------------------------- viewport
     def view_update(self, context, depsgraph):

@@ -204,6 +204,12 @@ class FrameState:
         self.background = None       # (world, GPU texture) cached by the engine
         #: the frame's bounced light (addon.frame.bounce.FrameBounce), None: direct only
         self.bounce = None
+        #: the light group of the World and of each compact source (addon.frame.passes;
+        #: each lamp carries its own, core.sg.lamp_lobes.Lamp.group)
+        self.world_group = "World"
+        self.source_groups: list[str] = []
+        #: the World is muted (a light group pass without it): its part of the frame is zero
+        self.world_muted = False
         #: the camera of the frame being drawn (set by the engine before shading):
         #: dict(clip=4×4 world-to-clip, width, height, eye, view_dir), or None
         self.camera: dict | None = None
@@ -250,6 +256,8 @@ class FrameState:
         self.full_world = self.world
         self.world, self.sources = sources.split_world(self.world,
                                                       sources.extraction_settings(scene.prt))
+        self.world_group, self.source_groups = scene_export.world_groups(
+            scene, depsgraph.view_layer, len(self.sources))
         self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
         self.method = scene.prt.method
         self.settings = {name: getattr(scene.prt, name) for name in methods.scene_properties()}
@@ -394,7 +402,7 @@ class FrameState:
         ``eye``: camera position for perspective views; ``view_dirs_for`` a unit
         direction toward an orthographic camera (then ``eye`` is ignored).
         """
-        out = self.method_impl.shade(self, eye, view_dirs_for)
+        out = self._method_shade(self, eye, view_dirs_for)
         bounced = white = glossy = None
         if out is not None and self.bounce is not None:
             # the bounce reaches every receiver (addon.frame.bounce)
@@ -407,8 +415,8 @@ class FrameState:
         # white and with black, their difference is what the texture multiplies per pixel
         sub = copy.copy(self)
         sub.objects = [self.objects[i] for i in textured]
-        white_radiance = self.method_impl.shade(_with_base(sub, 1.0), eye, view_dirs_for)
-        black = self.method_impl.shade(_with_base(sub, 0.0), eye, view_dirs_for)
+        white_radiance = self._method_shade(_with_base(sub, 1.0), eye, view_dirs_for)
+        black = self._method_shade(_with_base(sub, 0.0), eye, view_dirs_for)
         for i, w, b in zip(textured, white_radiance, black):
             diffuse = np.asarray(w) - np.asarray(b)
             if white is not None and white[i] is not None:
@@ -416,6 +424,17 @@ class FrameState:
                 b = np.asarray(b) + glossy[i]
             out[i] = TexturedRadiance.of(out[i], diffuse, b)
         return out
+
+    def _method_shade(self, state, eye, view_dirs_for):
+        """The method's per-corner radiance of ``state``; zero without computing it when
+        the World is muted and the method draws no lit lamp of its own (a light group pass:
+        a per-vertex method's radiance is the World's light alone)."""
+        impl = state.method_impl
+        if state.world_muted and not (impl.draws_lamps and any(
+                np.any(np.asarray(lamp.color) != 0.0) for lamp in state.lamps)):
+            return [np.zeros((len(st.arrays.corner_verts), 3), np.float32)
+                    for st in state.objects]
+        return impl.shade(state, eye, view_dirs_for)
 
     def bounced_radiance(self, eye, view_dirs_for=None) -> tuple[list, list, list]:
         """Per object, per corner (C, 3) float32 or None: the bounced light it sends toward

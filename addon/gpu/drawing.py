@@ -108,6 +108,23 @@ def surface_shader(added: bool = False):
     return shaders.shader("surface", ("ADDED",) if added else ())
 
 
+def data_shader():
+    """Per-vertex values of a data render pass, unclamped (surface_frag.glsl's DATA)."""
+    return shaders.shader("surface", ("DATA",))
+
+
+def data_batch(positions: np.ndarray, values: np.ndarray, triangles: np.ndarray,
+               closed_side: int = 0):
+    """:func:`surface_batch` of per-corner data values (C, 3) for :func:`data_shader`."""
+    rgba = np.empty((len(values), 4), dtype=np.float32)
+    rgba[:, :3] = values
+    rgba[:, 3] = float(closed_side)
+    return batch_for_shader(data_shader(), "TRIS",
+                            {"pos": np.ascontiguousarray(positions, dtype=np.float32),
+                             "radiance": rgba},
+                            indices=np.ascontiguousarray(triangles, dtype=np.int32))
+
+
 def textured_shader(added: bool = False):
     """Per-vertex radiance times a per-pixel colour (shaders/passes/surface_tex_*.glsl)."""
     return shaders.shader("surface_tex", ("ADDED",) if added else ())
@@ -247,11 +264,12 @@ def _quad_batch():
 
 
 def draw_frame(batches, background, view_projection, transparent: bool, object_draws=(),
-               added_draws=()):
+               added_draws=(), shader=None):
     """Draw into the bound framebuffer.  ``background`` = (texture, rotation 4x4, strength);
     ``object_draws``: callables ``draw(view_projection)`` of a per-pixel method;
     ``added_draws``: callables whose output is added onto the surfaces already drawn
-    (depth test equal, no depth writes: the per-pixel sharp lobes)."""
+    (depth test equal, no depth writes: the per-pixel sharp lobes); ``shader``: what
+    ``batches`` are drawn with (the per-vertex radiance shader unless given)."""
     fb = gpu.state.active_framebuffer_get()
     fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
     gpu.state.blend_set("NONE")
@@ -269,7 +287,7 @@ def draw_frame(batches, background, view_projection, transparent: bool, object_d
         _quad_batch().draw(sh)
     gpu.state.depth_test_set("LESS_EQUAL")
     gpu.state.depth_mask_set(True)
-    sh = surface_shader()
+    sh = surface_shader() if shader is None else shader
     sh.bind()
     sh.uniform_float("viewProjection", view_projection)
     for batch in batches:
@@ -287,13 +305,14 @@ def draw_frame(batches, background, view_projection, transparent: bool, object_d
 
 
 def render_offscreen(batches, background, view_projection, width, height, transparent,
-                     object_draws=(), added_draws=()):
-    """Draw a frame offscreen; return linear RGBA (height, width, 4), bottom row first."""
+                     object_draws=(), added_draws=(), shader=None):
+    """Draw a frame offscreen (:func:`draw_frame`); return linear RGBA (height, width, 4),
+    bottom row first."""
     offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
     try:
         with offscreen.bind():
             draw_frame(batches, background, view_projection, transparent, object_draws,
-                       added_draws)
+                       added_draws, shader)
             fb = gpu.state.active_framebuffer_get()
             buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
         buf.dimensions = width * height * 4

@@ -72,8 +72,9 @@ SPECS: dict[str, Spec] = {
         vertex=("passes/surface_vert.glsl",), fragment=_COMMON + ("passes/surface_frag.glsl",),
         push_constants=_VIEW, vertex_inputs=(("VEC3", "pos"), ("VEC4", "radiance")),
         varyings=(("smooth", "VEC4", "vRadiance"),),
-        # added onto a frame already drawn (a per-pixel method's bounced light): alpha 0
-        switches=("ADDED",)),
+        # added onto a frame already drawn (a per-pixel method's bounced light): alpha 0;
+        # DATA: a data render pass's values, unclamped (addon/frame/passes.py)
+        switches=("ADDED", "DATA")),
     # per-vertex radiance times a slot's colour per pixel (drawing.textured_draws)
     "surface_tex": Spec(
         vertex=("passes/surface_tex_vert.glsl",),

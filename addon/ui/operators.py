@@ -1,5 +1,5 @@
 """Operators: ``prt.precompute`` (modal with progress/ESC in the UI, synchronous in -b),
-``prt.clear`` and ``prt.auto_choose`` (AUTO's stored choice made again; modal with
+``prt.clear``, ``prt.bake`` (addon/frame/baking.py) and ``prt.auto_choose`` (AUTO's stored choice made again; modal with
 progress/ESC in the UI, synchronous in -b).
 
 A modal operator never blocks the UI for long: the trace runs in a worker thread; what
@@ -14,12 +14,14 @@ import time
 import types
 
 import bpy
+from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ...core.scene import visibility
 from ...core.common.parallel import Cancelled
 from .. import methods
 from ...core.pipeline import frame_status
 from ..blender import precompute, scene_export, storage
+from ..frame import baking
 
 #: Modal precomputes in progress (kept out of the .blend, unlike a scene property).
 RUNNING: set = set()
@@ -251,6 +253,49 @@ class PRT_OT_clear(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class PRT_OT_bake(bpy.types.Operator):
+    """Bake the relit irradiance, radiance or ambient occlusion of the selected objects
+    into an image texture on a UV map or into a Color Attribute"""
+
+    bl_idname = "prt.bake"
+    bl_label = "Bake PRT"
+    bl_options = {"REGISTER", "UNDO"}
+
+    quantity: EnumProperty(name="Bake", default="IRRADIANCE", items=[
+        ("IRRADIANCE", "Irradiance", "The light arriving (World, lamps, bounces): a lightmap "
+                                     "to multiply by the material's colour"),
+        ("RADIANCE", "Radiance", "The diffuse light leaving toward the scene camera"),
+        ("AO", "Ambient Occlusion", "The cosine-weighted open sky")])
+    target: EnumProperty(name="Into", default="IMAGE", items=[
+        ("IMAGE", "Image Texture", "A float image per object on its UV map, packed"),
+        ("COLOR_ATTRIBUTE", "Color Attribute", "A Face Corner colour attribute of its mesh")])
+    uv_map: StringProperty(name="UV Map", default="",
+                           description="The UV map the image is laid on (empty: the one "
+                                       "rendered)")
+    size: IntProperty(name="Size", default=1024, min=16, max=16384,
+                      description="Width and height of the image in pixels")
+    margin: IntProperty(name="Margin", default=16, min=0, max=256,
+                        description="Pixels the islands are dilated by at their seams")
+    rotations: StringProperty(name="World Rotations", default="",
+                              description="Turns of the World about Z in degrees, added to "
+                                          "its rotation, e.g. '0 90 180 270': one result "
+                                          "each (empty: the current rotation only)")
+
+    def execute(self, context):
+        try:
+            made, notes = baking.bake(
+                context.scene, context.evaluated_depsgraph_get(),
+                [o.name for o in context.selected_objects], self.quantity, self.target,
+                self.uv_map, self.size, self.margin, baking.parse_turns(self.rotations))
+        except ValueError as exc:
+            self.report({"ERROR"}, f"PRT bake: {exc}")
+            return {"CANCELLED"}
+        for note in notes:
+            self.report({"WARNING"}, f"PRT bake: {note}")
+        self.report({"INFO"}, "PRT bake: " + ", ".join(made))
+        return {"FINISHED"}
+
+
 class PRT_OT_auto_choose(bpy.types.Operator):
     """Choose AUTO's method and budget per object again for the scene as it is now, weighed
     by the scene camera's image, and store the choice with the scene"""
@@ -331,7 +376,7 @@ def choice_step(op, context, event):
     return {"RUNNING_MODAL"}
 
 
-CLASSES = (PRT_OT_precompute, PRT_OT_clear, PRT_OT_auto_choose)
+CLASSES = (PRT_OT_precompute, PRT_OT_clear, PRT_OT_bake, PRT_OT_auto_choose)
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

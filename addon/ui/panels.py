@@ -30,6 +30,11 @@ def draw_settings(layout, context):
     if any(o.prt.dynamic for o in scene.objects if o.type in ("MESH", "EMPTY")):
         col.prop(prt, "field_detail")
     col.prop(prt, "ray_offset")
+    row = col.row()
+    row.prop(prt, "write_attributes")
+    sub = row.row()
+    sub.active = prt.write_attributes
+    sub.prop(prt, "attribute_sh_order", text="SH Order")
     col.prop(prt, "supersampling")
     sub = col.row()
     sub.active = prt.supersampling > 1
@@ -39,6 +44,7 @@ def draw_settings(layout, context):
     row.operator("prt.precompute", icon="LIGHT_SUN")
     row.operator("prt.clear", text="", icon="TRASH")
     layout.operator("prt.report", icon="GRAPH")
+    layout.operator("prt.bake", icon="RENDER_STILL")
     if prt.last_report:
         layout.label(text=prt.last_report, icon="INFO")
     if prt.precomputed_resolution and str(prt.precomputed_resolution) != prt.resolution:
@@ -86,6 +92,33 @@ class PRT_PT_render(bpy.types.Panel):
         draw_settings(self.layout, context)
 
 
+class PRT_PT_passes(bpy.types.Panel):
+    """The passes F12 writes beside Combined (addon/frame/passes.py), as Cycles names them."""
+    bl_label = "PRT Relight Passes"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "view_layer"
+    COMPAT_ENGINES = {"PRT_RELIGHT"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+    def draw(self, context):
+        layer = context.view_layer
+        col = self.layout.column(heading="Data")
+        for attr, label in (("use_pass_z", "Z"), ("use_pass_position", "Position"),
+                            ("use_pass_normal", "Normal")):
+            col.prop(layer, attr, text=label)
+        col = self.layout.column(heading="Light")
+        col.prop(layer, "use_pass_ambient_occlusion", text="Ambient Occlusion")
+        col.prop(layer, "use_pass_environment", text="Environment")
+        col.prop(context.scene.prt, "light_group_passes")
+        if len(layer.lightgroups):
+            col.label(text="Light Groups: " + ", ".join(g.name for g in layer.lightgroups),
+                      icon="LIGHT")
+
+
 class PRT_PT_sidebar(bpy.types.Panel):
     bl_label = "PRT Relight"
     bl_space_type = "VIEW_3D"
@@ -96,7 +129,7 @@ class PRT_PT_sidebar(bpy.types.Panel):
         draw_settings(self.layout, context)
 
 
-CLASSES = (PRT_PT_render, PRT_PT_sidebar)
+CLASSES = (PRT_PT_render, PRT_PT_passes, PRT_PT_sidebar)
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

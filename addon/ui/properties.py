@@ -48,6 +48,21 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
                ("MEDIUM", "Medium", "12 shells of 6×12² samples, 24² maps"),
                ("HIGH", "High", "16 shells of 6×16² samples, 32² maps (Xu et al. 2006)")],
         description="Sampling of the dynamic objects' shadow fields (precomputed with them)")
+    light_group_passes: BoolProperty(
+        name="Light Group Passes", default=False,
+        description="F12 writes a Combined_<group> pass per light group -- the World, each "
+                    "compact source of it, each lamp, or the view layer's Light Groups -- "
+                    "summing to Combined, for the compositor; each group costs another "
+                    "frame (on as well when the view layer has Light Groups)")
+    write_attributes: BoolProperty(
+        name="Mesh Attributes", default=True,
+        description="Precompute writes each object's PRT AO, PRT Bent Normal and SH transfer "
+                    "(PRT SH 0, ...) as Face Corner attributes of its mesh (the Spreadsheet, "
+                    "the Attribute node, Geometry Nodes); Clear removes them")
+    attribute_sh_order: IntProperty(
+        name="SH Attribute Order", default=3, min=0, max=5,
+        description="Order of the SH transfer vector written as attributes (order² of "
+                    "them, PRT SH 0 ...; 0 = none)")
     # Written by the precompute operator (read-only in the UI).
     precomputed_resolution: IntProperty(name="Precomputed Directions", default=0)
     last_report: StringProperty(name="Last Precompute", default="")

@@ -383,3 +383,23 @@ def perturbed_normals(normal_source: NormalSource, uv, normal, tangent=None, sig
     dh2 = np.sum(dh * duv[:, 1], axis=-1)
     g = surface_gradient(normal, dp[:, 0], dp[:, 1], dh1, dh2)
     return bump_normals(normal, g, normal_source.distance, normal_source.strength)
+
+
+def dilate(image: np.ndarray, covered: np.ndarray, pixels: int):
+    """A baked map's margin: ring by ring, up to ``pixels`` times, each texel no triangle
+    covers next to one that is takes the mean of its covered 4-neighbours (so bilinear
+    filtering and mip maps at a UV island's edge read the island, not black).  Returns
+    (image, covered) anew."""
+    img = np.array(image, dtype=np.float32, copy=True)
+    done = np.array(covered, dtype=bool, copy=True)
+    for _ in range(max(0, int(pixels))):
+        pad_v = np.pad(img * done[..., None], ((1, 1), (1, 1), (0, 0)))
+        pad_d = np.pad(done, 1).astype(np.float32)
+        total = pad_v[:-2, 1:-1] + pad_v[2:, 1:-1] + pad_v[1:-1, :-2] + pad_v[1:-1, 2:]
+        count = pad_d[:-2, 1:-1] + pad_d[2:, 1:-1] + pad_d[1:-1, :-2] + pad_d[1:-1, 2:]
+        new = ~done & (count > 0)
+        if not new.any():
+            break
+        img[new] = total[new] / count[new][:, None]
+        done |= new
+    return img, done

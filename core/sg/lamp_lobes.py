@@ -28,6 +28,8 @@ class Lamp:
                (its local x and y axes times half its size, object scale included).
     shape:     AREA: "SQUARE", "RECTANGLE", "DISK" or "ELLIPSE".
     name:      the Blender object's name (what the panel and the render log call it).
+    group:     the light group whose ``Combined_<group>`` render pass it is drawn in
+               (no part of its light).
     """
 
     kind: str
@@ -42,6 +44,7 @@ class Lamp:
     half_y: tuple = (0.0, 0.0, 0.0)
     shape: str = "SQUARE"
     name: str = ""
+    group: str = ""
 
     def __post_init__(self):
         self.kind = str(self.kind).upper()

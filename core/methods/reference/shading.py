@@ -76,6 +76,29 @@ def sky_visibility(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> 
     return out
 
 
+def bent_normals(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap) -> np.ndarray:
+    """Each point's bent normal, (P, 3) unit: the cosine-weighted mean of its visible
+    directions (the way the open sky lies); its normal where nothing is visible."""
+    normals = np.asarray(normals, dtype=np.float32)
+    dirs = cube.directions.astype(np.float32)
+    dw = cube.solid_angles.astype(np.float32)
+    out = np.array(normals, dtype=np.float32, copy=True)
+    block = block_points(cube.resolution)
+
+    def block_bent(a, b):
+        w = normals[a:b] @ dirs.T
+        np.maximum(w, 0.0, out=w)
+        w *= dw
+        w *= np.unpackbits(np.asarray(vis_bits[a:b], np.uint8), axis=1, count=cube.size)
+        mean = w @ dirs
+        length = np.linalg.norm(mean, axis=1, keepdims=True)
+        seen = length[:, 0] > 1e-12
+        out[a:b][seen] = mean[seen] / length[seen]
+
+    for_blocks(len(normals), block, block_bent)
+    return out
+
+
 #: an edge "jumps" when its endpoints' sky visibility differs by more than this
 COARSE_JUMP = 0.25
 #: a mesh is too coarse for its shadows when more than this share of its edges jump

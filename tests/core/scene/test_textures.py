@@ -284,3 +284,20 @@ def test_terminator_factor_is_the_masking_of_a_bump_roughness():
     # light under the smooth normal's horizon, in front of the mapped normal: none
     n = np.array([[0.0, 0.8, 0.6]])
     assert textures.bump_shadowing(ns, n, np.array([[0.0, 0.99, -0.14]]))[0] == 0.0
+
+
+def test_dilate_fills_a_margin_from_covered_neighbours():
+    img = np.zeros((8, 8, 3), np.float32)
+    covered = np.zeros((8, 8), bool)
+    covered[3:5, 3:5] = True
+    img[3:5, 3:5] = (1.0, 2.0, 3.0)
+    img[0, 0] = 9.0                        # not covered: overwritten, never read
+    out, done = textures.dilate(img, covered, 2)
+    # two 4-neighbour steps: every texel within Manhattan distance 2 of the block
+    i, j = np.mgrid[0:8, 0:8]
+    reach = np.maximum(np.maximum(3 - i, i - 4), 0) + np.maximum(np.maximum(3 - j, j - 4), 0)
+    assert np.array_equal(done, reach <= 2)
+    np.testing.assert_allclose(out[done], np.tile((1.0, 2.0, 3.0), (done.sum(), 1)))
+    assert out[0, 0, 0] == 9.0 and np.array_equal(out[covered], img[covered])
+    same, _ = textures.dilate(img, covered, 0)
+    np.testing.assert_array_equal(same, img)

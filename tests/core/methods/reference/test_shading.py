@@ -189,3 +189,22 @@ def test_point_views():
                                [[0.0, 0.0, 1.0], np.array([-1.0, -2.0, 1.0]) / np.sqrt(6.0)])
     ortho = reference.point_views(pos, eye=None, view_dir=np.array([0.0, 1.0, 0.0]))
     assert ortho.shape == (2, 3) and np.all(ortho == [0.0, 1.0, 0.0])
+
+
+def test_bent_normals_and_open_sky_against_quadrature():
+    """Open: the bent normal is the normal, the open sky 1.  The +x half of the sky
+    blocked (a mask, no geometry): half the sky, and the bent normal along the clamped
+    cosine's first moment over the -x half, (-2/3, 0, pi/3) by the integrals below."""
+    cube = directions.cubemap(N)
+    nrm = np.array([[0.0, 0.0, 1.0]] * 2)
+    up = cube.directions[:, 2] > 0
+    open_ = np.packbits(up)[None]
+    half = np.packbits(up & (cube.directions[:, 0] < 0))[None]
+    bits = np.concatenate([open_, half])
+    bent = reference.bent_normals(bits, nrm, cube)
+    sky = reference.sky_visibility(bits, nrm, cube)
+    np.testing.assert_allclose(bent[0], (0.0, 0.0, 1.0), atol=1e-6)
+    np.testing.assert_allclose(sky, (1.0, 0.5), atol=2e-3)
+    # x: ∫cos φ dφ over the half (-2) times ∫cos θ sin² θ dθ (1/3); z: π ∫cos² θ sin θ dθ
+    want = np.array([-2.0 / 3.0, 0.0, np.pi / 3.0])
+    np.testing.assert_allclose(bent[1], want / np.linalg.norm(want), atol=5e-3)
