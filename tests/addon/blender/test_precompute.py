@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon.blender import precompute
+from prt_relight.addon.blender import precompute, storage
 from prt_relight.addon.frame import state as runtime
 from prt_relight.core.common.parallel import Cancelled
 from prt_relight.core.pipeline import tracing
