@@ -477,9 +477,18 @@ void main()
   smoothN = normalize(vNrm);
   vec4 eye = param(8, 0);
   vec3 o = view_direction(eye, vPos);
-  if (mapped && dot(ng, o) > 0.0) {
-    n = valid_reflection_normal(ng, o, n);   /* Cycles' bump map correction: glossy only */
+  /* Cycles turns every glossy closure's normal until the mirror reflection clears the
+   * triangle (ensure_valid_specular_reflection): a smooth normal bent at a crease as much
+   * as a mapped one (the glossy terms only; the sharp pass does the same) */
+  if (dot(ng, o) > 0.0) {
+    n = valid_reflection_normal(ng, o, n);
   }
+  /* the (sub)pixel's mirror directions span |dx x dy| (ray differentials), which Cycles
+   * integrates the pixel over: a lobe narrower than that box (per-axis variance
+   * |d|^2 / 12 against the lobe's 2 alpha^2) is widened to it, so a source smaller than
+   * the pixel's reflection lights the pixel by its share, not by a hit or a miss */
+  vec3 mirror = reflect(-o, n);
+  float footprint = length(cross(dFdx(mirror), dFdy(mirror)));
   o = bent_view(n, o);
   float cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
   vec4 kd = param(0, 0);
@@ -490,6 +499,7 @@ void main()
 #endif
   vec4 lobe = param(1, 0);
   float a = texAlpha > 0.0 ? texAlpha : max(lobe.x, MICROFACET_ALPHA_MIN);
+  a = max(a, sqrt(footprint / 24.0));
   int dist = int(lobe.y);
   int lobes = int(lobe.z);
 #ifdef GLOSSY

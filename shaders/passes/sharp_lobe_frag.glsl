@@ -77,8 +77,10 @@ vec3 env_level(int l, vec2 uv)
   return a * (1.0 - fy) + b * fy;
 }
 
-/* the environment averaged over solid angle `omega` around world direction d */
-vec3 env_filtered(vec3 d, float omega)
+/* the environment averaged around world direction d over solid angle `omega` (a sample's
+ * share of the lobe, read LOD_BIAS levels sharper) or `share` (its share of the pixel's
+ * footprint, unbiased: the samples' mip boxes then tile the footprint), the wider */
+vec3 env_filtered(vec3 d, float omega, float share)
 {
   vec3 t = envRot * d;
   float u = fract(0.5 - atan(t.y, t.x) / (2.0 * PI));
@@ -86,7 +88,9 @@ vec3 env_filtered(vec3 d, float omega)
   float v = acos(ct) / PI;
   vec4 info = param(2);
   float texel = (2.0 * PI / info.x) * (PI / info.y) * max(sqrt(1.0 - ct * ct), 0.5 / info.y);
-  float lod = omega > 0.0 ? clamp(0.5 * log2(omega / texel) + LOD_BIAS, 0.0, info.z) : 0.0;
+  float lod = omega > 0.0 ? 0.5 * log2(omega / texel) + LOD_BIAS : 0.0;
+  lod = share > 0.0 ? max(lod, 0.5 * log2(share / texel)) : lod;
+  lod = clamp(lod, 0.0, info.z);
   int l0 = int(floor(lod));
   float f = lod - float(l0);
   vec3 c = env_level(l0, vec2(u, v));
@@ -252,7 +256,19 @@ void main()
   float a = rough * rough;
   int dist = int(lobe.y);
   int lobes = int(lobe.z);
-  int K = a > 0.0 ? int(lobe.w) : 1;
+  /* The (sub)pixel's mirror directions span the parallelogram dx, dy (ray differentials),
+   * which Cycles integrates the pixel over.  The lobe already blurs over its own width
+   * (std sqrt(2) alpha per axis in reflected directions); what it leaves of the box's
+   * variance (|d|^2 / 12) is made up by moving each sample to a point of a box shrunk to
+   * that variance, so a lobe narrower than the footprint (a sub-pixel source in a mirror)
+   * is integrated over the pixel, not hit or missed per sample; a mirror takes K samples
+   * too when it has a footprint. */
+  vec3 mirror = reflect(-o, n);
+  vec3 dx = dFdx(mirror), dy = dFdy(mirror);
+  dx *= sqrt(max(1.0 - 24.0 * a * a / max(dot(dx, dx), 1e-12), 0.0));
+  dy *= sqrt(max(1.0 - 24.0 * a * a / max(dot(dy, dy), 1e-12), 0.0));
+  float footprint = length(cross(dx, dy));
+  int K = (a > 0.0 || footprint > 0.0) ? int(lobe.w) : 1;
   vec3 ms[2];
   for (int j = 0; j < min(lobes, 2); j++) {
     ms[j] = multiscatter(j, rough, cos_o);
@@ -262,9 +278,6 @@ void main()
   float lam_o = smith_lambda(dist, a, cos_o);
   vec3 color = vec3(0.0);
   vec2 shift = pixel_shift();      /* the sample set turned per pixel */
-  /* the solid angle of the mirror directions over this fragment (ray differentials) */
-  vec3 mirror = reflect(-o, n);
-  float footprint = length(cross(dFdx(mirror), dFdy(mirror)));
   for (int s = 0; s < K; s++) {
     vec3 h = n;
     if (a > 0.0) {
@@ -285,12 +298,14 @@ void main()
     }
     float nh = max(dot(n, h), 1e-6);
     float g2 = 1.0 / (1.0 + smith_lambda(dist, a, cos_i) + lam_o);
-    /* the sample's solid angle 1 / (K pdf), pdf = D (n.h) / (4 o.h), and at least the
-     * solid angle the (sub)pixel's mirror directions span: the environment is averaged
-     * over the footprint Cycles integrates the pixel over (a mirror's alone) */
+    /* the sample's solid angle 1 / (K pdf), pdf = D (n.h) / (4 o.h), 0 for a mirror, or
+     * its share of the footprint */
     float omega = a > 0.0 ? 4.0 * oh / (float(K) * ndf(dist, a, nh) * nh) : 0.0;
-    omega = max(omega, footprint);
-    vec3 light = env_filtered(i, omega) * visibility(i);
+    /* read at a point of the footprint (an R2 sequence, turned per pixel unlike the
+     * NDF's samples); the horizon tests above are the fragment's own */
+    vec2 at = fract(float(s) * vec2(0.7548776662, 0.5698402910) + shift.yx) - 0.5;
+    vec3 seen = normalize(i + at.x * dx + at.y * dy);
+    vec3 light = env_filtered(seen, omega, footprint / float(K)) * visibility(seen);
     vec3 f = vec3(0.0);
     for (int j = 0; j < min(lobes, 2); j++) {
       vec4 k0 = param(4 + 3 * j);
