@@ -12,6 +12,7 @@ extraction; the shadow maps follow.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -182,6 +183,10 @@ def material_texels(material, eye4, closed_side=0) -> np.ndarray:
     if material.has_diffuse:
         p[0, 0, :3] = np.asarray(material.diffuse_albedo) / math.pi
         p[0, 0, 3] = 1.0
+    # a slot whose lobes the sharp pass draws: it reflects the World there (its sources
+    # too), the lamps here
+    p[0, 9, 1] = 1.0 if material.per_pixel_lobe else 0.0
+    material = replace(material, per_pixel_lobe=False)
     lobes = [] if material.is_diffuse_only else core_brdf.sharp_lobes(material)
     r = material.table_roughness
     p[0, 1] = (max(r * r, core_brdf.MICROFACET_ALPHA_MIN),
@@ -244,9 +249,11 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
                                              plan.face_tile) \
         if any(any(f) for f in plan.faces) else (drawing.white_texture(), [])
     src = np.zeros((len(sources), SOURCE_TEXELS, 4), np.float32)
+    in_world = len(state.sources)           # the World's sources come first, all distant
     for k, s in enumerate(distant):
         src[k, 0] = (*s.direction, s.radius)
         src[k, 1] = (*s.radiance, 1.0 if s.point_like else 0.0)
+        src[k, 8, 0] = 1.0 if k < in_world else 0.0
         if k < len(tiles):                      # else tile size 0: no shadow
             M, tile, depth_range, texel = tiles[k]
             src[k, 2:6] = M.T                   # columns of the matrix (GLSL mat4 order)

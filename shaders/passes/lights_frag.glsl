@@ -18,7 +18,8 @@
  * paramTex (one material slot), row 0: 0 (albedo / pi, has diffuse), 1 (alpha,
  * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
  * weight, eta, -), (f0, -), (B, -) (core.shading.brdf.sharp_lobes), 8 eye (w = 1 perspective),
- * 9 (core.scene.mesh.closed_side of the object, -, -, -), 11 (roughness nodes n, alpha floor),
+ * 9 (core.scene.mesh.closed_side of the object, 1 when the sharp pass draws the slot's
+ * lobes (the World's sources' glossy then left to it), -, -), 11 (roughness nodes n, alpha floor),
  * 12-15 a textured Roughness (texture.glsl's info, mapping rows, mix colour);
  * 16 a normal or bump map (kind 0 none / 1 Normal Map / 2 Bump, strength, distance, -),
  * 17-20 its image (info, mapping rows, mix colour: texture.glsl mapped_normal);
@@ -29,7 +30,8 @@
  * srcTex, row s per source: 0 (direction toward it, angular radius), 1 (radiance, kind:
  * 0 a disc, 1 point-like (radiance is then its irradiance)), 2..5 world-to-shadow-clip
  * columns, 6 (atlas tile origin x, y and size in texels, depth range in world units),
- * 7 (shadow texel size in world units, the map's x axis in world space); tile size 0:
+ * 7 (shadow texel size in world units, the map's x axis in world space), 8 (1 for a
+ * compact source of the World's image, 0 for a sun lamp, -, -, -); tile size 0:
  * no shadow map (past the atlas's budget, addon/frame/sources.py shadow_plan).  A local lamp:
  * 0 (position, sphere radius), 1 (power times colour, kind 2 point / 3 spot), 2 (spot
  * axis, cos of its half angle), 3 (spot smoothstep width), 6 (-, -, cubeTex face size; 0:
@@ -504,8 +506,10 @@ void main()
   int lobes = int(lobe.z);
 #ifdef GLOSSY
   bool glossy = lobe.w > 0.5 && lobes > 0;
+  bool sharpSlot = param(9, 0).y > 0.5;
 #else
   const bool glossy = false;
+  const bool sharpSlot = false;
 #endif
   vec3 wd = table(1, cos_o);
   vec3 ms0 = table(2, cos_o), ms1 = table(3, cos_o);
@@ -543,6 +547,10 @@ void main()
     vec3 c = s0.xyz;
     float r = s0.w;
     float kind = s1.w;      /* 0 disc, 1 point-like direction, 2 point, 3 spot, 4/5 area */
+    /* a slot whose lobes the sharp pass draws reflects the World there, its compact
+     * sources included (srcTex texel 8: 1 for a source of the World's image); its lamps
+     * only here */
+    bool glossyHere = glossy && !(sharpSlot && kind < 1.5 && source(s, 8).x > 0.5);
 #ifdef AREA_LAMPS
     if (kind > 3.5) {                 /* an area lamp: a rectangle (4) or an ellipse (5) */
       if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
@@ -550,7 +558,8 @@ void main()
       }
       float Va = local_visibility(s, vPos, ng, s0.xyz, s0.w, shift);
       if (Va > 0.0) {
-        color += Va * area_lamp(s, kind > 4.5, n, nd, ng, o, cos_o, kd, wd, a, dist, lobes, glossy,
+        color += Va * area_lamp(s, kind > 4.5, n, nd, ng, o, cos_o, kd, wd, a, dist, lobes,
+                                glossyHere,
                                 lam_o, ms0, ms1, tx, ty, shift);
       }
       continue;
@@ -593,7 +602,7 @@ void main()
     if (kind > 0.5) {                               /* point-like: its irradiance */
       if (dot(ng, c) > 0.0) {
         sum = (kd.rgb * wd * max(dot(nd, c), 0.0) * (mapped ? bump_shadowing(smoothN, nd, c) : 1.0) +
-               (glossy ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
+               (glossyHere ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
                        : vec3(0.0))) * s1.rgb;
       }
     }
@@ -610,7 +619,7 @@ void main()
         sum += kd.rgb * wd * (PI * sr * sr * nc) * L *
                (mapped ? bump_shadowing(smoothN, nd, c) : 1.0);
       }
-      for (int l = 0; l < (glossy || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
+      for (int l = 0; l < (glossyHere || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
         vec2 u = fract(vec2((float(l) + 0.5) / float(NL), radical_inverse(l)) + shift);
         vec3 i = cone_sample(c, cos_r, u);
         if (dot(ng, i) <= 0.0) {
@@ -621,7 +630,7 @@ void main()
           f += kd.rgb * wd * max(dot(nd, i), 0.0) * (omega / float(NL)) *
                (mapped ? bump_shadowing(smoothN, nd, i) : 1.0);
         }
-        if (glossy) {
+        if (glossyHere) {
           float pl = 1.0 / omega;
           float pb = ndf_pdf(n, o, i, a, dist);
           f += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) /
@@ -629,7 +638,7 @@ void main()
         }
         sum += f * L;
       }
-      if (glossy) {
+      if (glossyHere) {
         for (int b = 0; b < NB; b++) {
           vec3 i;
           if (!ndf_direction(b, n, o, a, dist, tx, ty, shift, i) ||

@@ -91,3 +91,37 @@ def test_chrome_sphere_reflecting_sub_pixel_lamps_matches_cycles(tmp_path):
     assert rel_l2_converged(ours, truth)[2] < 0.25
     mean = 0.5 * (truth[0][..., :3] + truth[1][..., :3])
     assert abs(ours[..., :3].sum() / mean.sum() - 1.0) < 0.05
+
+
+@pytest.mark.slow
+def test_lamps_reflected_in_a_mirror_like_metal_match_cycles(tmp_path):
+    """A metal sphere (roughness 0.02: its lobes drawn by the sharp pass) under three small
+    point lamps and 'night', 48^2: the lamps' highlights were not drawn at all (the lights
+    pass took the slot for diffuse only; the image's energy 0.78 of Cycles', 42 % off with
+    them drawn but not widened to the pixel's footprint); now within 1 % of Cycles' energy
+    and within its noise."""
+    from prt_relight.core.report.metrics import rel_l2_converged
+    scenes.reset()
+    scenes.add_world("night")
+    scenes.add_ground(size=6.0, cuts=24)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32, radius=0.7,
+                                         location=(0.0, 0.0, 0.7))
+    bpy.ops.object.shade_smooth()
+    bpy.context.object.data.materials.append(scenes.bsdf_material(
+        "Metal", "ShaderNodeBsdfPrincipled", Metallic=1.0, Roughness=0.02,
+        **{"Base Color": (0.9, 0.9, 0.9, 1.0)}))
+    for k, location in enumerate(((1.5, -2.0, 2.5), (-2.0, -1.0, 3.0), (0.5, 1.5, 3.5))):
+        data = bpy.data.lights.new(f"Lamp{k}", "POINT")
+        data.energy, data.shadow_soft_size = 300.0, 0.01
+        lamp = bpy.data.objects.new(f"Lamp{k}", data)
+        lamp.location = location
+        bpy.context.scene.collection.objects.link(lamp)
+    scenes.add_camera(location=(0.0, -4.5, 1.6), rotation=(1.35, 0.0, 0.0), resolution=(48, 48))
+    truth = [scenes.render_exr(tmp_path / f"cycles{k}.exr", "CYCLES", 1024, seed=k)
+             for k in range(2)]
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    bpy.context.scene.prt.method = "REFERENCE"
+    ours = scenes.render_exr(tmp_path / "ours.exr")
+    mean = 0.5 * (truth[0][..., :3] + truth[1][..., :3])
+    assert abs(ours[..., :3].sum() / mean.sum() - 1.0) < 0.06
+    assert rel_l2_converged(ours, truth)[2] < 0.2
