@@ -39,7 +39,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-lamps bench-methods bench-bounces report clean distclean
+.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-lamps bench-frames bench-methods bench-bounces report clean distclean
 
 setup: apt venv
 
@@ -136,6 +136,14 @@ bench-dynamic: setup
 LAMPS_ARGS ?=
 bench-lamps: setup
 	$(VENV_PY) bench/bench_lights.py --lamps $(LAMPS_ARGS)
+
+# Relit frames against Workbench (issue 32): every method on the diffuse, sun, glossy,
+# textured, three-lamp and 1080p teapot scenes, relit F12 and viewport frames as ratios to
+# Workbench in one run, with the profile of a relit F12 (about 15 minutes on 2 cores;
+# FRAMES_ARGS="--append docs/measurements.md" records the run).
+FRAMES_ARGS ?=
+bench-frames: setup
+	$(VENV_PY) bench/bench_frames.py $(FRAMES_ARGS)
 
 # Each method against REFERENCE on its held-out scenes (long: tens of minutes on 2 cores).
 bench-methods: setup

@@ -6,6 +6,8 @@ in the same run; with ``--lamps``, the frame cost per lamp.
     python bench/bench_lights.py [--out out/bench_lights] [--methods REFERENCE,SH,...]
     python bench/bench_lights.py --lamps [--counts 0,1,4,16,64] [--method SH]
                                  [--size 128x96] [--spot-deg 50] [--append docs/measurements.md]
+    python bench/bench_lights.py --sun-seeds [--seeds 12] [--spp 1024] [--size 128 96]
+                                 [--methods REFERENCE,SH,...] [--out out/bench_sun_seeds]
 
 Scenes: Suzanne on a 96² ground under a dim sky with one 1-pixel sun (2·10⁴), the same
 Suzanne diffuse under 'forest' (a soft HDRI), and Beckmann 0.3 glossy under 'sunrise'.
@@ -23,6 +25,12 @@ frame, ``engine.render_pixels`` inside a render) and with the scene's Anti-Alias
 samples).  The method's own shading does not depend on the lamps (SH by default: its
 per-vertex shading is the cheapest, so the lamps' share shows).  Times are the best of five
 frames (the least disturbed on a shared machine).
+
+``--sun-seeds``: the error against converged Cycles where Cycles itself is noisy, the *sun*
+scene (Cycles' 1024 spp frames differ from each other by 3-16 % rel-L2 there, fireflies)
+rendered by Cycles with N seeds: ``core.report.metrics.rel_l2_converged`` (the per-seed
+variance subtracted), printed with the raw figure and the mean's own noise; Cycles frames
+are kept and reused (per seed, size and spp).
 """
 
 from __future__ import annotations
@@ -36,7 +44,7 @@ import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import scenes  # noqa: E402
-from prt_relight.core.report.metrics import rel_l2  # noqa: E402  (importing scenes registers prt_relight)
+from prt_relight.core.report.metrics import rel_l2, rel_l2_converged  # noqa: E402  (importing scenes registers prt_relight)
 
 import numpy as np  # noqa: E402
 
@@ -231,7 +239,45 @@ def lamp_cost(argv):
             f.write("\n" + "\n".join(lines))
 
 
+def sun_seeds(argv):
+    """``--sun-seeds``: the sun scene against converged Cycles (the module's docstring)."""
+    ap = argparse.ArgumentParser(description="the sun scene against converged Cycles")
+    ap.add_argument("--seeds", type=int, default=12)
+    ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--size", type=int, nargs=2, default=[128, 96])
+    ap.add_argument("--methods", default=",".join(METHODS + ["BLOCKS"]))
+    ap.add_argument("--out", default="out/bench_sun_seeds")
+    args = ap.parse_args(argv)
+    import bpy
+    out = scenes.ROOT / args.out
+    out.mkdir(parents=True, exist_ok=True)
+    build("sun")
+    sc = bpy.context.scene
+    sc.render.resolution_x, sc.render.resolution_y = args.size
+    scenes.precompute(32)
+    w, h = args.size
+    frames = []
+    for s in range(args.seeds):
+        p = out / f"cycles_{w}x{h}_{args.spp}_{s}.exr"
+        if not p.exists():
+            scenes.render_cycles(p, samples=args.spp, seed=s)
+        frames.append(scenes.read_exr(p))
+    print(f"sun scene {w}×{h}, Cycles {args.seeds} seeds × {args.spp} spp")
+    print("| method | vs the mean | the mean's noise | est. vs converged |")
+    print("|---|---|---|---|")
+    for m in args.methods.split(","):
+        sc.prt.method = m
+        scenes.render_prt(out / f"{m}.exr")
+        raw, noise, est = rel_l2_converged(scenes.read_exr(out / f"{m}.exr"), frames)
+        print(f"| {m} | {100 * raw:.2f} % | {100 * noise:.2f} % | {100 * est:.2f} % |",
+              flush=True)
+
+
+
 def main():
+    if "--sun-seeds" in sys.argv:
+        sun_seeds([a for a in sys.argv[1:] if a != "--sun-seeds"])
+        return
     if "--lamps" in sys.argv:
         lamp_cost([a for a in sys.argv[1:] if a != "--lamps"])
         return

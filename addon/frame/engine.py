@@ -12,7 +12,6 @@ from gpu_extras.presets import draw_texture_2d
 from mathutils import Matrix
 
 from ...core.sphere import envmap
-from ...core.shading import pixel_filter
 from ...core.common.parallel import Cancelled
 from ..gpu import drawing, lights, sharp
 from . import passes
@@ -152,13 +151,10 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
         else []
     if object_draws is not None and state.bounce is not None:
         added += _bounce_draws(state, eye, view_dir)
-    big = drawing.render_offscreen(batches, background, projection @ view,
-                                   width * s, height * s, transparent,
-                                   object_draws=list(object_draws or ()) + textured,
-                                   added_draws=added)
-    if s > 1:
-        big = pixel_filter.resolve(big, s, filter_width)
-    return big
+    return drawing.render_offscreen(batches, background, projection @ view, width, height,
+                                    transparent, object_draws=list(object_draws or ()) + textured,
+                                    added_draws=added, supersampling=s,
+                                    filter_width=filter_width)
 
 
 def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: int, height: int,

@@ -16,6 +16,7 @@ import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 from ...core.common.cache import Cache, clear_all
+from ...core.shading import pixel_filter
 from . import shaders
 
 #: width of the data textures whose texels run on across rows (a shading point's stored
@@ -305,20 +306,68 @@ def draw_frame(batches, background, view_projection, transparent: bool, object_d
 
 
 def render_offscreen(batches, background, view_projection, width, height, transparent,
-                     object_draws=(), added_draws=(), shader=None):
+                     object_draws=(), added_draws=(), shader=None, supersampling: int = 1,
+                     filter_width: float = 0.0):
     """Draw a frame offscreen (:func:`draw_frame`); return linear RGBA (height, width, 4),
-    bottom row first."""
-    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    bottom row first.  With ``supersampling`` s > 1 the frame is drawn at s times the size
+    per axis and resolved on the GPU with the pixel filter of ``filter_width`` pixels
+    (:func:`resolve`), so only its pixels are read back."""
+    s = max(1, int(supersampling))
+    offscreen = gpu.types.GPUOffScreen(width * s, height * s, format="RGBA32F")
     try:
         with offscreen.bind():
             draw_frame(batches, background, view_projection, transparent, object_draws,
                        added_draws, shader)
-            fb = gpu.state.active_framebuffer_get()
-            buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
-        buf.dimensions = width * height * 4
-        return np.array(buf, dtype=np.float32).reshape(height, width, 4)
+            if s == 1:
+                return _read(gpu.state.active_framebuffer_get(), width, height)
+        return resolve(offscreen.texture_color, width, height, s, filter_width)
     finally:
         offscreen.free()
+
+
+def _read(fb, width, height):
+    buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
+    buf.dimensions = width * height * 4
+    return np.array(buf, dtype=np.float32).reshape(height, width, 4)
+
+
+def _taps_texture(pixels, s, filter_width):
+    """(margin, tap count, R32F texture of the taps, a row per pixel)."""
+    margin, weights = pixel_filter.resolve_taps(pixels, s, filter_width)
+    flat = np.ascontiguousarray(weights, dtype=np.float32).reshape(-1)
+    tex = gpu.types.GPUTexture((weights.shape[1], pixels), format="R32F",
+                               data=gpu.types.Buffer("FLOAT", flat.size, flat))
+    return margin, weights.shape[1], tex
+
+
+def resolve(texture, width, height, s, filter_width):
+    """A (width·s, height·s) frame texture resolved to (height, width, 4) pixels with the
+    pixel filter (core.shading.pixel_filter.resolve_taps), x then y, on the GPU."""
+    sh = shaders.shader("resolve")
+    quad = batch_for_shader(sh, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+                            indices=[(0, 1, 2), (0, 2, 3)])
+    across = gpu.types.GPUOffScreen(width, height * s, format="RGBA32F")
+    out = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        for axis, source, target, pixels in ((0, texture, across, width),
+                                             (1, None, out, height)):
+            margin, taps, tap_tex = _taps_texture(pixels, s, filter_width)
+            with target.bind():
+                gpu.state.depth_test_set("NONE")
+                gpu.state.blend_set("NONE")
+                sh.bind()
+                for name, value in (("axis", axis), ("samples", s), ("margin", margin),
+                                    ("taps", taps)):
+                    sh.uniform_int(name, value)
+                sh.uniform_sampler("frameTex", source if source is not None
+                                   else across.texture_color)
+                sh.uniform_sampler("tapTex", tap_tex)
+                quad.draw(sh)
+                if axis == 1:
+                    return _read(gpu.state.active_framebuffer_get(), width, height)
+    finally:
+        across.free()
+        out.free()
 
 
 def triangle_corners(st):

@@ -155,6 +155,12 @@ SPECS: dict[str, Spec] = {
         push_constants=(("MAT3", "envRot"), ("INT", "flatCount")),
         samplers=_SSDF_SG_SAMPLERS + (("FLOAT_2D", "flatTex"),),
         vertex_inputs=(("VEC2", "ndc"),)),
+    # the pixel filter along one axis (drawing.render_offscreen: x, then y)
+    "resolve": Spec(
+        vertex=("passes/fullscreen_vert.glsl",), fragment=("passes/resolve_frag.glsl",),
+        push_constants=tuple(("INT", n) for n in ("axis", "samples", "margin", "taps")),
+        samplers=(("FLOAT_2D", "frameTex"), ("FLOAT_2D", "tapTex")),
+        vertex_inputs=(("VEC2", "ndc"),)),
     # RSL's per-vertex pass: one texel per shading point (methods/rsl/shading.py)
     "rsl_vertex": Spec(
         vertex=("passes/fullscreen_vert.glsl",),

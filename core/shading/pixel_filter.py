@@ -26,37 +26,43 @@ def blackman_harris(offset, width: float) -> np.ndarray:
     return np.where(np.abs(v) < width, f, 0.0)
 
 
-def resolve_weights(pixels: int, samples_per_pixel: int, width: float) -> np.ndarray:
-    """(pixels, pixels·s) row-normalised weights of the samples for each pixel on one axis.
-
-    Samples beyond the frame do not exist, so border pixels renormalise over the samples
-    inside it.  A width too small to reach any sample falls back to the pixel's own box.
-    """
+def resolve_taps(pixels: int, samples_per_pixel: int, width: float):
+    """One axis of the filter as taps: ``(margin, weights)``, pixel ``p`` taking samples
+    ``p·s − margin + t`` for ``t < T`` with ``weights[p, t]`` ((pixels, T) float32, each row
+    summing to 1).  Samples beyond the frame do not exist (weight 0: border pixels
+    renormalise over the samples inside it); a width too small to reach any sample falls
+    back to the pixel's own box.  The GPU's resolve (addon/gpu/drawing.py) reads these."""
     s = max(1, int(samples_per_pixel))
-    centres = np.arange(pixels) + 0.5
-    positions = (np.arange(pixels * s) + 0.5) / s
-    own = (np.arange(pixels * s) // s)[None, :] == np.arange(pixels)[:, None]
+    margin = int(np.ceil(width * s)) if width > 0.0 else 0
+    p = np.arange(int(pixels))[:, None]
+    j = p * s - margin + np.arange(s + 2 * margin)[None, :]
+    inside = (j >= 0) & (j < int(pixels) * s)
+    own = (np.floor_divide(j, s) == p) & inside
     if width > 0.0:
-        w = blackman_harris(positions[None, :] - centres[:, None], float(width))
-        w = np.clip(w, 0.0, None)
+        w = blackman_harris((j + 0.5) / s - (p + 0.5), float(width))
+        w = np.where(inside, np.clip(w, 0.0, None), 0.0)
         empty = w.sum(axis=1) <= 0.0
         w[empty] = own[empty]
     else:
         w = own.astype(np.float64)
-    return w / w.sum(axis=1, keepdims=True)
+    return margin, (w / w.sum(axis=1, keepdims=True)).astype(np.float32)
+
+
+def _filter_axis(image: np.ndarray, axis: int, s: int, width: float) -> np.ndarray:
+    pixels = image.shape[axis] // s
+    margin, weights = resolve_taps(pixels, s, width)
+    shape = [1] * image.ndim
+    shape[axis] = pixels
+    out = 0.0
+    for t in range(weights.shape[1]):
+        idx = np.clip(np.arange(pixels) * s - margin + t, 0, image.shape[axis] - 1)
+        out = out + np.take(image, idx, axis=axis) * weights[:, t].reshape(shape)
+    return out
 
 
 def resolve(image: np.ndarray, samples_per_pixel: int, width: float) -> np.ndarray:
-    """(H·s, W·s, C) supersampled frame → (H, W, C) pixels with the filter above."""
+    """(H·s, W·s, C) supersampled frame → (H, W, C) pixels with the filter above, on the
+    CPU (a data pass; the frame itself is resolved on the GPU with the same taps)."""
     s = max(1, int(samples_per_pixel))
-    image = np.asarray(image)
-    height, width_px = image.shape[0] // s, image.shape[1] // s
-    if width <= 0.0:
-        return image.reshape(height, s, width_px, s, -1).mean(axis=(1, 3))
-    rows = resolve_weights(height, s, width).astype(np.float32)
-    cols = resolve_weights(width_px, s, width).astype(np.float32)
-    channels = image.shape[2]
-    flat = image.astype(np.float32, copy=False).reshape(height * s, width_px * s * channels)
-    tmp = (rows @ flat).reshape(height, width_px * s, channels)          # filter along y
-    out = np.einsum("xj,yjc->yxc", cols, tmp, optimize=True)             # then along x
-    return out.astype(np.float32, copy=False)
+    image = np.asarray(image, dtype=np.float32)
+    return _filter_axis(_filter_axis(image, 0, s, width), 1, s, width).astype(np.float32)
