@@ -57,3 +57,16 @@ def view_draw(depsgraph, view_matrix, window_matrix, width, height, perspective=
     buf = engine._view_texture.read()
     buf.dimensions = height * width * 4          # flat first: np.array of a 3D Buffer is wrong
     return engine, np.array(buf, dtype=np.float32).reshape(height, width, 4)
+
+
+def gpu_context():
+    """An empty scene rendered once by Workbench: the gpu module's context in -b."""
+    import bpy
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    scene.render.resolution_x, scene.render.resolution_y = 8, 8
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()

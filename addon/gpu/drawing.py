@@ -117,13 +117,7 @@ def data_shader():
 def data_batch(positions: np.ndarray, values: np.ndarray, triangles: np.ndarray,
                closed_side: int = 0):
     """:func:`surface_batch` of per-corner data values (C, 3) for :func:`data_shader`."""
-    rgba = np.empty((len(values), 4), dtype=np.float32)
-    rgba[:, :3] = values
-    rgba[:, 3] = float(closed_side)
-    return batch_for_shader(data_shader(), "TRIS",
-                            {"pos": np.ascontiguousarray(positions, dtype=np.float32),
-                             "radiance": rgba},
-                            indices=np.ascontiguousarray(triangles, dtype=np.int32))
+    return _corner_batch(data_shader(), positions, values, triangles, closed_side)
 
 
 def textured_shader(added: bool = False):
@@ -246,10 +240,14 @@ def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles: np.nda
     """Batch of one object's corners: positions (C, 3), radiance (C, 3), triangles (T, 3).
     ``closed_side`` (core.scene.mesh.closed_side) rides in the radiance's alpha: the shader
     draws a closed mesh's inner side black."""
-    rgba = np.empty((len(radiance), 4), dtype=np.float32)
-    rgba[:, :3] = radiance
+    return _corner_batch(surface_shader(), positions, radiance, triangles, closed_side)
+
+
+def _corner_batch(shader, positions, values, triangles, closed_side):
+    rgba = np.empty((len(values), 4), dtype=np.float32)
+    rgba[:, :3] = values
     rgba[:, 3] = float(closed_side)
-    return batch_for_shader(surface_shader(), "TRIS",
+    return batch_for_shader(shader, "TRIS",
                             {"pos": np.ascontiguousarray(positions, dtype=np.float32),
                              "radiance": rgba},
                             indices=np.ascontiguousarray(triangles, dtype=np.int32))

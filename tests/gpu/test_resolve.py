@@ -8,18 +8,10 @@ import pytest
 
 from prt_relight.core.shading import pixel_filter
 
+
 bpy = pytest.importorskip("bpy")
 
-
-def _gpu_context():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    scene.render.resolution_x, scene.render.resolution_y = 8, 8
-    scene.render.engine = "BLENDER_WORKBENCH"
-    bpy.ops.render.render()                    # gives the gpu module a context in -b
+from ..viewport import gpu_context  # noqa: E402
 
 
 @pytest.mark.parametrize("s, width", [(3, 1.5), (2, 1.5), (3, 0.0), (4, 0.6)])
@@ -29,7 +21,7 @@ def test_gpu_resolve_equals_the_filter(registered_addon, s, width):
     import gpu
     from prt_relight.addon.frame.engine import in_render
     from prt_relight.addon.gpu import drawing
-    _gpu_context()
+    gpu_context()
     h, w = 7, 11
     rng = np.random.default_rng(s)
     big = rng.random((h * s, w * s, 4)).astype(np.float32)

@@ -16,25 +16,16 @@ from ..core.methods.rsl.scenes import occluded_grid as _scene, sky_with_sun as _
 
 bpy = pytest.importorskip("bpy")
 
+from ..viewport import gpu_context  # noqa: E402
+
 CUBE = directions.cubemap(32)
-
-
-def _gpu_context():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    scene.collection.objects.link(cam)
-    scene.camera = cam
-    scene.render.resolution_x, scene.render.resolution_y = 8, 8
-    scene.render.engine = "BLENDER_WORKBENCH"
-    bpy.ops.render.render()                    # gives the gpu module a context in -b
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["VDT", "SAT"])
 def test_glsl_pass_equals_numpy(registered_addon, kind):
     from prt_relight.addon.methods.rsl import shading as method
-    _gpu_context()
+    gpu_context()
     pos, nrm, bits = _scene(8)
     maps = distance_tables.visibility_maps(bits, nrm, CUBE, 32)
     table = distance_tables.visibility_distance_table(maps) if kind == "VDT" else distance_tables.visibility_sat(maps)

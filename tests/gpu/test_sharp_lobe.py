@@ -59,24 +59,11 @@ def _smooth_environment(height=256, width=512):
     return (L * np.array([1.0, 0.8, 0.6])).astype(np.float32)
 
 
-@pytest.mark.parametrize("roughness, tilt, tol", [(0.0, 0.6, 1e-3), (0.1, 0.5, 0.03),
-                                                  (0.15, 0.8, 0.03), (0.15, 1.2, 0.03)])
-def test_glsl_lobe_matches_quadrature_of_the_environment(roughness, tilt, tol):
-    """A Glossy plane seen at ``tilt`` from the zenith through an orthographic camera:
-    every pixel has the same normal and view, so each is the lobe integral over the
-    equirect (numpy quadrature of core.shading.brdf; at roughness 0 the bilinear mirror
-    reflection, as Cycles' singular lobe reads the texture)."""
+def _ortho_mean(v, tilt):
+    """The scene's plane seen along ``v`` (``tilt`` from the zenith) by an 8x8 orthographic
+    camera, precomputed and drawn with its sharp lobe: the pixels' mean RGB."""
     from prt_relight.addon.frame.engine import render_pixels
     from prt_relight.addon.frame.state import FrameState
-
-    scenes.reset()
-    img = _smooth_environment()
-    scenes.add_world(image=scenes.float_image("env", img))
-    bpy.ops.mesh.primitive_plane_add(size=4.0)
-    plane = bpy.context.object
-    plane.data.materials.append(scenes.bsdf_material("G", "ShaderNodeBsdfGlossy",
-                                                 Roughness=roughness, distribution="GGX"))
-    v = np.array([0.0, -math.sin(tilt), math.cos(tilt)])
     cam = scenes.add_camera(location=tuple(6.0 * v), rotation=(tilt, 0.0, 0.0), resolution=None)
     cam.data.type = "ORTHO"
     cam.data.ortho_scale = 1.0
@@ -92,7 +79,26 @@ def test_glsl_lobe_matches_quadrature_of_the_environment(roughness, tilt, tol):
     cam_eval = cam.evaluated_get(depsgraph)
     pixels = render_pixels(state, cam_eval.matrix_world.inverted(),
                            cam_eval.calc_matrix_camera(depsgraph, x=8, y=8), 8, 8, True, False)
-    got = pixels[..., :3].reshape(-1, 3).mean(axis=0)
+    return pixels[..., :3].reshape(-1, 3).mean(axis=0)
+
+
+@pytest.mark.parametrize("roughness, tilt, tol", [(0.0, 0.6, 1e-3), (0.1, 0.5, 0.03),
+                                                  (0.15, 0.8, 0.03), (0.15, 1.2, 0.03)])
+def test_glsl_lobe_matches_quadrature_of_the_environment(roughness, tilt, tol):
+    """A Glossy plane seen at ``tilt`` from the zenith through an orthographic camera:
+    every pixel has the same normal and view, so each is the lobe integral over the
+    equirect (numpy quadrature of core.shading.brdf; at roughness 0 the bilinear mirror
+    reflection, as Cycles' singular lobe reads the texture)."""
+
+    scenes.reset()
+    img = _smooth_environment()
+    scenes.add_world(image=scenes.float_image("env", img))
+    bpy.ops.mesh.primitive_plane_add(size=4.0)
+    plane = bpy.context.object
+    plane.data.materials.append(scenes.bsdf_material("G", "ShaderNodeBsdfGlossy",
+                                                 Roughness=roughness, distribution="GGX"))
+    v = np.array([0.0, -math.sin(tilt), math.cos(tilt)])
+    got = _ortho_mean(v, tilt)
     if roughness == 0.0:
         expected = 0.8 * _bilinear(img, np.array([0.0, math.sin(tilt), math.cos(tilt)]))
     else:
@@ -154,8 +160,6 @@ def test_glsl_lobe_of_a_bent_normal_reflects_above_the_triangle():
     reflection clears the triangle; the pass does the same, so each pixel is the lobe
     reflection of the view about the corrected normal (core.scene.textures.
     valid_reflection_normal), just above the plane."""
-    from prt_relight.addon.frame.engine import render_pixels
-    from prt_relight.addon.frame.state import FrameState
     from prt_relight.core.scene.textures import valid_reflection_normal
 
     scenes.reset()
@@ -170,22 +174,7 @@ def test_glsl_lobe_of_a_bent_normal_reflects_above_the_triangle():
                                                      Roughness=0.0, distribution="GGX"))
     tilt = math.radians(70.0)
     v = np.array([0.0, -math.sin(tilt), math.cos(tilt)])
-    cam = scenes.add_camera(location=tuple(6.0 * v), rotation=(tilt, 0.0, 0.0), resolution=None)
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 1.0
-    scenes.set_resolution(8, 8)
-    bpy.ops.prt.precompute()
-    scene = bpy.context.scene
-    scene.render.engine = "BLENDER_WORKBENCH"
-    bpy.ops.render.render()                      # gives the gpu module a context in -b
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    state = FrameState()
-    state.sync(depsgraph)
-    assert state.objects[0].materials[0].per_pixel_lobe
-    cam_eval = cam.evaluated_get(depsgraph)
-    pixels = render_pixels(state, cam_eval.matrix_world.inverted(),
-                           cam_eval.calc_matrix_camera(depsgraph, x=8, y=8), 8, 8, True, False)
-    got = pixels[..., :3].reshape(-1, 3).mean(axis=0)
+    got = _ortho_mean(v, tilt)
     ng = np.array([0.0, 0.0, 1.0])
     mirror = 2.0 * (bent @ v) * bent - v
     assert mirror @ ng < 0.0                      # the uncorrected reflection is under the plane
