@@ -27,3 +27,21 @@ def small_scene(hdri="sunset", cuts=16, subdiv=1):
     scenes.add_camera(location=(0.0, -6.0, 3.0), rotation=(1.15, 0.0, 0.0), resolution=None)
     scenes.set_resolution(64, 48)
     bpy.context.scene.prt.supersampling = 2
+
+
+def save_every_method(path):
+    """Precompute the scene, store every storing method's data on the same job (BLOCKS,
+    RSL, SSDF_SG: each its derive/store) and save the .blend to ``path``."""
+    from prt_relight.addon import methods
+    from prt_relight.addon.blender import precompute
+    scene = bpy.context.scene
+    job = precompute.gather(bpy.context.evaluated_depsgraph_get(), scene.prt)
+    job.run()
+    precompute.commit(scene, job)
+    for method_id in ("BLOCKS", "RSL", "SSDF_SG"):
+        method = methods.get(method_id)
+        job.method = method_id
+        method.shading.store(scene, job, method.shading.derive(job))
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    return path
+

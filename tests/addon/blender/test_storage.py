@@ -10,8 +10,7 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import methods
-from prt_relight.addon.blender import precompute, storage
+from prt_relight.addon.blender import storage
 from prt_relight.core.store import layouts
 from prt_relight.addon.frame import state as runtime
 from prt_relight.addon.methods.blocks import shading as blocks
@@ -19,6 +18,8 @@ from prt_relight.addon.methods.rsl import shading as rsl
 from prt_relight.addon.methods.ssdf_sg import store as ssdf_sg_storage
 from prt_relight.core.common import codec
 from prt_relight.bench import scenes
+
+from ...cases.small import save_every_method
 
 
 pytestmark = pytest.mark.usefixtures("registered_addon")
@@ -73,16 +74,8 @@ def _loaded_by(name) -> list:
 def stored_file(registered_addon, tmp_path_factory):
     """A .blend whose objects hold the data of every storing method (one precompute,
     then each method's derive/store on the same job) and their blobs."""
-    scene = _scene()
-    job = precompute.gather(bpy.context.evaluated_depsgraph_get(), scene.prt)
-    job.run()
-    precompute.commit(scene, job)
-    for method_id in ("BLOCKS", "RSL", "SSDF_SG"):
-        method = methods.get(method_id)
-        job.method = method_id
-        method.shading.store(scene, job, method.shading.derive(job))
-    path = tmp_path_factory.mktemp("storage") / "stored.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    _scene()
+    path = save_every_method(tmp_path_factory.mktemp("storage") / "stored.blend")
     blobs = {ob.name: _blobs(ob) for ob in bpy.data.objects if ob.type == "MESH"}
     assert all(set(b) == set(BLOBS.values()) for b in blobs.values()), blobs.keys()
     return path, blobs

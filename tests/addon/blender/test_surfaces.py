@@ -10,13 +10,11 @@ import bpy
 import numpy as np
 import pytest
 
-from prt_relight.addon import methods
-from prt_relight.addon.blender import precompute, scene_export, storage, surfaces
+from prt_relight.addon.blender import scene_export, storage, surfaces
 from prt_relight.addon.frame import state as runtime
-from prt_relight.addon.methods.blocks import shading as blocks
-from prt_relight.addon.methods.rsl import shading as rsl
-from prt_relight.addon.methods.ssdf_sg import store as ssdf_sg_storage
 from prt_relight.bench import scenes
+
+from ...cases.small import save_every_method
 
 pytestmark = pytest.mark.usefixtures("registered_addon")
 
@@ -117,17 +115,7 @@ def test_geometry_instanced_without_an_object_and_nested_instances():
 def stored_herd(registered_addon, tmp_path_factory):
     """A saved herd of 3 collection instances holding every storing method's data."""
     _small_herd()
-    scene = bpy.context.scene
-    job = precompute.gather(bpy.context.evaluated_depsgraph_get(), scene.prt)
-    job.run()
-    precompute.commit(scene, job)
-    for method_id in ("BLOCKS", "RSL", "SSDF_SG"):
-        method = methods.get(method_id)
-        job.method = method_id
-        method.shading.store(scene, job, method.shading.derive(job))
-    path = tmp_path_factory.mktemp("herd") / "herd.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    return path
+    return save_every_method(tmp_path_factory.mktemp("herd") / "herd.blend")
 
 
 def _loaded_by(name) -> list:
