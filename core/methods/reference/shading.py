@@ -172,8 +172,9 @@ def specular_radiance(vis_bits: np.ndarray, positions: np.ndarray, normals: np.n
             out[a:b] = (f @ Lc) * np.asarray(material.specular_color, dtype=np.float32)
             return
         for lobe, weight in specular_terms(material, normals[a:b], view_dirs[a:b], d):
-            lobe *= visdw
-            out[a:b] += (lobe @ Lc) * weight
+            # not in place: terms may share one array (a part-metal Principled's metal and
+            # dielectric lobes both start with the bare lobe)
+            out[a:b] += ((lobe * visdw) @ Lc) * weight
 
     for_blocks(P, block, block_radiance, tick)
     return out

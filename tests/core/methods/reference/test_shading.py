@@ -71,17 +71,23 @@ def brute_visible(tris, origin_base, offset, dirs):
     return vis, margin
 
 
-def test_reference_matches_brute_force_loops():
-    n = 16
+def _occluded_points(n=16):
+    """Three ground points under a few random triangles, traced: (cube, triangles, points,
+    normals, bits, visibility, ray offset, rng)."""
     cube = directions.cubemap(n)
     rng = np.random.default_rng(12)
-    # a few triangles above a ground point at the origin
     tris = rng.uniform(-0.8, 0.8, size=(5, 3, 3)) + [0, 0, 1.0]
     tris[:, :, 2] = np.abs(tris[:, :, 2]) + 0.2
     pts = np.array([[0.0, 0.0, 0.0], [0.2, -0.1, 0.0], [-0.3, 0.25, 0.0]])
     nrm = unit(np.array([[0.0, 0.0, 1.0], [0.2, 0.1, 1.0], [-0.3, 0.0, 1.0]]))
     offset = 1e-4
     bits, vis = trace(tris, pts, nrm, n=n, offset=offset)
+    return cube, tris, pts, nrm, bits, vis, offset, rng
+
+
+def test_reference_matches_brute_force_loops():
+    n = 16
+    cube, tris, pts, nrm, bits, vis, offset, rng = _occluded_points(n)
 
     # visibility vs float64 brute force, ignoring texels grazing a triangle edge or the horizon
     for p in range(len(pts)):
@@ -125,6 +131,22 @@ def test_reference_matches_brute_force_loops():
     lam = reference.shade_points(bits, pts, nrm, np.zeros(len(pts), np.int64), [LAMBERT], eye,
                                  cube, light)
     np.testing.assert_allclose(lam, irr * np.array(LAMBERT.diffuse_albedo) / np.pi, rtol=1e-5)
+
+
+def test_part_metal_principled_glossy_matches_brute_force_loops():
+    """A Principled slot with metallic between 0 and 1 keeps both lobes (its metal and its
+    dielectric terms share the bare lobe: summing one must not change the other)."""
+    cube, _tris, pts, nrm, bits, vis, _offset, rng = _occluded_points()
+    img = rng.uniform(0.0, 3.0, size=(32, 64, 3)).astype(np.float32)
+    light = envmap.WorldLighting(img).to_cubemap(cube.resolution)
+    mat = materials.principled_material(base_color=(0.8, 0.5, 0.3), metallic=0.3, roughness=0.4)
+    eye = np.array([1.5, -2.0, 3.0])
+    got = reference.specular_radiance(bits, pts, nrm, eye, cube, light, mat)
+    for p in range(len(pts)):
+        view = unit(eye - pts[p])
+        f = brdf.specular_cosine(mat, nrm[p][None], view[None], light.unit_directions)[0]
+        want = ((f * light.radiance) * (vis[p] * cube.solid_angles)[:, None]).sum(axis=0)
+        np.testing.assert_allclose(got[p], want, rtol=1e-4)
 
 
 def test_reference_material_slots_and_view_dirs():
