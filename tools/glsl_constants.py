@@ -53,6 +53,7 @@ CONSTANTS = (
     # the microfacet lobes that match Cycles
     ("MICROFACET_ALPHA_MIN", "core.shading.microfacet:MICROFACET_ALPHA_MIN", "float"),
     ("COS_VIEW_MIN", "core.shading.brdf:COS_VIEW_MIN", "float"),
+    ("HALF_LEN2_FLOOR", "core.shading.brdf:HALF_LEN2_FLOOR", "float"),
     # textured inputs
     ("LUMINANCE", "core.scene.textures:LUMINANCE", "vec"),
     # SSDF_SG (core.methods.ssdf_sg)

@@ -323,6 +323,42 @@ def render_offscreen(batches, background, view_projection, width, height, transp
         offscreen.free()
 
 
+def texel_pass(shader, width: int, rows: int, ints=(), floats=(), samplers=()) -> np.ndarray:
+    """Run a pass that writes one texel per item (RSL's and REFERENCE's per-point passes) into
+    a (width, rows) RGBA32F target and read it back, (rows * width, 4) float32; ``ints``,
+    ``floats``, ``samplers``: (name, value) pairs bound first."""
+    offscreen = gpu.types.GPUOffScreen(width, rows, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
+            gpu.state.depth_test_set("NONE")
+            gpu.state.blend_set("NONE")
+            shader.bind()
+            for name, value in ints:
+                shader.uniform_int(name, value)
+            for name, value in floats:
+                shader.uniform_float(name, value)
+            for name, texture in samplers:
+                shader.uniform_sampler(name, texture)
+            batch_for_shader(shader, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+                             indices=[(0, 1, 2), (0, 2, 3)]).draw(shader)
+            return _read(fb, width, rows).reshape(rows * width, 4)
+    finally:
+        offscreen.free()
+
+
+def gpu_available() -> bool:
+    """A GPU pass can run: the main thread of a Blender with a GPU context."""
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    try:
+        return gpu.platform.backend_type_get() != "NONE"
+    except Exception:
+        return False
+
+
 def _read(fb, width, height):
     buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
     buf.dimensions = width * height * 4

@@ -21,8 +21,8 @@ import numpy as np
 
 from ...core.shading import brdf as core_brdf
 from ...core.sphere import envmap
-from ...core.scene import textures, visibility as core_visibility
-from . import drawing, shaders
+from ...core.scene import textures
+from . import drawing, shaders, visibility
 from ..blender import texture_export
 from ..frame import keys
 
@@ -33,11 +33,10 @@ SAMPLES = 32
 ROUGHNESS_NODES = 17
 #: cos_o nodes of a multiscatter row (values i / (TABLE - 1), sharp_lobe_frag.glsl)
 TABLE = 32
-# per object: (geometry fingerprint, sharp slots) -> batch; visibility textures per bits
+# per object: (geometry fingerprint, sharp slots) -> batch
 _BATCHES = drawing.gpu_cache({})
 # the vertex format every feature set of the pass draws
 _FORMAT = drawing.gpu_cache({}, limit=1)
-_VISIBILITY = drawing.gpu_cache({})
 _MIPS = drawing.gpu_cache({})
 
 
@@ -118,28 +117,6 @@ def _texture(rgba: np.ndarray):
     return drawing.float_texture(np.ascontiguousarray(rgba, dtype=np.float32))
 
 
-def visibility_texels(bits: np.ndarray):
-    """(rows, drawing.ROW_TEXELS, 4) float32 of bit-packed visibility (P, nbytes): three bytes
-    per float (exact below 2^24), point p's floats from texel p * stride; and the stride."""
-    floats = core_visibility.bytes_to_float24(bits)              # (P, nbytes / 3)
-    P, F = floats.shape
-    stride = -(-F // 4)
-    flat = np.zeros((P, stride * 4), np.float32)
-    flat[:, :F] = floats
-    total = max(P * stride, 1)
-    rows = -(-total // drawing.ROW_TEXELS)
-    out = np.zeros(rows * drawing.ROW_TEXELS * 4, np.float32)
-    out[:flat.size] = flat.reshape(-1)
-    return out.reshape(rows, drawing.ROW_TEXELS, 4), stride
-
-
-def _visibility_texture(st):
-    def make():
-        texels, stride = visibility_texels(st.bits)
-        return _texture(texels), stride
-    return keys.per_visibility(_VISIBILITY, (st.name, id(st.bits)), st.bits, make, limit=16)
-
-
 def _mip_texture(world):
     """(texture, levels) of the equirect's mip pyramid below level 0 (newest world image)."""
     img = world.image
@@ -215,7 +192,7 @@ def draws(state, eye, view_dir, background) -> list:
         batches = _batches(st, slots)
         if not batches:
             continue
-        vis_tex, stride = _visibility_texture(st)
+        vis_tex, stride = visibility.texture(st)
         slot_draws = []
         for slot, batch in batches:
             rough = texture_export.shader_inputs(st, slot).get("Roughness")

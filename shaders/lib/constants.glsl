@@ -21,6 +21,7 @@ const float WARP_MU_MIN = 0.02;  /* core.sg.ggx_warp.WARP_MU_MIN */
 const int WARP_MU_NODES = 21;  /* core.sg.ggx_warp: len(WARP_MU) */
 const float MICROFACET_ALPHA_MIN = 0.001;  /* core.shading.microfacet.MICROFACET_ALPHA_MIN */
 const float COS_VIEW_MIN = 0.0001;  /* core.shading.brdf.COS_VIEW_MIN */
+const float HALF_LEN2_FLOOR = 1e-20;  /* core.shading.brdf.HALF_LEN2_FLOOR */
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);  /* core.scene.textures.LUMINANCE */
 const vec3 FRAME_REF = vec3(0.2672612419124244, 0.5345224838248488, 0.8017837257372732);  /* core.methods.ssdf_sg.ssdf.FRAME_REF */
 const vec3 FRAME_REF_ALT = vec3(-0.8017837257372732, 0.2672612419124244, 0.5345224838248488);  /* core.methods.ssdf_sg.ssdf.FRAME_REF_ALT */

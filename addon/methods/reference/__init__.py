@@ -4,9 +4,11 @@ every cubemap texel, the yardstick every other method is measured against."""
 from .. import register
 from ..contract import Method
 from .shading import ReferenceShading
+from .settings import ReferenceSettings
 
 METHOD = register(Method(
     'REFERENCE', 'Reference',
     ('Pixel-basis triple product over every cubemap texel (exact for the cubemap; '
                  'slowest)'),
-    shading=ReferenceShading()))
+    shading=ReferenceShading(),
+    settings=ReferenceSettings()))

@@ -1,5 +1,7 @@
 """REFERENCE: the pixel-basis triple product over every cubemap texel (exact for the
-cubemap; the yardstick every other method is measured against)."""
+cubemap; the yardstick every other method is measured against).  The diffuse sums are
+numpy (cached per lighting); the glossy sums, which change with the view, run as a GPU pass
+where a GPU context is at hand (``scene.prt.reference_gpu``), numpy otherwise."""
 
 from __future__ import annotations
 
@@ -8,8 +10,11 @@ import numpy as np
 from ....core.sphere import directions
 from ....core.methods.reference import shading as reference
 from ....core.common import parallel
+from ....core.shading.materials import slot_material
 from ...frame import keys
+from ...gpu import drawing
 from ..contract import Shading, glossy_or_layered
+from . import gpu as reference_gpu
 
 # View-independent diffuse sums per (object, visibility, lighting).
 IRRADIANCE_CACHE = keys.cache(64)
@@ -24,6 +29,7 @@ class ReferenceShading(Shading):
         cube = directions.cubemap(state.resolution)
         L = keys.environment_cubemap(state.world, state.resolution)
         env_key = keys.env_key(state.world, state.resolution)
+        use_gpu = bool(state.settings.get("reference_gpu", True)) and drawing.gpu_available()
         out = []
         n = len(state.objects)
         for i, st in enumerate(state.objects):
@@ -43,11 +49,23 @@ class ReferenceShading(Shading):
             if view_dir is not None:
                 view_dirs = np.broadcast_to(np.asarray(view_dir, dtype=np.float64),
                                             pts.normals.shape)
+            glossy = use_gpu and any(not slot_material(st.materials, m).is_diffuse_only
+                                     for m in np.unique(pts.materials))
             radiance = reference.shade_points(st.bits, pts.positions, pts.normals, pts.materials,
                                               st.materials, eye, cube, L,
                                               irradiance=irradiance, view_dirs=view_dirs,
-                                              tick=tick)
+                                              tick=tick, glossy=not glossy)
+            if glossy:
+                try:
+                    radiance += reference_gpu.specular_radiance(
+                        st, pts.normals, pts.materials, st.materials, cube, L,
+                        reference.point_views(pts.positions, eye, view_dir), env_key)
+                except Exception as exc:          # numpy gives the same sums
+                    state.note(f"REFERENCE GPU pass failed ({exc}); shading with numpy")
+                    use_gpu = False
+                    radiance = reference.shade_points(
+                        st.bits, pts.positions, pts.normals, pts.materials, st.materials, eye,
+                        cube, L, irradiance=irradiance, view_dirs=view_dirs, tick=tick)
             radiance = np.nan_to_num(radiance, nan=0.0, posinf=0.0, neginf=0.0)
             out.append(radiance[pts.point_of_corner].astype(np.float32))
         return out
-

@@ -228,7 +228,7 @@ class RSLShading(Shading):
         R = state.world.rotation
         evaluator = rsl.Evaluator(lights, R)
         kind = state.settings.get("rsl_visibility", "VDT")
-        use_gpu = bool(state.settings.get("rsl_gpu", True)) and gpu_available()
+        use_gpu = bool(state.settings.get("rsl_gpu", True)) and drawing.gpu_available()
         cos_tables = brdf_tables(materials.Material())
         out = []
         for i, st in enumerate(state.objects):
@@ -330,18 +330,6 @@ _GPU = drawing.gpu_cache({}, limit=64)
 _GPU_DIFFUSE = drawing.gpu_cache({}, limit=16)
 
 
-def gpu_available() -> bool:
-    """The GPU pass runs on the main thread of a Blender with a GPU context."""
-    import threading
-    if threading.current_thread() is not threading.main_thread():
-        return False
-    try:
-        import gpu
-        return gpu.platform.backend_type_get() != "NONE"
-    except Exception:
-        return False
-
-
 def _shader():
     return shaders.shader("rsl_vertex")
 
@@ -402,8 +390,6 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
     (``indices``: their tables in the batch's visibility texture ``vis_texture``).
     ``weights``: list of (P, 3), the diffuse weight ``albedo/pi * W`` then each glossy
     term's weight (:func:`..core.methods.rsl.shading.point_weights`)."""
-    import gpu
-    from gpu_extras.batch import batch_for_shader
     P = len(normals)
     if P == 0:
         return np.zeros((0, 3))
@@ -428,37 +414,16 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
     lt[1, :, :3] = energy
     brdf_texture = keys.held(_GPU, ("brdf", id(tables)), (tables,),
                              lambda: _texture(brdf_texture_blocks(tables), "R32F"))
-    sh = _shader()
-    offscreen = gpu.types.GPUOffScreen(width, rows, format="RGBA32F")
-    try:
-        with offscreen.bind():
-            fb = gpu.state.active_framebuffer_get()
-            fb.clear(color=(0.0, 0.0, 0.0, 0.0))
-            gpu.state.depth_test_set("NONE")
-            gpu.state.blend_set("NONE")
-            sh.bind()
-            for name, value in (("width", width), ("pointCount", P), ("lightCount", K),
-                                ("termCount", terms), ("visMode", 0 if vis_kind == "VDT" else 1),
-                                ("visRes", vis_res),
-                                ("visTile", vis_res if vis_kind == "VDT" else vis_res + 1),
-                                ("brdfRes", tables.resolution),
-                                ("viewNodes", len(tables.view_angles))):
-                sh.uniform_int(name, value)
-            sh.uniform_float("viewStep", float(tables.view_angles[1] - tables.view_angles[0]))
-            # keep the textures referenced until the draw is done
-            point_tex, weight_tex = _texture(pd, "RGBA32F"), _texture(wt, "RGBA32F")
-            light_tex = _texture(lt, "RGBA32F")
-            sh.uniform_sampler("pointData", point_tex)
-            sh.uniform_sampler("weights", weight_tex)
-            sh.uniform_sampler("lights", light_tex)
-            sh.uniform_sampler("visTable", vis_texture)
-            sh.uniform_sampler("brdfTables", brdf_texture)
-            batch = batch_for_shader(sh, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
-                                     indices=[(0, 1, 2), (0, 2, 3)])
-            batch.draw(sh)
-            buf = fb.read_color(0, 0, width, rows, 4, 0, "FLOAT")
-        buf.dimensions = width * rows * 4
-        out = np.array(buf, dtype=np.float32).reshape(rows * width, 4)
-    finally:
-        offscreen.free()
+    # keep the textures referenced until the draw is done
+    point_tex, weight_tex = _texture(pd, "RGBA32F"), _texture(wt, "RGBA32F")
+    out = drawing.texel_pass(
+        _shader(), width, rows,
+        ints=(("width", width), ("pointCount", P), ("lightCount", K), ("termCount", terms),
+              ("visMode", 0 if vis_kind == "VDT" else 1), ("visRes", vis_res),
+              ("visTile", vis_res if vis_kind == "VDT" else vis_res + 1),
+              ("brdfRes", tables.resolution), ("viewNodes", len(tables.view_angles))),
+        floats=(("viewStep", float(tables.view_angles[1] - tables.view_angles[0])),),
+        samplers=(("pointData", point_tex), ("weights", weight_tex),
+                  ("lights", _texture(lt, "RGBA32F")), ("visTable", vis_texture),
+                  ("brdfTables", brdf_texture)))
     return out[:P, :3].astype(np.float64)

@@ -191,7 +191,7 @@ def lambert_layer(material: Material, irradiance: np.ndarray, normals: np.ndarra
 
 
 def shade_points(vis_bits, positions, normals, materials, material_table, eye, cube, lighting,
-                 irradiance=None, view_dirs=None, tick=None) -> np.ndarray:
+                 irradiance=None, view_dirs=None, tick=None, glossy=True) -> np.ndarray:
     """Outgoing radiance (P, 3) of every point, each with its slot's material
     (``materials[p]`` in ``material_table``, :func:`.brdf.slot_material`).
 
@@ -199,7 +199,8 @@ def shade_points(vis_bits, positions, normals, materials, material_table, eye, c
     The diffuse part is ``irradiance * albedo / pi * diffuse_view_weight(n, v)``
     (the view weight is 1 except for Principled layering, where it needs the
     per-point view ``v``: toward ``eye``, or ``view_dirs``).  ``tick(fraction)``:
-    progress, called between blocks of points (it may raise to stop).
+    progress, called between blocks of points (it may raise to stop).  ``glossy`` False: the
+    diffuse part only (a caller that sums the glossy part elsewhere, e.g. on the GPU).
     """
     if irradiance is None:
         irradiance = diffuse_irradiance(vis_bits, normals, cube, lighting, part(tick, 0, 0.5))
@@ -215,7 +216,7 @@ def shade_points(vis_bits, positions, normals, materials, material_table, eye, c
         if needs_view:
             vd = view_directions(positions[sel], eye) if view_dirs is None else view_dirs[sel]
         out[sel] = lambert_layer(mat, irradiance[sel], normals[sel], vd)
-        if not mat.is_diffuse_only:
+        if glossy and not mat.is_diffuse_only:
             out[sel] += specular_radiance(vis_bits[sel], positions[sel], normals[sel], eye, cube,
                                           lighting, mat, view_dirs=vd,
                                           tick=part(tick, done / total,

@@ -1,0 +1,113 @@
+"""REFERENCE's glossy sum per shading point on the GPU (shaders/methods/reference_glossy_frag.glsl):
+the same sum as core.methods.reference.shading.specular_radiance, one texel per point, every
+material of an object (a textured slot's variants too) in one pass.  The CPU prepares what is
+per point and cheap (the view bent above the horizon, each lobe's weight with Cycles'
+multiscatter factor at the point's cos_o); the GPU does the points × visible texels."""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+from ....core.shading import brdf as core_brdf
+from ....core.shading.materials import slot_material
+from ...frame import keys
+from ...gpu import drawing, shaders, visibility
+
+#: points per row of the pass's target (and of its point data)
+WIDTH = 1024
+#: texels per row of the environment's data
+ENV_WIDTH = 1024
+# the newest sums per (object, bits, lighting, what the pass reads of the points): a textured
+# slot's frame shades its objects three times (its colour, white, black), and where the
+# colour does not reach the glossy lobes (no metal) the three passes are one
+_SUMS = keys.cache(8)
+
+
+def _texture(values: np.ndarray):
+    return drawing.float_texture(np.ascontiguousarray(values, dtype=np.float32))
+
+
+def material_rows(materials: list, count: int) -> np.ndarray:
+    """(count, 8, 4) float32: per material index its alpha, distribution and glossy lobes
+    (core.shading.brdf.sharp_lobes; none for a diffuse-only one), the layout of matData."""
+    out = np.zeros((max(count, 1), 8, 4), np.float32)
+    for m in range(count):
+        mat = slot_material(materials, m)
+        if mat.is_diffuse_only:
+            continue
+        lobes = core_brdf.sharp_lobes(mat)
+        out[m, 0] = (mat.alpha, 0.0 if mat.lobe_distribution == "BECKMANN" else 1.0,
+                     len(lobes), 0.0)
+        for j, (kind, _weight, f0, B, eta) in enumerate(lobes[:2]):
+            out[m, 1 + 3 * j] = (kind, eta, 0.0, 0.0)
+            out[m, 2 + 3 * j, :3] = f0
+            out[m, 3 + 3 * j, :3] = B
+    return out
+
+
+def point_rows(normals, views, point_materials, materials) -> np.ndarray:
+    """(4, P, 4) float32: per point [normal, material], [view bent above the horizon
+    (core.shading.brdf.bend_views), cos_o], and each glossy lobe's weight times its
+    multiscatter factor (the weights core.shading.brdf.specular_terms gives its terms)."""
+    n = core_brdf.unit_rows(normals, "normals")
+    v, cos_o = core_brdf.bend_views(n, core_brdf.unit_rows(views, "views"))
+    P = len(n)
+    out = np.zeros((4, P, 4), np.float32)
+    out[0, :, :3] = n
+    out[0, :, 3] = point_materials
+    out[1, :, :3] = v
+    out[1, :, 3] = cos_o
+    for m in np.unique(point_materials):
+        mat = slot_material(materials, m)
+        if mat.is_diffuse_only:
+            continue
+        sel = np.nonzero(point_materials == m)[0]
+        for j, (kind, weight, *_rest) in enumerate(core_brdf.sharp_lobes(mat)[:2]):
+            which = "metal" if (mat.fresnel == "DIELECTRIC" and kind == core_brdf.SHARP_F82) \
+                else "main"
+            out[2 + j, sel, :3] = weight * core_brdf.multiscatter_factor(mat, cos_o[sel], which)
+    return out
+
+
+def environment_rows(cube, lighting) -> np.ndarray:
+    """(2 rows, ENV_WIDTH, 4) blocks of float32: each cubemap texel's unit direction, then its
+    radiance times its solid angle (the sum's L_k dw_k)."""
+    N = cube.size
+    rows = -(-N // ENV_WIDTH)
+    out = np.zeros((2, rows * ENV_WIDTH, 4), np.float32)
+    out[0, :N, :3] = lighting.unit_directions
+    out[1, :N, :3] = np.asarray(lighting.radiance, np.float64) * cube.solid_angles[:, None]
+    return out.reshape(2 * rows, ENV_WIDTH, 4), rows
+
+
+def specular_radiance(st, normals, point_materials, materials, cube, lighting, views,
+                      lighting_key) -> np.ndarray:
+    """Glossy radiance (P, 3) float32 of an object's points toward ``views`` (P, 3), by the
+    GPU pass: ``st`` holds the visibility bits (``st.bits``, its texture cached per bits);
+    ``lighting_key``: what identifies ``lighting`` (addon.frame.keys.env_key)."""
+    P = len(normals)
+    if P == 0:
+        return np.zeros((0, 3), np.float32)
+    rows = -(-P // WIDTH)
+    pts = np.zeros((4, rows * WIDTH, 4), np.float32)
+    pts[:, :P] = point_rows(normals, views, point_materials, materials)
+    mats = material_rows(materials, int(np.max(point_materials)) + 1)
+    digest = hashlib.blake2b(pts.tobytes() + mats.tobytes(), digest_size=16).digest()
+
+    def run():
+        vis_tex, stride = visibility.texture(st)
+        env, env_rows = environment_rows(cube, lighting)
+        # the textures stay referenced until the pass has read them
+        textures = (("pointData", _texture(pts.reshape(4 * rows, WIDTH, 4))),
+                    ("visTex", vis_tex), ("envData", _texture(env)),
+                    ("matData", _texture(mats)))
+        out = drawing.texel_pass(
+            shaders.shader("reference_glossy"), WIDTH, rows,
+            ints=(("width", WIDTH), ("rows", rows), ("pointCount", P), ("stride", stride),
+                  ("envWidth", ENV_WIDTH), ("envRows", env_rows)),
+            samplers=textures)
+        return out[:P, :3]
+    return keys.per_visibility(_SUMS, (st.name, id(st.bits), lighting_key, digest), st.bits,
+                               run).copy()

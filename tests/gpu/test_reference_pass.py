@@ -1,0 +1,60 @@
+"""REFERENCE's glossy GLSL pass (shaders/methods/reference_glossy_frag.glsl) against
+core.methods.reference.shading.specular_radiance in numpy."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from prt_relight.core.shading import materials
+from prt_relight.core.sphere import directions, envmap
+from prt_relight.core.methods.reference import shading as reference
+
+from ..core.methods.rsl.scenes import occluded_grid, sky_with_sun
+
+bpy = pytest.importorskip("bpy")
+
+from ..viewport import gpu_context  # noqa: E402
+
+CUBE = directions.cubemap(32)
+
+#: every Fresnel kind, both distributions, the multiscatter factor, a metal and a mix
+MATERIALS = (
+    materials.Material(),                                            # diffuse only: no glossy
+    materials.principled_material(metallic=0.3, roughness=0.4),
+    materials.principled_material(base_color=(0.9, 0.6, 0.2), metallic=1.0, roughness=0.25),
+    materials.Material(specular_color=(0.9, 0.5, 0.2), roughness=0.3, distribution="BECKMANN",
+                       fresnel="SCHLICK"),
+    materials.Material(specular_color=(0.7, 0.7, 0.7), roughness=0.5, distribution="GGX"),
+    materials.Material(specular_color=(0.8, 0.4, 0.3), roughness=0.35, distribution="MULTI_GGX",
+                       fresnel="F82"),
+)
+
+
+@pytest.mark.slow
+def test_glsl_glossy_sums_equal_numpy(registered_addon):
+    from prt_relight.addon.methods.reference import gpu as method
+    from prt_relight.addon.frame.engine import in_render
+    gpu_context()
+    pos, nrm, bits = occluded_grid(8)
+    lighting = envmap.WorldLighting(image=sky_with_sun(),
+                                    rotation=envmap.euler_xyz_matrix(0.1, 0.2, 0.7)
+                                    ).to_cubemap(32)
+    eye = np.array([2.0, -3.0, 2.0])
+    views = reference.view_directions(pos, eye)
+    point_mat = np.arange(len(nrm)) % len(MATERIALS)           # every material in one pass
+    st = SimpleNamespace(name="grid", bits=bits)
+
+    got = in_render(bpy.context.scene, lambda _d: method.specular_radiance(
+        st, nrm, point_mat, list(MATERIALS), CUBE, lighting, views, ("test",)))
+    want = np.zeros_like(got)
+    for m, mat in enumerate(MATERIALS):
+        sel = point_mat == m
+        want[sel] = reference.specular_radiance(bits[sel], pos[sel], nrm[sel], eye, CUBE,
+                                                lighting, mat, view_dirs=views[sel])
+    assert np.isfinite(got).all()
+    assert np.abs(want).max() > 0.0 and not want[point_mat == 0].any()
+    # float32 sums in another order
+    np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-4 * np.abs(want).max())
