@@ -95,5 +95,7 @@ def test_viewport_shades_view_dependent_materials_off_the_main_thread():
     final = draw(view_b)
     expected = render_pixels(engine._state, view_b, window, w, h,
                              scene.render.film_transparent, True)
-    np.testing.assert_array_equal(final, expected)
-    assert not np.array_equal(interim, final)                       # highlights caught up
+    # the worker sums the glossy part in numpy, F12 on the main thread on the GPU (the same
+    # sums in float32, in another order)
+    np.testing.assert_allclose(final, expected, rtol=1e-4, atol=1e-6)
+    assert not np.allclose(interim, final, rtol=1e-3)               # highlights caught up
