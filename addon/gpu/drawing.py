@@ -359,6 +359,15 @@ def gpu_available() -> bool:
         return False
 
 
+def software_gpu() -> bool:
+    """The GPU is a software rasterizer (Mesa's llvmpipe: ``gpu.platform.device_type_get()``
+    SOFTWARE), where BLAS on the same cores beats a per-point loop over a dense sum."""
+    try:
+        return gpu.platform.device_type_get() == "SOFTWARE"
+    except Exception:
+        return True
+
+
 def _read(fb, width, height):
     buf = fb.read_color(0, 0, width, height, 4, 0, "FLOAT")
     buf.dimensions = width * height * 4

@@ -161,14 +161,16 @@ SPECS: dict[str, Spec] = {
         push_constants=tuple(("INT", n) for n in ("axis", "samples", "margin", "taps")),
         samplers=(("FLOAT_2D", "frameTex"), ("FLOAT_2D", "tapTex")),
         vertex_inputs=(("VEC2", "ndc"),)),
-    # REFERENCE's glossy sum: one texel per shading point (methods/reference/gpu.py)
-    "reference_glossy": Spec(
+    # REFERENCE's glossy or diffuse sums: one texel per shading point (methods/reference/gpu.py)
+    "reference_sums": Spec(
         vertex=("passes/fullscreen_vert.glsl",),
-        fragment=_COMMON + ("lib/microfacet.glsl", "methods/reference_glossy_frag.glsl"),
+        fragment=_COMMON + ("lib/microfacet.glsl", "methods/reference_sums_frag.glsl"),
         push_constants=tuple(("INT", n) for n in (
             "width", "rows", "pointCount", "stride", "envWidth", "envRows")),
         samplers=tuple(("FLOAT_2D", n) for n in ("pointData", "visTex", "envData", "matData")),
-        vertex_inputs=(("VEC2", "ndc"),)),
+        vertex_inputs=(("VEC2", "ndc"),),
+        # the diffuse sum (no material) instead of the glossy one
+        switches=("IRRADIANCE",)),
     # RSL's per-vertex pass: one texel per shading point (methods/rsl/shading.py)
     "rsl_vertex": Spec(
         vertex=("passes/fullscreen_vert.glsl",),

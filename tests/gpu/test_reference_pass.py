@@ -1,4 +1,4 @@
-"""REFERENCE's glossy GLSL pass (shaders/methods/reference_glossy_frag.glsl) against
+"""REFERENCE's glossy GLSL pass (shaders/methods/reference_sums_frag.glsl) against
 core.methods.reference.shading.specular_radiance in numpy."""
 
 from __future__ import annotations
@@ -58,3 +58,20 @@ def test_glsl_glossy_sums_equal_numpy(registered_addon):
     assert np.abs(want).max() > 0.0 and not want[point_mat == 0].any()
     # float32 sums in another order
     np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-4 * np.abs(want).max())
+
+
+@pytest.mark.slow
+def test_glsl_irradiance_equals_numpy(registered_addon):
+    from prt_relight.addon.frame.engine import in_render
+    from prt_relight.addon.methods.reference import gpu as method
+    gpu_context()
+    pos, nrm, bits = occluded_grid(8)
+    rng = np.random.default_rng(5)
+    nrm = nrm + 0.3 * rng.normal(size=nrm.shape)               # tilted: texels below horizons
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    lighting = envmap.WorldLighting(image=sky_with_sun()).to_cubemap(32)
+    st = SimpleNamespace(name="grid", bits=bits)
+    got = in_render(bpy.context.scene, lambda _d: method.irradiance(st, nrm, CUBE, lighting))
+    want = reference.diffuse_irradiance(bits, nrm, CUBE, lighting)
+    assert np.isfinite(got).all() and want.max() > 0.0
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6 * np.abs(want).max())

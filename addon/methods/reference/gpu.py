@@ -1,6 +1,7 @@
-"""REFERENCE's glossy sum per shading point on the GPU (shaders/methods/reference_glossy_frag.glsl):
-the same sum as core.methods.reference.shading.specular_radiance, one texel per point, every
-material of an object (a textured slot's variants too) in one pass.  The CPU prepares what is
+"""REFERENCE's sums per shading point on the GPU (shaders/methods/reference_sums_frag.glsl):
+the glossy sum of core.methods.reference.shading.specular_radiance, one texel per point, every
+material of an object (a textured slot's variants too) in one pass, and the diffuse sum of
+its diffuse_irradiance (IRRADIANCE).  The CPU prepares what is
 per point and cheap (the view bent above the horizon, each lobe's weight with Cycles'
 multiscatter factor at the point's cos_o); the GPU does the points × visible texels."""
 
@@ -71,15 +72,48 @@ def point_rows(normals, views, point_materials, materials) -> np.ndarray:
     return out
 
 
-def environment_rows(cube, lighting) -> np.ndarray:
-    """(2 rows, ENV_WIDTH, 4) blocks of float32: each cubemap texel's unit direction, then its
-    radiance times its solid angle (the sum's L_k dw_k)."""
+def environment_rows(cube, lighting) -> tuple[np.ndarray, int]:
+    """(3 rows, ENV_WIDTH, 4) blocks of float32: each cubemap texel's unit direction, its
+    radiance times its solid angle (the sums' L_k dw_k), its mean direction vector (the
+    irradiance's mean cosine); and the rows of a block."""
     N = cube.size
     rows = -(-N // ENV_WIDTH)
-    out = np.zeros((2, rows * ENV_WIDTH, 4), np.float32)
+    out = np.zeros((3, rows * ENV_WIDTH, 4), np.float32)
     out[0, :N, :3] = lighting.unit_directions
     out[1, :N, :3] = np.asarray(lighting.radiance, np.float64) * cube.solid_angles[:, None]
-    return out.reshape(2 * rows, ENV_WIDTH, 4), rows
+    out[2, :N, :3] = lighting.directions
+    return out.reshape(3 * rows, ENV_WIDTH, 4), rows
+
+
+def _pass(st, pts, rows, P, cube, lighting, mats=None):
+    """The pass over an object's points (``pts``: its point data, (4 blocks, rows * WIDTH,
+    4)): the glossy sums with the material rows ``mats``, the irradiance without."""
+    vis_tex, stride = visibility.texture(st)
+    env, env_rows = environment_rows(cube, lighting)
+    # the textures stay referenced until the pass has read them; the irradiance variant
+    # reads neither the material rows nor the point data past its normals
+    textures = (("pointData", _texture(pts.reshape(-1, WIDTH, 4))), ("visTex", vis_tex),
+                ("envData", _texture(env)))
+    ints = (("width", WIDTH), ("pointCount", P), ("stride", stride), ("envWidth", ENV_WIDTH),
+            ("envRows", env_rows))
+    if mats is not None:
+        textures += (("matData", _texture(mats)),)
+        ints += (("rows", rows),)
+    out = drawing.texel_pass(
+        shaders.shader("reference_sums", () if mats is not None else ("IRRADIANCE",)),
+        WIDTH, rows, ints=ints, samplers=textures)
+    return out[:P, :3]
+
+
+def irradiance(st, normals, cube, lighting) -> np.ndarray:
+    """E(x) (P, 3) float32 of an object's points (``st.bits`` their visibility), by the pass."""
+    P = len(normals)
+    if P == 0:
+        return np.zeros((0, 3), np.float32)
+    rows = -(-P // WIDTH)
+    pts = np.zeros((1, rows * WIDTH, 4), np.float32)
+    pts[0, :P, :3] = normals
+    return _pass(st, pts, rows, P, cube, lighting)
 
 
 def specular_radiance(st, normals, point_materials, materials, cube, lighting, views,
@@ -97,17 +131,6 @@ def specular_radiance(st, normals, point_materials, materials, cube, lighting, v
     digest = hashlib.blake2b(pts.tobytes() + mats.tobytes(), digest_size=16).digest()
 
     def run():
-        vis_tex, stride = visibility.texture(st)
-        env, env_rows = environment_rows(cube, lighting)
-        # the textures stay referenced until the pass has read them
-        textures = (("pointData", _texture(pts.reshape(4 * rows, WIDTH, 4))),
-                    ("visTex", vis_tex), ("envData", _texture(env)),
-                    ("matData", _texture(mats)))
-        out = drawing.texel_pass(
-            shaders.shader("reference_glossy"), WIDTH, rows,
-            ints=(("width", WIDTH), ("rows", rows), ("pointCount", P), ("stride", stride),
-                  ("envWidth", ENV_WIDTH), ("envRows", env_rows)),
-            samplers=textures)
-        return out[:P, :3]
+        return _pass(st, pts, rows, P, cube, lighting, mats)
     return keys.per_visibility(_SUMS, (st.name, id(st.bits), lighting_key, digest), st.bits,
                                run).copy()

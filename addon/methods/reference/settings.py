@@ -1,4 +1,4 @@
-"""REFERENCE's settings in ``scene.prt``: where its glossy sums run."""
+"""REFERENCE's settings in ``scene.prt``: where its sums run."""
 
 from __future__ import annotations
 

@@ -7,7 +7,10 @@
  * over the cubemap texels the point sees (its visibility bits), with f_s the glossy lobes of
  * core.shading.brdf.specular_terms: D G2 / (4 cos_o) from dot products, each lobe's Fresnel
  * (lib/microfacet.glsl lobe_fresnel), times its per-point weight (lobe weight and
- * multiscatter factor at the point's cos_o, computed on the CPU).
+ * multiscatter factor at the point's cos_o, computed on the CPU).  With IRRADIANCE: the
+ * diffuse sum of core.methods.reference.shading.diffuse_irradiance instead,
+ * E(x) = sum_k L_k dw_k V(x, w_k) max(0, n.w_k) with w_k the texel's mean direction vector
+ * (its mean cosine), no material.
  *
  * Textures (texelFetch only):
  *   pointData RGBA32F  rows of `width`, four blocks of `rows`: [normal, material], [bent view,
@@ -15,8 +18,8 @@
  *   visTex    RGBA32F  the stored visibility bits (addon/gpu/visibility.py: np.packbits, three
  *                      bytes per float as an exact integer, bit b of float q is cubemap
  *                      texel 24 q + 23 - b), `stride` texels per point, rows of ROW_TEXELS
- *   envData   RGBA32F  rows of `envWidth`, two blocks of `envRows`: [unit direction, -],
- *                      [radiance times solid angle, -]
+ *   envData   RGBA32F  rows of `envWidth`, three blocks of `envRows`: [unit direction, -],
+ *                      [radiance times solid angle, -], [mean direction vector, -]
  *   matData   RGBA32F  row m per material: (alpha, distribution 0 Beckmann / 1 GGX, lobes,
  *                      -), then per lobe j at 1 + 3 j: (kind, eta, -, -), (f0, -), (B, -)
  */
@@ -36,6 +39,8 @@ void main()
     return;
   }
   vec4 nm = texelFetch(pointData, q, 0);
+  vec3 n = nm.xyz;
+#ifndef IRRADIANCE
   vec4 vc = texelFetch(pointData, q + ivec2(0, rows), 0);
   vec3 w0 = texelFetch(pointData, q + ivec2(0, 2 * rows), 0).rgb;
   vec3 w1 = texelFetch(pointData, q + ivec2(0, 3 * rows), 0).rgb;
@@ -46,7 +51,6 @@ void main()
     fragColor = vec4(0.0);
     return;
   }
-  vec3 n = nm.xyz;
   vec3 o = vc.xyz;
   float cos_o = vc.w;
   float a = head.x;
@@ -58,6 +62,7 @@ void main()
   vec4 k1 = texelFetch(matData, ivec2(4, m), 0);
   vec3 f01 = texelFetch(matData, ivec2(5, m), 0).rgb;
   vec3 B1 = texelFetch(matData, ivec2(6, m), 0).rgb;
+#endif
   int first = p * stride;
   vec3 sum = vec3(0.0);
   for (int j = 0; j < stride; j++) {
@@ -68,6 +73,10 @@ void main()
         int b = findLSB(bits);
         bits &= bits - 1u;
         int k = 24 * (4 * j + c) + 23 - b;
+        vec3 Ldw = at(envData, k, envWidth, envRows).rgb;
+#ifdef IRRADIANCE
+        sum += max(dot(n, at(envData, k, envWidth, 2 * envRows).xyz), 0.0) * Ldw;
+#else
         vec3 i = at(envData, k, envWidth, 0).xyz;
         float cos_i = dot(n, i);
         float dot_io = dot(o, i);
@@ -83,7 +92,8 @@ void main()
         if (lobes > 1) {
           f += w1 * lobe_fresnel(int(k1.x + 0.5), f01, B1, k1.y, h_i);
         }
-        sum += lobe * f * at(envData, k, envWidth, envRows).rgb;
+        sum += lobe * f * Ldw;
+#endif
       }
     }
   }
