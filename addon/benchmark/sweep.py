@@ -76,7 +76,7 @@ class ReportRun:
         state = FrameState()
         state.sync(depsgraph)
         img = render_pixels(state, view, projection, w, h, True, persp, supersampling,
-                            filter_width)
+                            filter_width, depsgraph.scene.prt.aa_threshold)
         return state, img[::-1].copy()
 
     def _time_frames(self, state, view, projection, w, h, persp):

@@ -134,7 +134,7 @@ def render_camera(scene, depsgraph) -> dict | None:
 def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, width: int,
                 height: int, transparent: bool, supersampling: int = 1,
                 object_draws=None, filter_width: float = 0.0, eye=None,
-                view_dir=None) -> np.ndarray:
+                view_dir=None, adaptive: float = 0.0) -> np.ndarray:
     """Draw per-corner ``radiance`` (or a per-pixel method's ``object_draws``) offscreen:
     linear RGBA (height, width, 4), bottom row first.
 
@@ -142,24 +142,32 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
     filter of ``filter_width`` pixels (the scene's Film *Filter Size*; 0 = each pixel's
     own samples averaged), so an F12 frame is filtered as Cycles filters its samples.
     ``eye`` / ``view_dir`` (as :func:`_eye` gives them) let the per-pixel sharp lobes
-    (:mod:`.sharp`) be added; without either they are not drawn."""
+    (:mod:`.sharp`) be added; without either they are not drawn.  ``adaptive`` > 0: only the
+    pixels a one-sample pilot frame finds differing from a neighbour by that contrast get
+    every sample (drawing.render_offscreen; the scene's Adaptive Threshold)."""
     batches, textured = ([], []) if object_draws is not None else _batches(state, radiance)
     s = max(1, int(supersampling))
     background = _background(state)
     added = (sharp.draws(state, eye, view_dir, background)
              + lights.draws(state, eye, view_dir, s)) if eye is not None or view_dir is not None \
         else []
-    if object_draws is not None and state.bounce is not None:
-        added += _bounce_draws(state, eye, view_dir)
+    bounced = _bounce_draws(state, eye, view_dir) \
+        if object_draws is not None and state.bounce is not None else []
+    pilot = None
+    if adaptive > 0.0 and s > 1 and added:
+        # the pilot's one sample per pixel takes the sources' whole shadow filter
+        pilot = (sharp.draws(state, eye, view_dir, background)
+                 + lights.draws(state, eye, view_dir, 1) + bounced)
     return drawing.render_offscreen(batches, background, projection @ view, width, height,
                                     transparent, object_draws=list(object_draws or ()) + textured,
-                                    added_draws=added, supersampling=s,
-                                    filter_width=filter_width)
+                                    added_draws=added + bounced, supersampling=s,
+                                    filter_width=filter_width, adaptive=adaptive,
+                                    pilot_draws=pilot)
 
 
 def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: int, height: int,
                   transparent: bool, is_perspective: bool, supersampling: int = 1,
-                  filter_width: float = 0.0) -> np.ndarray:
+                  filter_width: float = 0.0, adaptive: float = 0.0) -> np.ndarray:
     """Shade for this view and draw: the engine's one drawing path (viewport and F12)."""
     eye, view_dir = _eye(view, is_perspective)
     state.camera = frame_camera(view, projection, width, height, eye, view_dir)
@@ -171,7 +179,7 @@ def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: in
     state.tick(0.85)
     pixels = draw_pixels(state, radiance, view, projection, width, height, transparent,
                          supersampling, object_draws=object_draws, filter_width=filter_width,
-                         eye=eye, view_dir=view_dir)
+                         eye=eye, view_dir=view_dir, adaptive=adaptive)
     state.tick(1.0)
     return pixels
 
@@ -241,7 +249,7 @@ class ViewportShading:
 
 def data_passes(state, layer, frame) -> dict:
     """The view layer's data passes, Ambient Occlusion and Environment (passes.py)."""
-    view, projection, width, height, _, _, s, filter_width = frame
+    view, projection, width, height, _, _, s, filter_width, _ = frame
     out = {}
     for attr, name, _, _, _ in passes.DATA_PASSES:
         if not getattr(layer, attr, False):
@@ -264,7 +272,8 @@ def light_passes(state, frame) -> dict:
     the bounced light alone, and the base colours; each light pass is its part over its
     colour pass (Cycles' division).  The bounced light's glossy part (FrameState.
     bounced_radiance) is Glossy Indirect."""
-    view, projection, width, height, _, persp, s, filter_width = frame
+    # every sample everywhere: each pass is divided by another, drawn with its own pilot
+    view, projection, width, height, _, persp, s, filter_width, _ = frame
     drawn = (view, projection, width, height, True, persp, s, filter_width)
     direct = render_pixels(_without_bounce(state), *drawn)
     glossy = render_pixels(passes.with_base(state, 0.0), *drawn)
@@ -380,7 +389,7 @@ class PRTRenderEngine(bpy.types.RenderEngine):
             layer = depsgraph.view_layer
             groups = passes.light_groups(state) if passes.groups_wanted(scene, layer) else []
             frame = (view, projection, width, height, r.film_transparent, persp,
-                     scene.prt.supersampling, r.filter_size)
+                     scene.prt.supersampling, r.filter_size, scene.prt.aa_threshold)
             # Combined, then each light group's frame (as costly as Combined each)
             share = 0.9 / (1 + len(groups))
             self.update_stats("PRT Relight", f"Shading ({state.method}; ESC stops)")

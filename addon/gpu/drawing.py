@@ -263,12 +263,14 @@ def _quad_batch():
 
 
 def draw_frame(batches, background, view_projection, transparent: bool, object_draws=(),
-               added_draws=(), shader=None):
+               added_draws=(), shader=None, keep=None):
     """Draw into the bound framebuffer.  ``background`` = (texture, rotation 4x4, strength);
     ``object_draws``: callables ``draw(view_projection)`` of a per-pixel method;
     ``added_draws``: callables whose output is added onto the surfaces already drawn
     (depth test equal, no depth writes: the per-pixel sharp lobes); ``shader``: what
-    ``batches`` are drawn with (the per-vertex radiance shader unless given)."""
+    ``batches`` are drawn with (the per-vertex radiance shader unless given); ``keep``:
+    adaptive anti-aliasing's (samples per axis, mask texture, pilot texture): the samples of
+    every pixel the mask leaves out take the pilot's pixel, and nothing else is drawn there."""
     fb = gpu.state.active_framebuffer_get()
     fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
     gpu.state.blend_set("NONE")
@@ -284,6 +286,8 @@ def draw_frame(batches, background, view_projection, transparent: bool, object_d
         sh.uniform_float("strength", float(strength))
         sh.uniform_sampler("envMap", texture)
         _quad_batch().draw(sh)
+    if keep is not None:
+        _keep_pilot(keep, first=True)
     gpu.state.depth_test_set("LESS_EQUAL")
     gpu.state.depth_mask_set(True)
     sh = surface_shader() if shader is None else shader
@@ -299,23 +303,62 @@ def draw_frame(batches, background, view_projection, transparent: bool, object_d
         for draw in added_draws:
             draw(view_projection)
         gpu.state.blend_set("NONE")
+    if keep is not None:
+        _keep_pilot(keep, first=False)
     gpu.state.depth_test_set("NONE")
     gpu.state.depth_mask_set(False)
 
 
+def _keep_pilot(keep, first: bool):
+    """Adaptive anti-aliasing's quad (shaders/passes/adaptive_frag.glsl): ``first``, the
+    near-plane depth alone over the kept pixels' samples (no later draw reaches them); then
+    their colour, the pilot's pixel (depth test equal)."""
+    samples, mask_tex, pilot_tex = keep
+    sh = shaders.shader("adaptive")
+    if first:
+        gpu.state.depth_test_set("ALWAYS")
+        gpu.state.depth_mask_set(True)
+        gpu.state.color_mask_set(False, False, False, False)
+    else:
+        gpu.state.depth_test_set("EQUAL")
+        gpu.state.depth_mask_set(False)
+        gpu.state.blend_set("NONE")
+    sh.bind()
+    sh.uniform_int("samples", int(samples))
+    sh.uniform_sampler("maskTex", mask_tex)
+    sh.uniform_sampler("pilotTex", pilot_tex)
+    batch_for_shader(sh, "TRIS", {"ndc": [(-1, -1), (1, -1), (1, 1), (-1, 1)]},
+                     indices=[(0, 1, 2), (0, 2, 3)]).draw(sh)
+    if first:
+        gpu.state.color_mask_set(True, True, True, True)
+
+
 def render_offscreen(batches, background, view_projection, width, height, transparent,
                      object_draws=(), added_draws=(), shader=None, supersampling: int = 1,
-                     filter_width: float = 0.0):
+                     filter_width: float = 0.0, adaptive: float = 0.0, pilot_draws=None):
     """Draw a frame offscreen (:func:`draw_frame`); return linear RGBA (height, width, 4),
     bottom row first.  With ``supersampling`` s > 1 the frame is drawn at s times the size
     per axis and resolved on the GPU with the pixel filter of ``filter_width`` pixels
-    (:func:`resolve`), so only its pixels are read back."""
+    (:func:`resolve`), so only its pixels are read back.  ``adaptive`` > 0: a pilot frame of
+    one sample per pixel first (``pilot_draws``: its added draws, else ``added_draws``), and
+    only the pixels core.shading.pixel_filter.refine_mask picks at that threshold are drawn
+    with every sample; the others' samples are the pilot's pixel."""
     s = max(1, int(supersampling))
+    keep = None
+    if s > 1 and adaptive > 0.0:
+        pilot = render_offscreen(batches, background, view_projection, width, height,
+                                 transparent, object_draws,
+                                 added_draws if pilot_draws is None else pilot_draws, shader)
+        mask = pixel_filter.refine_mask(pilot, adaptive)
+        if not mask.all():
+            rgba = np.zeros(pilot.shape, np.float32)
+            rgba[..., 0] = mask
+            keep = (s, float_texture(rgba), float_texture(pilot))
     offscreen = gpu.types.GPUOffScreen(width * s, height * s, format="RGBA32F")
     try:
         with offscreen.bind():
             draw_frame(batches, background, view_projection, transparent, object_draws,
-                       added_draws, shader)
+                       added_draws, shader, keep)
             if s == 1:
                 return _read(gpu.state.active_framebuffer_get(), width, height)
         return resolve(offscreen.texture_color, width, height, s, filter_width)

@@ -155,6 +155,12 @@ SPECS: dict[str, Spec] = {
         push_constants=(("MAT3", "envRot"), ("INT", "flatCount")),
         samplers=_SSDF_SG_SAMPLERS + (("FLOAT_2D", "flatTex"),),
         vertex_inputs=(("VEC2", "ndc"),)),
+    # adaptive anti-aliasing: the samples of a pixel the pilot frame holds (render_offscreen)
+    "adaptive": Spec(
+        vertex=("passes/near_quad_vert.glsl",), fragment=("passes/adaptive_frag.glsl",),
+        push_constants=(("INT", "samples"),),
+        samplers=(("FLOAT_2D", "maskTex"), ("FLOAT_2D", "pilotTex")),
+        vertex_inputs=(("VEC2", "ndc"),)),
     # the pixel filter along one axis (drawing.render_offscreen: x, then y)
     "resolve": Spec(
         vertex=("passes/fullscreen_vert.glsl",), fragment=("passes/resolve_frag.glsl",),

@@ -36,9 +36,10 @@ def draw_settings(layout, context):
     sub.active = prt.write_attributes
     sub.prop(prt, "attribute_sh_order", text="SH Order")
     col.prop(prt, "supersampling")
-    sub = col.row()
+    sub = col.column()
     sub.active = prt.supersampling > 1
     sub.prop(scene.render, "filter_size")
+    sub.prop(prt, "aa_threshold")
     row = layout.row(align=True)
     row.enabled = not RUNNING
     row.operator("prt.precompute", icon="LIGHT_SUN")

@@ -4,6 +4,7 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty,
                        PointerProperty, StringProperty)
 
+from ...core.shading import pixel_filter
 from .. import methods
 from ..gpu.drawing import redraw_viewports
 from ..methods import catalog  # noqa: F401  (registers every method before the enum is built)
@@ -29,6 +30,13 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
                                description="Final renders are drawn at this many times the "
                                            "resolution per axis and resolved with the Film's "
                                            "Filter Size (Blackman-Harris, as Cycles)")
+    aa_threshold: FloatProperty(name="Adaptive Threshold", default=pixel_filter.REFINE_THRESHOLD,
+                                min=0.0, max=1.0, precision=3,
+                                description="Final renders draw a pilot frame of one sample per "
+                                            "pixel and give every sample only to the pixels "
+                                            "that differ from a neighbour by more than this "
+                                            "relative contrast (edges, highlights, texture "
+                                            "detail); 0 = every pixel gets every sample")
     light_sources: IntProperty(name="Compact Sources", default=8, min=0, max=8,
                                description="Most bright, compact sources (a sun, softboxes) "
                                            "taken out of the World and drawn per pixel with "

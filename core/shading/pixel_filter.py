@@ -10,11 +10,24 @@ a glossy highlight on a finely tessellated mesh, a shadow edge, a silhouette. Re
 with the same filter makes an F12 frame comparable with Cycles pixel by pixel.
 
 ``width <= 0`` keeps the box mean over each pixel's own samples.
+
+Adaptive anti-aliasing (:func:`refine_mask`): a pilot frame of one sample per pixel tells
+which pixels need their ``s × s`` samples (edges, silhouettes, highlights, texture detail:
+where a pixel differs from a neighbour); the others keep the pilot's sample for all of
+theirs, so the expensive per-pixel passes run on a fraction of the samples.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from ..scene.textures import LUMINANCE
+
+#: the relative luminance contrast |a - b| / (a + b) between neighbouring pilot pixels above
+#: which both are drawn with every sample (addon: scene.prt.aa_threshold's default)
+REFINE_THRESHOLD = 0.05
+#: contrast is measured above this share of the frame's mean luminance (noise in the dark)
+DARK_FLOOR = 1e-3
 
 
 def blackman_harris(offset, width: float) -> np.ndarray:
@@ -66,3 +79,32 @@ def resolve(image: np.ndarray, samples_per_pixel: int, width: float) -> np.ndarr
     s = max(1, int(samples_per_pixel))
     image = np.asarray(image, dtype=np.float32)
     return _filter_axis(_filter_axis(image, 0, s, width), 1, s, width).astype(np.float32)
+
+
+def refine_mask(pilot: np.ndarray, threshold: float = REFINE_THRESHOLD) -> np.ndarray:
+    """Which pixels of a one-sample pilot frame (H, W, 4) to draw with every sample, (H, W)
+    bool: those whose luminance differs from one of their 8 neighbours' by a relative
+    contrast ``|a - b| / (a + b + floor)`` above ``threshold`` (``floor``: DARK_FLOOR of the
+    frame's mean) or whose coverage (alpha) differs, grown by one pixel (the pixel filter
+    reaches the neighbours' samples).  Non-finite pixels are always refined."""
+    img = np.asarray(pilot, dtype=np.float32)
+    y = np.nan_to_num(np.maximum(img[..., :3] @ LUMINANCE.astype(np.float32), 0.0),
+                      posinf=np.float32(3e38))
+    cov = np.nan_to_num(img[..., 3])
+    floor = np.float32(DARK_FLOOR * max(float(y.mean()), 1e-12))
+    flag = ~np.isfinite(img).all(axis=-1)
+    H, W = y.shape
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        # pairs (i, j) -- (i + dy, j + dx) inside the frame
+        a = (slice(0, H - dy), slice(max(0, -dx), W - max(0, dx)))
+        b = (slice(dy, H), slice(max(0, dx), W - max(0, -dx)))
+        ya, yb = y[a], y[b]
+        hit = (np.abs(ya - yb) > threshold * (ya + yb + floor)) | (cov[a] != cov[b])
+        flag[a] |= hit
+        flag[b] |= hit
+    grown = flag.copy()
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            src = flag[max(0, -dy):H - max(0, dy), max(0, -dx):W - max(0, dx)]
+            grown[max(0, dy):H - max(0, -dy), max(0, dx):W - max(0, -dx)] |= src
+    return grown

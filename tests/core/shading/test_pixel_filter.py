@@ -71,3 +71,42 @@ def test_filter_spreads_an_isolated_bright_sample_to_the_neighbours():
     assert box[4, 4, 0] == pytest.approx(1.0) and box.sum() == pytest.approx(1.0)
     assert 0.0 < bh[4, 4, 0] < 1.0 and bh[3, 4, 0] > 0.0 and bh[5, 5, 0] > 0.0
     assert bh[2, 4, 0] == 0.0                   # 2 px away: outside the 1.5 px support
+
+
+def _pilot(h=9, w=11, value=1.0):
+    img = np.full((h, w, 4), value, np.float32)
+    img[..., 3] = 1.0
+    return img
+
+
+def test_refine_mask_keeps_smooth_frames_and_grows_around_a_bright_pixel():
+    flat = _pilot()
+    assert not pf.refine_mask(flat).any()
+    # a gentle gradient stays below the contrast threshold
+    ramp = _pilot()
+    ramp[..., :3] *= (1.0 + 0.01 * np.arange(11))[None, :, None]
+    assert not pf.refine_mask(ramp).any()
+    spot = _pilot()
+    spot[4, 5, :3] = 3.0
+    mask = pf.refine_mask(spot)
+    # the pixel and its 8 neighbours differ; grown by one more pixel: a 5 x 5 block
+    want = np.zeros(mask.shape, bool)
+    want[2:7, 3:8] = True
+    np.testing.assert_array_equal(mask, want)
+    # relative contrast: the same frame ten times brighter gives the same mask
+    np.testing.assert_array_equal(pf.refine_mask(10.0 * spot), mask)
+
+
+def test_refine_mask_takes_silhouettes_and_bad_pixels():
+    edge = _pilot()
+    edge[:, 6:, 3] = 0.0                      # coverage ends: the object's silhouette
+    mask = pf.refine_mask(edge)
+    assert mask[:, 4:8].all() and not mask[:, :4].any() and not mask[:, 8:].any()
+    bad = _pilot()
+    bad[0, 0, 1] = np.nan
+    assert pf.refine_mask(bad)[0, 0]
+    # a threshold of 0 refines every pixel with any difference; a huge one only edges
+    noisy = _pilot() + np.random.default_rng(1).normal(0, 0.01, (9, 11, 4)).astype(np.float32)
+    noisy[..., 3] = 1.0
+    assert pf.refine_mask(noisy, 0.0).all()
+    assert not pf.refine_mask(noisy, 1.0).any()
