@@ -32,7 +32,9 @@ VISIBILITY_SUBSAMPLES = 2
 
 _LIGHTING = keys.cache(1)       # unrotated cubemap lighting per (content, strength, resolution)
 LIGHTS = keys.cache(8)         # SquareLights per (lighting key, K / budget)
-_TABLES = keys.cache(32)        # BrdfTables per material
+# BrdfTables per material (0.3-1.1 MB each): a frame's textured slots hold up to 32
+# roughness variants each (core.scene.textures.point_variants)
+_TABLES = keys.cache(100)
 _VISIBILITY = keys.cache(8)     # per-vertex VDT / SAT per (object, bits)
 _FACTORS = keys.cache(8)        # view-independent (V, C) per (object, bits, lights, rotation)
 STORED = keys.cache(8)         # (VDT, pose) reconstructed per stored blob (storage.key)
@@ -60,6 +62,7 @@ def scene_lights(state):
 
 
 def brdf_tables(material: materials.Material) -> rsl.BrdfTables:
+    material = rsl.table_material(material)
     return keys.held(_TABLES, material, (), lambda: rsl.brdf_tables(
         material, DISK_RESOLUTION, VIEW_NODES, BRDF_SUBSAMPLES))
 

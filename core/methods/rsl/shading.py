@@ -22,7 +22,7 @@ same tables.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -74,6 +74,15 @@ def offset_sat(texel_integrals: np.ndarray, cell_area: float):
 def _texel_sum(values: np.ndarray, resolution: int, sub: int) -> np.ndarray:
     n = int(resolution)
     return values.reshape(values.shape[:-2] + (n, sub, n, sub)).sum(axis=(-3, -1))
+
+
+def table_material(material: materials.Material) -> materials.Material:
+    """The material :func:`brdf_tables` needs: the base colour reaches the glossy tables only
+    through a Principled metal lobe (its F0), so without one it is set to the default (a
+    textured slot's variants shaded with white and black share their tables)."""
+    if material.fresnel == "DIELECTRIC" and material.metallic > 0.0:
+        return material
+    return replace(material, diffuse_albedo=materials.Material().diffuse_albedo)
 
 
 def brdf_tables(material: materials.Material, resolution: int = 32, views: int = 32,

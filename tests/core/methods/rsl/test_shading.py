@@ -141,3 +141,22 @@ def test_offset_sat_keeps_float32_precision():
         err_offset.append(abs(got_offset - want) / want)
     assert np.max(err_offset) < 1e-4
     assert np.max(err_plain) > 10 * np.max(err_offset)
+
+
+@pytest.mark.parametrize("mat", [
+    materials.principled_material(base_color=(0.9, 0.2, 0.1), roughness=0.4),
+    materials.Material(diffuse_albedo=(0.9, 0.2, 0.1), specular_color=(0.6, 0.5, 0.4),
+                       roughness=0.3, fresnel="F82", distribution="MULTI_GGX")])
+def test_glossy_tables_ignore_a_base_colour_that_reaches_no_lobe(mat):
+    """table_material sets the base colour aside where no metal lobe reads it: the tables
+    made with any base colour are the same (a textured slot's white and black variants
+    share theirs); a part-metal Principled keeps its own."""
+    from dataclasses import replace
+    black = replace(mat, diffuse_albedo=(0.0, 0.0, 0.0))
+    a, b = rsl.brdf_tables(mat, 8, 4, 2), rsl.brdf_tables(black, 8, 4, 2)
+    assert len(a.glossy) == len(b.glossy) > 0
+    for x, y in zip(a.glossy, b.glossy):
+        np.testing.assert_array_equal(x, y)
+    assert rsl.table_material(mat) == rsl.table_material(black)
+    metal = materials.principled_material(base_color=(0.9, 0.2, 0.1), metallic=0.5)
+    assert rsl.table_material(metal) == metal
