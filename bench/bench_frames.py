@@ -84,8 +84,9 @@ def _lamp(kind, power, location, rotation=(0.0, 0.0, 0.0)):
     bpy.context.scene.collection.objects.link(ob)
 
 
-def build(kind, size):
-    """The scene of ``kind`` (the module's docstring), ``size``² pixels (the teapot 1080p)."""
+def build(kind, size, resolution=None):
+    """The scene of ``kind`` (the module's docstring), ``size``² pixels (the teapot 1080p);
+    ``resolution`` (width, height) replaces both (bench/gpu_frames.py's frame size)."""
     import bpy
     if kind in ("diffuse", "sun", "glossy"):
         bench_lights.build(kind)
@@ -110,10 +111,12 @@ def build(kind, size):
             _lamp("POINT", 200.0, (0.5, 1.5, 2.2))
         scenes.add_camera(resolution=(256, 192))
         bpy.context.scene.prt.supersampling = 3
-    scenes.set_resolution(*((1920, 1080) if kind == "teapot" else (size, size)))
+    if resolution is None:
+        resolution = (1920, 1080) if kind == "teapot" else (size, size)
+    scenes.set_resolution(*resolution)
 
 
-def _turn(scene):
+def turn_world(scene):
     """Turn the World's Mapping by a new angle (a relit frame)."""
     mapping = next(n for n in scene.world.node_tree.nodes if n.type == "MAPPING")
     mapping.inputs["Rotation"].default_value[2] += 0.37
@@ -122,7 +125,7 @@ def _turn(scene):
 def profile(path):
     """Seconds per step of one relit F12 (:data:`STEPS`, then the rest)."""
     import bpy
-    _turn(bpy.context.scene)
+    turn_world(bpy.context.scene)
     prof = cProfile.Profile()
     prof.enable()
     t0 = time.perf_counter()
@@ -138,41 +141,62 @@ def profile(path):
     return steps
 
 
+def workbench_f12(scene, rounds, aa=None):
+    """Median seconds of Workbench's F12 over ``rounds`` frames after a warm one, with the
+    scene's Anti-Aliasing or ``aa`` ("OFF": the stand-in for its viewport frame)."""
+    saved = scene.display.render_aa
+    scene.display.render_aa = aa or saved
+    try:
+        scenes.render_workbench()                                  # warm
+        return statistics.median(scenes.render_workbench() for _ in range(rounds))
+    finally:
+        scene.display.render_aa = saved
+
+
+def relit_f12(scene, path, rounds):
+    """Median seconds of the relit F12 (saved to ``path``): a first frame fills the caches,
+    then the World is turned before each of ``rounds`` frames."""
+    scenes.render_prt(path)
+
+    def one():
+        turn_world(scene)
+        return scenes.render_prt(path)
+    return statistics.median(one() for _ in range(rounds))
+
+
+def viewport_frame(scene, rounds):
+    """Median seconds of the viewport frame after an HDRI turn: one sample per pixel,
+    ``engine.render_pixels`` inside a render, the state's World turned as
+    ``addon.frame.relit`` turns it."""
+    from prt_relight.addon.frame import relit
+    from prt_relight.addon.frame.engine import in_render, render_pixels, render_view
+    from prt_relight.addon.frame.state import FrameState
+
+    def viewport(depsgraph):
+        state = FrameState()
+        state.sync(depsgraph)
+        view, proj, vw, vh, persp = render_view(scene, depsgraph)
+        times = relit.relit_times(
+            [state], lambda st: render_pixels(st, view, proj, vw, vh, True, persp), rounds)
+        return statistics.median(times[0])
+    return in_render(scene, viewport)
+
+
 def run(kind, methods, size, rounds, out_dir):
     """The rows of one scene kind: ratios and the profile per method."""
     import bpy
     build(kind, size)
-    from prt_relight.addon.frame import relit
-    from prt_relight.addon.frame.engine import in_render, render_pixels, render_view
-    from prt_relight.addon.frame.state import FrameState
     scene = bpy.context.scene
     scenes.precompute(32)
-    scenes.render_workbench()                                      # warm
-    t_wb = statistics.median(scenes.render_workbench() for _ in range(rounds))
-    aa = scene.display.render_aa
-    scene.display.render_aa = "OFF"
-    t_wb1 = statistics.median(scenes.render_workbench() for _ in range(rounds))
-    scene.display.render_aa = aa
+    t_wb = workbench_f12(scene, rounds)
+    t_wb1 = workbench_f12(scene, rounds, "OFF")
     w, h = scene.render.resolution_x, scene.render.resolution_y
     rows = []
     for method in methods:
         scene.prt.method = method
         path = out_dir / f"{kind}.{method}.exr"
-        scenes.render_prt(path)                                    # first frame: caches
-
-        def relit_f12():
-            _turn(scene)
-            return scenes.render_prt(path)
-        t_f12 = statistics.median(relit_f12() for _ in range(rounds))
-
-        def viewport(depsgraph):
-            state = FrameState()
-            state.sync(depsgraph)
-            view, proj, vw, vh, persp = render_view(scene, depsgraph)
-            times = relit.relit_times(
-                [state], lambda st: render_pixels(st, view, proj, vw, vh, True, persp), rounds)
-            return statistics.median(times[0])
-        t_view = in_render(scene, viewport)
+        t_f12 = relit_f12(scene, path, rounds)
+        t_view = viewport_frame(scene, rounds)
         steps = profile(path)
         rows.append((kind, f"{w}×{h}", method, t_f12 / t_wb, t_view / t_wb1, t_f12, steps))
         print(_row(rows[-1]), f"(Workbench F12 {1e3 * t_wb:.0f} ms, no AA {1e3 * t_wb1:.0f} ms)",
