@@ -554,6 +554,13 @@ def render_workbench(path=None) -> float:
     return render([path] if path else [], "BLENDER_WORKBENCH")
 
 
+def render_eevee(path=None, samples: int = 16) -> float:
+    """F12 with EEVEE at ``samples`` render samples (timing baseline); returns seconds."""
+    import bpy
+    bpy.context.scene.eevee.taa_render_samples = samples
+    return render([path] if path else [], "BLENDER_EEVEE")
+
+
 def precompute(resolution: int = 32, threads=None, method: str = "REFERENCE") -> dict:
     """Run the add-on's gather/run/commit (what ``prt.precompute`` does) and return timings.
 
