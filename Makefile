@@ -14,6 +14,8 @@
 #   make bench-dynamic  shadow fields: precompute/storage per detail, frames with 1/4/16 dynamic objects
 #   make bench-bounces  bounced light: every method against Cycles with bounces and direct, F12 both ways
 #   make bench-lamps  frame cost per lamp: 0 to 64 spots in rows, every one with its shadow
+#   make bench-frames  relit frames of every method against Workbench, with the profile
+#   make bench-gpu  ms per frame of every method beside Workbench and EEVEE at 1920x1080 on the GPU
 #   make report  speed/error report of every method into out/report
 #   make clean   remove dist/, out/, caches   (make distclean: also .venv, wheels/)
 
@@ -39,7 +41,7 @@ APT_PACKAGES := \
 	libsm6 libice6 libxt6 libgl1 libopengl0 libglx-mesa0 \
 	libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1
 
-.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-lamps bench-frames bench-methods bench-bounces report clean distclean
+.PHONY: setup apt venv wheels validate build test test-core lint docs shaders demo bench bench-scale bench-dynamic bench-lamps bench-frames bench-gpu bench-methods bench-bounces report clean distclean
 
 setup: apt venv
 
@@ -144,6 +146,15 @@ bench-lamps: setup
 FRAMES_ARGS ?=
 bench-frames: setup
 	$(VENV_PY) bench/bench_frames.py $(FRAMES_ARGS)
+
+# A GPU figure (issue 32, item 4): every method's relit F12 and viewport frame in ms beside
+# Workbench's and EEVEE's F12 (16 render samples) on the same scenes at 1920x1080, the GPU named
+# in the header; run it on a machine with an NVIDIA GPU (EGL: bench/gpu_frames.py's docstring).
+# On llvmpipe it warns and gives ratios only; GPU_ARGS="--size 320 180 --kinds diffuse" for a
+# quick check, "--append docs/measurements.md" records the run.
+GPU_ARGS ?=
+bench-gpu: setup
+	$(VENV_PY) bench/gpu_frames.py $(GPU_ARGS)
 
 # Each method against REFERENCE on its held-out scenes (long: tens of minutes on 2 cores).
 bench-methods: setup
