@@ -341,15 +341,16 @@ def render_offscreen(batches, background, view_projection, width, height, transp
     per axis and resolved on the GPU with the pixel filter of ``filter_width`` pixels
     (:func:`resolve`), so only its pixels are read back.  ``adaptive`` > 0: a pilot frame of
     one sample per pixel first (``pilot_draws``: its added draws, else ``added_draws``), and
-    only the pixels core.shading.pixel_filter.refine_mask picks at that threshold are drawn
-    with every sample; the others' samples are the pilot's pixel."""
+    only the pixels core.shading.pixel_filter.refine_mask picks at that threshold, and those
+    no surface covers, are drawn with every sample; the others' samples are the pilot's pixel."""
     s = max(1, int(supersampling))
     keep = None
     if s > 1 and adaptive > 0.0:
-        pilot = render_offscreen(batches, background, view_projection, width, height,
-                                 transparent, object_draws,
-                                 added_draws if pilot_draws is None else pilot_draws, shader)
-        mask = pixel_filter.refine_mask(pilot, adaptive)
+        pilot, depth = _pilot(batches, background, view_projection, width, height, transparent,
+                              object_draws, added_draws if pilot_draws is None else pilot_draws,
+                              shader)
+        # the sky between the objects is cheap: every sample, as without the pilot
+        mask = pixel_filter.refine_mask(pilot, adaptive) | (depth >= 1.0)
         if not mask.all():
             rgba = np.zeros(pilot.shape, np.float32)
             rgba[..., 0] = mask
@@ -362,6 +363,24 @@ def render_offscreen(batches, background, view_projection, width, height, transp
             if s == 1:
                 return _read(gpu.state.active_framebuffer_get(), width, height)
         return resolve(offscreen.texture_color, width, height, s, filter_width)
+    finally:
+        offscreen.free()
+
+
+def _pilot(batches, background, view_projection, width, height, transparent, object_draws,
+           added_draws, shader):
+    """Adaptive anti-aliasing's pilot: the frame at one sample per pixel, (height, width, 4)
+    and its depth (height, width), 1 where no surface is."""
+    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            draw_frame(batches, background, view_projection, transparent, object_draws,
+                       added_draws, shader)
+            fb = gpu.state.active_framebuffer_get()
+            depth = fb.read_depth(0, 0, width, height)
+            depth.dimensions = width * height
+            return (_read(fb, width, height),
+                    np.array(depth, dtype=np.float32).reshape(height, width))
     finally:
         offscreen.free()
 
