@@ -346,11 +346,11 @@ def render_offscreen(batches, background, view_projection, width, height, transp
     s = max(1, int(supersampling))
     keep = None
     if s > 1 and adaptive > 0.0:
-        pilot, depth = _pilot(batches, background, view_projection, width, height, transparent,
-                              object_draws, added_draws if pilot_draws is None else pilot_draws,
-                              shader)
-        # the sky between the objects is cheap: every sample, as without the pilot
-        mask = pixel_filter.refine_mask(pilot, adaptive) | (depth >= 1.0)
+        pilot = _pilot(batches, view_projection, width, height, object_draws,
+                       added_draws if pilot_draws is None else pilot_draws, shader)
+        # the sky between the objects is cheap: every sample, as without the pilot (a kept
+        # pixel is covered: its neighbours' coverage is the same as its own)
+        mask = pixel_filter.refine_mask(pilot, adaptive) | (pilot[..., 3] < 0.5)
         if not mask.all():
             rgba = np.zeros(pilot.shape, np.float32)
             rgba[..., 0] = mask
@@ -367,20 +367,14 @@ def render_offscreen(batches, background, view_projection, width, height, transp
         offscreen.free()
 
 
-def _pilot(batches, background, view_projection, width, height, transparent, object_draws,
-           added_draws, shader):
-    """Adaptive anti-aliasing's pilot: the frame at one sample per pixel, (height, width, 4)
-    and its depth (height, width), 1 where no surface is."""
+def _pilot(batches, view_projection, width, height, object_draws, added_draws, shader):
+    """Adaptive anti-aliasing's pilot: the frame at one sample per pixel without the sky,
+    (height, width, 4): its alpha is the surfaces' coverage."""
     offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
     try:
         with offscreen.bind():
-            draw_frame(batches, background, view_projection, transparent, object_draws,
-                       added_draws, shader)
-            fb = gpu.state.active_framebuffer_get()
-            depth = fb.read_depth(0, 0, width, height)
-            depth.dimensions = width * height
-            return (_read(fb, width, height),
-                    np.array(depth, dtype=np.float32).reshape(height, width))
+            draw_frame(batches, None, view_projection, True, object_draws, added_draws, shader)
+            return _read(gpu.state.active_framebuffer_get(), width, height)
     finally:
         offscreen.free()
 
