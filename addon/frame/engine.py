@@ -191,7 +191,8 @@ class ViewportShading:
     Meanwhile the geometry is redrawn at once with the newest radiance available, so
     the camera follows the mouse and highlights catch up when the worker finishes
     (a timer then asks Blender to redraw).  numpy releases the GIL, so the UI stays
-    responsive.
+    responsive.  A method whose per-view sums run on a hardware GPU (REFERENCE's pass,
+    ``Shading.shades_on_gpu``) shades on the main thread at once instead.
     """
 
     def __init__(self):
@@ -216,8 +217,9 @@ class ViewportShading:
         # AUTO about to measure (no stored choice holds): off the main thread from the
         # first frame, drawn meanwhile with what there is (unlit at first)
         slow = getattr(state.method_impl, "slow_frame", lambda s: False)(state)
-        if not slow and (not state.view_dependent or self.radiance is None
-                         or self.layout != layout):
+        # a view-dependent method whose per-view sums run on a hardware GPU: at once
+        if not slow and (not state.view_dependent or state.method_impl.shades_on_gpu(state)
+                         or self.radiance is None or self.layout != layout):
             self.radiance = state.shade(eye, view_dirs_for=view_dir)
             self.layout, self.key = layout, key
             self.version += 1

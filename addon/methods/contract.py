@@ -44,6 +44,11 @@ class Shading(ABC):
         """Whether the frame changes with the camera (glossy or layered materials)."""
         return False
 
+    def shades_on_gpu(self, state) -> bool:
+        """Whether ``shade``'s view-dependent work runs on a hardware GPU here (milliseconds:
+        the viewport shades a moved camera at once, not in a worker thread)."""
+        return False
+
     def sync(self, state):
         """Called at the end of FrameState.sync (load stored per-method data)."""
 

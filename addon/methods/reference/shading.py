@@ -25,6 +25,10 @@ class ReferenceShading(Shading):
     def view_dependent(self, state) -> bool:
         return glossy_or_layered(state)
 
+    def shades_on_gpu(self, state) -> bool:
+        return (bool(state.settings.get("reference_gpu", True)) and drawing.gpu_available()
+                and not drawing.software_gpu())
+
     def shade(self, state, eye, view_dir):
         cube = directions.cubemap(state.resolution)
         L = keys.environment_cubemap(state.world, state.resolution)

@@ -99,3 +99,27 @@ def test_viewport_shades_view_dependent_materials_off_the_main_thread():
     # sums in float32, in another order)
     np.testing.assert_allclose(final, expected, rtol=1e-4, atol=1e-6)
     assert not np.allclose(interim, final, rtol=1e-3)               # highlights caught up
+
+
+def test_viewport_shades_at_once_where_the_glossy_sums_run_on_a_hardware_gpu(monkeypatch):
+    """REFERENCE with its GPU pass on a hardware GPU (taken as one here): a moved camera is
+    shaded on the main thread at once (no worker, no stale frame)."""
+    from prt_relight.addon.gpu import drawing
+    small_scene()
+    bpy.ops.prt.precompute()
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()
+    monkeypatch.setattr(drawing, "software_gpu", lambda: False)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    w, h = 48, 36
+    window = cam.calc_matrix_camera(depsgraph, x=w, y=h)
+    engine = viewport.FakeViewEngine()
+    view_a = cam.matrix_world.inverted()
+    first = viewport.view_draw(depsgraph, view_a, window, w, h, engine=engine)[1]
+    from mathutils import Matrix
+    moved = viewport.view_draw(depsgraph, view_a @ Matrix.Rotation(0.15, 4, "Z"), window, w, h,
+                               engine=engine)[1]
+    assert engine._state.view_dependent and not engine.workers
+    assert not np.allclose(first, moved, rtol=1e-3)
