@@ -232,9 +232,14 @@ def main():
              "| scene | size | method | relit F12 ÷ Workbench | viewport ÷ Workbench | relit F12 "
              "| sync | CPU shading | GPU | filter | rest |",
              "|---|---|---|---|---|---|---|---|---|---|---|", *map(_row, rows), ""]
+    report(lines, args.append)
+
+
+def report(lines, append=None):
+    """Print a table's ``lines``, and append them to the markdown file ``append`` if given."""
     print("\n".join(lines))
-    if args.append:
-        with open(args.append, "a", encoding="utf-8") as f:
+    if append:
+        with open(append, "a", encoding="utf-8") as f:
             f.write("\n" + "\n".join(lines))
 
 

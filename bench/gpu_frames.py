@@ -136,10 +136,7 @@ def main():
     lines = [header(device, args.size, args.rounds, args.eevee_samples) + ":", "",
              "| scene | method | relit F12 ms | viewport ms | ÷ Workbench | ÷ EEVEE |",
              "|---|---|---|---|---|---|", *map(row, rows), ""]
-    print("\n".join(lines))
-    if args.append:
-        with open(args.append, "a", encoding="utf-8") as f:
-            f.write("\n" + "\n".join(lines))
+    bench_frames.report(lines, args.append)
 
 
 if __name__ == "__main__":
