@@ -327,8 +327,10 @@ def _groups(st, eye, view_dir, turn=None):
 #: most glossy terms the GPU pass sums (its glossy[MAX_TERMS]: shaders/lib/constants.glsl)
 MAX_TERMS = 8
 TEXTURE_WIDTH = 8192
-# cached textures (per object tables, per material SATs)
-_GPU = drawing.gpu_cache({}, limit=64)
+# cached textures: per object its visibility tables; per material its BRDF SATs (as many as
+# _TABLES holds: a textured slot's variants would otherwise push the objects' tables out)
+_GPU = drawing.gpu_cache({}, limit=16)
+_GPU_TABLES = drawing.gpu_cache({}, limit=100)
 # view-independent GPU results per (object, material, lighting)
 _GPU_DIFFUSE = drawing.gpu_cache({}, limit=16)
 
@@ -415,7 +417,7 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
     lt[0, :, :3] = lights_centres
     lt[0, :, 3] = lights_half
     lt[1, :, :3] = energy
-    brdf_texture = keys.held(_GPU, ("brdf", id(tables)), (tables,),
+    brdf_texture = keys.held(_GPU_TABLES, id(tables), (tables,),
                              lambda: _texture(brdf_texture_blocks(tables), "R32F"))
     # keep the textures referenced until the draw is done
     point_tex, weight_tex = _texture(pd, "RGBA32F"), _texture(wt, "RGBA32F")
