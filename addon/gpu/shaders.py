@@ -183,7 +183,7 @@ SPECS: dict[str, Spec] = {
         fragment=_COMMON + ("methods/rsl_vertex_frag.glsl",),
         push_constants=tuple(("INT", n) for n in (
             "width", "pointCount", "lightCount", "termCount", "visMode", "visRes", "visTile",
-            "brdfRes", "viewNodes")) + (("FLOAT", "viewStep"),),
+            "brdfRes", "viewNodes", "blockCols")) + (("FLOAT", "viewStep"),),
         samplers=tuple(("FLOAT_2D", n) for n in ("pointData", "weights", "lights", "visTable",
                                                  "brdfTables")),
         vertex_inputs=(("VEC2", "ndc"),)),

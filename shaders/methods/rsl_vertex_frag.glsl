@@ -9,13 +9,16 @@
  *
  * Textures (texelFetch only, so the sums equal the numpy evaluator's):
  *   pointData  RGBA32F  rows of `width`: [normal, 0] at (x, y), view dir at (x, y + rows),
- *                       the point's visibility table index at (x, y + 2 rows)
+ *                       at (x, y + 2 rows) the point's visibility table index, the first
+ *                       block of its material's tables and its material's term count
  *   weights    RGBA32F  (width, rows * (terms + 1)): diffuse weight, then term weights
  *   lights     RGBA32F  (lightCount, 2): [centre, half side], [energy, 0]
  *   visTable   R16F/R32F per-vertex N x N (VDT) or (N+1) x (N+1) (SAT) tables, each
  *                       visTile² texels in row-major order from texel index * visTile²
- *   brdfTables RGBA32F  (N+2) x (N+1) blocks: cosine table, then terms x view nodes;
- *                       column N+1, row 0 holds the block's offset (mean per area)
+ *   brdfTables RGBA32F  (N+2) x (N+1) blocks, `blockCols` to a row of blocks: per material
+ *                       its cosine table, then terms x view nodes (every material of the
+ *                       pass, one after another); column N+1, row 0 holds the block's
+ *                       offset (mean per area)
  */
 
 float table_texel(bool vis, ivec2 origin, int x, int y)
@@ -68,7 +71,7 @@ float clipped_area(vec2 p, float h)
 float table_box(int block, vec2 p, float h)
 {
   /* average of block's function over the square, offset added back */
-  ivec2 origin = ivec2(0, block * (brdfRes + 1));
+  ivec2 origin = ivec2((block % blockCols) * (brdfRes + 2), (block / blockCols) * (brdfRes + 1));
   float off = texelFetch(brdfTables, origin + ivec2(brdfRes + 1, 0), 0).r;
   return (box(false, origin, brdfRes, p, h) + off * clipped_area(p, h)) / (4.0 * h * h);
 }
@@ -127,7 +130,10 @@ void main()
   int j0 = min(int(node), viewNodes - 2);
   float fj = node - float(j0);
 
-  int vis_index = int(texelFetch(pointData, pix + ivec2(0, 2 * rows), 0).x + 0.5);
+  vec4 ids = texelFetch(pointData, pix + ivec2(0, 2 * rows), 0);
+  int vis_index = int(ids.x + 0.5);
+  int first = int(ids.y + 0.5);             /* the material's cosine table */
+  int terms = min(int(ids.z + 0.5), termCount);
   int base = vis_index * visTile * visTile;
 
   vec3 diffuse = vec3(0.0);
@@ -144,18 +150,18 @@ void main()
     if (V <= 0.0) {
       continue;
     }
-    diffuse += E * (V * table_box(0, p, h));
-    if (termCount > 0) {
+    diffuse += E * (V * table_box(first, p, h));
+    if (terms > 0) {
       vec2 q = disk(vec3(dot(cl.xyz, tp), dot(cl.xyz, bp), dot(cl.xyz, n)));
-      for (int k = 0; k < termCount; k++) {
-        int blk = 1 + k * viewNodes + j0;
+      for (int k = 0; k < terms; k++) {
+        int blk = first + 1 + k * viewNodes + j0;
         float g = (1.0 - fj) * table_box(blk, q, h) + fj * table_box(blk + 1, q, h);
         glossy[k] += E * (V * g);
       }
     }
   }
   vec3 color = diffuse * texelFetch(weights, pix, 0).rgb;
-  for (int k = 0; k < termCount; k++) {
+  for (int k = 0; k < terms; k++) {
     color += glossy[k] * texelFetch(weights, pix + ivec2(0, (k + 1) * rows), 0).rgb;
   }
   fragColor = vec4(color, 1.0);

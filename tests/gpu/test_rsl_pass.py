@@ -23,7 +23,7 @@ CUBE = directions.cubemap(32)
 
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["VDT", "SAT"])
-def test_glsl_pass_equals_numpy(registered_addon, kind):
+def test_glsl_pass_equals_numpy(registered_addon, kind, monkeypatch):
     from prt_relight.addon.methods.rsl import shading as method
     gpu_context()
     pos, nrm, bits = _scene(8)
@@ -42,29 +42,35 @@ def test_glsl_pass_equals_numpy(registered_addon, kind):
             materials.Material(specular_color=(0.9, 0.5, 0.2), roughness=0.3,
                           distribution="BECKMANN", fresnel="SCHLICK"))
 
+    tables = [rsl.brdf_tables(mat) for mat in mats]
+    which = np.arange(len(sel)) % len(mats)              # every material in one pass
+    weights = [rsl.point_weights(mat, nrm[sel], views[sel]) for mat in mats]
+    stacked = np.zeros((len(sel), max(map(len, weights)), 3))
+    for m, w in enumerate(weights):
+        stacked[which == m, :len(w)] = np.stack(w, axis=1)[which == m]
+
     def passes(_depsgraph):
-        """The GLSL pass of every material, inside a render (the gpu module's context in
-        -b: drawing outside one may corrupt it for later passes)."""
+        """The GLSL pass, inside a render (the gpu module's context in -b: drawing outside
+        one may corrupt it for later passes)."""
         # textures of 7 points each: several batches, a table's texels cross rows
         batches = method.vis_textures(table, batch=7)
         assert len(batches) == -(-len(nrm) // 7)
-        out = []
-        for mat in mats:
-            got = np.zeros((len(sel), 3))
-            for a, e, tex in batches:
-                part = np.nonzero((sel >= a) & (sel < e))[0]
-                i = sel[part]
-                got[part] = method.gpu_shade(ev.centres, ev.half[0], ev.energy,
-                                             rsl.brdf_tables(mat), nrm[i], views[i],
-                                             rsl.point_weights(mat, nrm[i], views[i]),
-                                             kind, tex, 32, i - a)
-            out.append(got)
-        return out
+        got = np.zeros((len(sel), 3))
+        for a, e, tex in batches:
+            part = np.nonzero((sel >= a) & (sel < e))[0]
+            i = sel[part]
+            got[part] = method.gpu_shade(ev.centres, ev.half[0], ev.energy, tables,
+                                         which[part], nrm[i], views[i], stacked[part], kind,
+                                         tex, 32, i - a)
+        return got
 
-    for mat, got in zip(mats, in_render(bpy.context.scene, passes)):
-        tables = rsl.brdf_tables(mat)
-        V, C = ev.diffuse_factors(nrm, kind, table, tables)
-        want = ev.shade(mat, tables, nrm, views, V, C)
+    # five blocks to a row of the tables' texture: the materials' blocks wrap across rows
+    monkeypatch.setattr(method, "_max_texture_size", lambda: 5 * (tables[0].resolution + 2))
+    got = in_render(bpy.context.scene, passes)
+    for m, mat in enumerate(mats):
+        V, C = ev.diffuse_factors(nrm, kind, table, tables[m])
+        want = ev.shade(mat, tables[m], nrm, views, V, C)[sel][which == m]
         assert np.isfinite(got).all()
         # float32 textures and arithmetic against float64: SAT differences keep ~1e-4
-        np.testing.assert_allclose(got, want[sel], rtol=1e-3, atol=1e-4 * np.abs(want).max())
+        np.testing.assert_allclose(got[which == m], want, rtol=1e-3,
+                                   atol=1e-4 * np.abs(want).max())

@@ -282,25 +282,41 @@ class RSLShading(Shading):
         batches = keys.held(_GPU, ("vis", st.name, kind), (vis,), lambda: vis_textures(vis))
         pts = st.points
         radiance = np.zeros((pts.count, 3))
-        for mat, sel, vd in _groups(st, eye, view_dir, turn):
-            def shade(mat=mat, sel=sel, vd=vd):
-                out = np.zeros((len(sel), 3))
-                for start, stop, texture in batches:
-                    part = np.nonzero((sel >= start) & (sel < stop))[0]
-                    if part.size == 0:
-                        continue
-                    nrm = normals[sel[part]]
-                    views = None if vd is None else vd[part]
-                    out[part] = gpu_shade(evaluator.centres, evaluator.half[0],
-                                          evaluator.energy, brdf_tables(mat), nrm, views,
-                                          rsl.point_weights(mat, nrm, views), kind, texture,
+
+        def shade(groups):
+            """One pass per visibility batch for every material of ``groups``."""
+            sel = np.concatenate([g[1] for g in groups])
+            tables = [brdf_tables(mat) for mat, _, _ in groups]
+            table_of = np.repeat(np.arange(len(groups)), [len(g[1]) for g in groups])
+            views = np.concatenate([normals[g[1]] if g[2] is None else g[2] for g in groups])
+            weights = [rsl.point_weights(mat, normals[s], vd) for mat, s, vd in groups]
+            T = max(len(w) for w in weights)
+            stacked = np.zeros((len(sel), T, 3))
+            at = 0
+            for w in weights:
+                stacked[at:at + len(w[0]), :len(w)] = np.stack(w, axis=1)
+                at += len(w[0])
+            out = np.zeros((len(sel), 3))
+            for start, stop, texture in batches:
+                part = np.nonzero((sel >= start) & (sel < stop))[0]
+                if part.size:
+                    out[part] = gpu_shade(evaluator.centres, evaluator.half[0], evaluator.energy,
+                                          tables, table_of[part], normals[sel[part]],
+                                          views[part], stacked[part], kind, texture,
                                           vis.shape[-1] - (kind == "SAT"), sel[part] - start)
-                return out
+            return sel, out
+
+        groups = list(_groups(st, eye, view_dir, turn))
+        for group in groups:
+            mat, sel, vd = group
             if vd is None:                  # view independent: once per lighting/rotation
                 radiance[sel] = keys.held(_GPU_DIFFUSE, (st.name, kind, mat, lighting_key),
-                                          (vis,), shade)
-            else:
-                radiance[sel] = shade()
+                                          (vis,), lambda group=group: shade([group])[1])
+        # every view-dependent material (a textured slot's variants) in one pass
+        viewed = [g for g in groups if g[2] is not None]
+        if viewed:
+            sel, out = shade(viewed)
+            radiance[sel] = out
         return radiance
 
 
@@ -375,6 +391,23 @@ def vis_textures(tables: np.ndarray, batch: int = BATCH_POINTS):
     return out
 
 
+def _max_texture_size() -> int:
+    import gpu
+    return gpu.capabilities.max_texture_size_get()
+
+
+def brdf_texture_atlas(tables: list, block_cols: int) -> np.ndarray:
+    """Every material's :func:`brdf_texture_blocks`, one after another, ``block_cols``
+    blocks to a row of blocks: (rows, block_cols * (N+2), 1) float32."""
+    n = tables[0].resolution
+    blocks = np.concatenate([brdf_texture_blocks(t)[..., 0] for t in tables])
+    count = len(blocks) // (n + 1)
+    grid = np.zeros((-(-count // block_cols) * block_cols, n + 1, n + 2), np.float32)
+    grid[:count] = blocks.reshape(count, n + 1, n + 2)
+    grid = grid.reshape(-1, block_cols, n + 1, n + 2).transpose(0, 2, 1, 3)
+    return grid.reshape(-1, block_cols * (n + 2))[..., None]
+
+
 def brdf_texture_blocks(tables: rsl.BrdfTables) -> np.ndarray:
     """The cosine SAT then every glossy term's SAT per view node, each an
     (N+1) x (N+2) block whose last column holds the block's offset in row 0."""
@@ -389,36 +422,44 @@ def brdf_texture_blocks(tables: rsl.BrdfTables) -> np.ndarray:
     return out[..., None]
 
 
-def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, normals, views,
+def gpu_shade(lights_centres, lights_half, energy, tables: list, table_of, normals, views,
               weights, vis_kind: str, vis_texture, vis_res: int, indices):
-    """Per-vertex radiance (P, 3) of points sharing one material by the GLSL pass
-    (``indices``: their tables in the batch's visibility texture ``vis_texture``).
-    ``weights``: list of (P, 3), the diffuse weight ``albedo/pi * W`` then each glossy
-    term's weight (:func:`..core.methods.rsl.shading.point_weights`)."""
+    """Per-vertex radiance (P, 3) by the GLSL pass: point i reads the BRDF tables
+    ``tables[table_of[i]]`` (every material of the pass in one texture) and its visibility
+    table ``indices[i]`` in the batch's texture ``vis_texture``; ``views`` (P, 3);
+    ``weights`` (P, T, 3): the diffuse weight ``albedo/pi * W``, then each glossy term's
+    weight of the point's material, zero past its terms
+    (:func:`..core.methods.rsl.shading.point_weights`)."""
     P = len(normals)
     if P == 0:
         return np.zeros((0, 3))
-    terms = len(weights) - 1
+    terms = weights.shape[1] - 1
     if terms > MAX_TERMS:
         raise ValueError(f"{terms} BRDF terms; the GPU pass takes {MAX_TERMS}")
     width = min(P, 1024)
     rows = -(-P // width)
+    first = np.cumsum([0] + [1 + len(t.glossy) * len(t.view_angles) for t in tables])
     pd = np.zeros((3 * rows * width, 4), np.float32)
     pd[:P, :3] = normals
-    pd[rows * width:rows * width + P, :3] = views if views is not None else normals
-    pd[2 * rows * width:2 * rows * width + P, 0] = indices        # exact below 2**24
+    pd[rows * width:rows * width + P, :3] = views
+    index = pd[2 * rows * width:2 * rows * width + P]
+    index[:, 0] = indices                                         # exact below 2**24
+    index[:, 1] = first[table_of]
+    index[:, 2] = np.array([len(t.glossy) for t in tables])[table_of]
     pd = pd.reshape(3 * rows, width, 4)
     wt = np.zeros(((terms + 1) * rows * width, 4), np.float32)
-    for k, w in enumerate(weights):
-        wt[k * rows * width:k * rows * width + P, :3] = w
+    for k in range(terms + 1):
+        wt[k * rows * width:k * rows * width + P, :3] = weights[:, k]
     wt = wt.reshape((terms + 1) * rows, width, 4)
     K = len(lights_half)
     lt = np.zeros((2, K, 4), np.float32)
     lt[0, :, :3] = lights_centres
     lt[0, :, 3] = lights_half
     lt[1, :, :3] = energy
-    brdf_texture = keys.held(_GPU_TABLES, id(tables), (tables,),
-                             lambda: _texture(brdf_texture_blocks(tables), "R32F"))
+    n = tables[0].resolution
+    block_cols = max(1, min(_max_texture_size() // (n + 2), int(first[-1])))
+    brdf_texture = keys.held(_GPU_TABLES, tuple(map(id, tables)), tables,
+                             lambda: _texture(brdf_texture_atlas(tables, block_cols), "R32F"))
     # keep the textures referenced until the draw is done
     point_tex, weight_tex = _texture(pd, "RGBA32F"), _texture(wt, "RGBA32F")
     out = drawing.texel_pass(
@@ -426,8 +467,9 @@ def gpu_shade(lights_centres, lights_half, energy, tables: rsl.BrdfTables, norma
         ints=(("width", width), ("pointCount", P), ("lightCount", K), ("termCount", terms),
               ("visMode", 0 if vis_kind == "VDT" else 1), ("visRes", vis_res),
               ("visTile", vis_res if vis_kind == "VDT" else vis_res + 1),
-              ("brdfRes", tables.resolution), ("viewNodes", len(tables.view_angles))),
-        floats=(("viewStep", float(tables.view_angles[1] - tables.view_angles[0])),),
+              ("brdfRes", n), ("viewNodes", len(tables[0].view_angles)),
+              ("blockCols", block_cols)),
+        floats=(("viewStep", float(tables[0].view_angles[1] - tables[0].view_angles[0])),),
         samplers=(("pointData", point_tex), ("weights", weight_tex),
                   ("lights", _texture(lt, "RGBA32F")), ("visTable", vis_texture),
                   ("brdfTables", brdf_texture)))
