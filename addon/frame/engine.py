@@ -390,8 +390,11 @@ class PRTRenderEngine(bpy.types.RenderEngine):
                 self.report({"WARNING"}, "PRT Relight: " + w)
             layer = depsgraph.view_layer
             groups = passes.light_groups(state) if passes.groups_wanted(scene, layer) else []
+            # light groups sum to Combined: every frame then takes every sample (each
+            # would refine its own pixels)
             frame = (view, projection, width, height, r.film_transparent, persp,
-                     scene.prt.supersampling, r.filter_size, scene.prt.aa_threshold)
+                     scene.prt.supersampling, r.filter_size,
+                     0.0 if groups else scene.prt.aa_threshold)
             # Combined, then each light group's frame (as costly as Combined each)
             share = 0.9 / (1 + len(groups))
             self.update_stats("PRT Relight", f"Shading ({state.method}; ESC stops)")
