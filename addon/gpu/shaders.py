@@ -172,7 +172,7 @@ SPECS: dict[str, Spec] = {
         vertex=("passes/fullscreen_vert.glsl",),
         fragment=_COMMON + ("lib/microfacet.glsl", "methods/reference_sums_frag.glsl"),
         push_constants=tuple(("INT", n) for n in (
-            "width", "rows", "pointCount", "stride", "envWidth", "envRows")),
+            "width", "rows", "firstRow", "pointCount", "stride", "envWidth", "envRows")),
         samplers=tuple(("FLOAT_2D", n) for n in ("pointData", "visTex", "envData", "matData")),
         vertex_inputs=(("VEC2", "ndc"),),
         # the diffuse sum (no material) instead of the glossy one

@@ -32,7 +32,8 @@ vec4 at(sampler2D tex, int i, int width, int row0)
 
 void main()
 {
-  ivec2 q = ivec2(gl_FragCoord.xy);
+  /* this draw's rows start at row firstRow of the points (drawn a block of rows at a time) */
+  ivec2 q = ivec2(gl_FragCoord.xy) + ivec2(0, firstRow);
   int p = q.y * width + q.x;
   if (p >= pointCount) {
     fragColor = vec4(0.0);

@@ -75,3 +75,29 @@ def test_glsl_irradiance_equals_numpy(registered_addon):
     want = reference.diffuse_irradiance(bits, nrm, CUBE, lighting)
     assert np.isfinite(got).all() and want.max() > 0.0
     np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6 * np.abs(want).max())
+
+
+def test_glsl_sums_drawn_a_block_of_rows_at_a_time(registered_addon, monkeypatch):
+    """Points drawn in several draws (one row of points each here) give the one draw's
+    sums: each draw reads its own rows of the points."""
+    from prt_relight.addon.frame.engine import in_render
+    from prt_relight.addon.methods.reference import gpu as method
+    gpu_context()
+    pos, nrm, bits = occluded_grid(8)
+    lighting = envmap.WorldLighting(image=sky_with_sun()).to_cubemap(32)
+    views = reference.view_directions(pos, np.array([2.0, -3.0, 2.0]))
+    mats = [MATERIALS[1]]
+    point_mat = np.zeros(len(nrm), np.int64)
+
+    def sums(_d, key):
+        st = SimpleNamespace(name="grid", bits=bits)
+        return (method.specular_radiance(st, nrm, point_mat, mats, CUBE, lighting, views, key),
+                method.irradiance(st, nrm, CUBE, lighting))
+
+    whole = in_render(bpy.context.scene, lambda d: sums(d, ("whole",)))
+    monkeypatch.setattr(method, "WIDTH", 16)          # 81 points: six rows of 16
+    monkeypatch.setattr(method, "CHUNK_ROWS", 1)
+    rows = in_render(bpy.context.scene, lambda d: sums(d, ("rows",)))
+    for a, b in zip(whole, rows):
+        assert np.abs(a).max() > 0.0
+        np.testing.assert_allclose(b, a, rtol=1e-6, atol=1e-7 * np.abs(a).max())

@@ -20,6 +20,9 @@ from ...gpu import drawing, shaders, visibility
 WIDTH = 1024
 #: texels per row of the environment's data
 ENV_WIDTH = 1024
+#: rows of points per draw (65536 points): a draw a GPU driver would reset (about 2 s on
+#: Windows) needs millions of points at 6×128²
+CHUNK_ROWS = 64
 # the newest sums per (object, bits, lighting, what the pass reads of the points): a textured
 # slot's frame shades its objects three times (its colour, white, black), and where the
 # colour does not reach the glossy lobes (no metal) the three passes are one
@@ -99,9 +102,11 @@ def _pass(st, pts, rows, P, cube, lighting, mats=None):
     if mats is not None:
         textures += (("matData", _texture(mats)),)
         ints += (("rows", rows),)
-    out = drawing.texel_pass(
-        shaders.shader("reference_sums", () if mats is not None else ("IRRADIANCE",)),
-        WIDTH, rows, ints=ints, samplers=textures)
+    shader = shaders.shader("reference_sums", () if mats is not None else ("IRRADIANCE",))
+    out = np.concatenate([
+        drawing.texel_pass(shader, WIDTH, min(rows - first, CHUNK_ROWS),
+                           ints=ints + (("firstRow", first),), samplers=textures)
+        for first in range(0, rows, CHUNK_ROWS)])
     return out[:P, :3]
 
 
