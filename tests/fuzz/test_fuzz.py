@@ -30,6 +30,9 @@ REGRESSION_SEEDS = {
          "Sphere01: sphere, scale flat"),
     35: ("a dynamic object scaled to 0 on an axis crashed the precompute (singular matrix)",
          "Sphere06: sphere, scale flat"),
+    # seed 44 (the same cause, 1.5 GB) takes 25 s: make fuzz runs it
+    46: ("a dynamic object's shadow on its neighbours read 512 points x every texel at once: "
+         "1.4 GB", "OpenCylinder01: open cylinder, scale uniform, modifiers ['mirror']"),
 }
 
 
