@@ -33,6 +33,10 @@ REGRESSION_SEEDS = {
     # seed 44 (the same cause, 1.5 GB) takes 25 s: make fuzz runs it
     46: ("a dynamic object's shadow on its neighbours read 512 points x every texel at once: "
          "1.4 GB", "OpenCylinder01: open cylinder, scale uniform, modifiers ['mirror']"),
+    82: ("RSL's store of an object scaled to 0 on an axis crashed inverting its matrix",
+         "Ico05: ico, scale flat"),
+    86: ("RSL's store of an object scaled to 0 on an axis crashed inverting its matrix",
+         "Monkey04: monkey, scale flat"),
 }
 
 
