@@ -87,8 +87,9 @@ def main(argv=None) -> int:
         print(f"seed {seed}: {verdict} {res['seconds']:.1f} s, scene +{res['peak_mb']:.0f} MB, "
               f"process {rss_mb:.0f} MB" + (f", refused: {res['refusals']}"
                                              if res["refusals"] else ""), flush=True)
-        if not res["ok"]:
-            print(text, flush=True)
+        if not res["ok"]:                  # the child's verdict, else all it wrote
+            verdict = text.find(f"seed {seed}: FAIL in")
+            print(text[verdict:] if verdict >= 0 else text, flush=True)
     bad = [r["seed"] for r in results if not r["ok"]]
     secs = sorted(r["seconds"] for r in results)
     print(f"\n{len(results) - len(bad)} of {len(results)} scenes clean in "
