@@ -73,8 +73,8 @@ def main(argv=None) -> int:
     ap.add_argument("--n", type=int, default=500, help="how many seeds (default 500)")
     ap.add_argument("--seed0", type=int, default=0, help="the first seed (default 0)")
     ap.add_argument("--one", type=int, default=None, help="run this one seed here")
-    ap.add_argument("--bound", type=float, default=60.0,
-                    help="check.MAX_SECONDS, for the hang limit (default 60)")
+    ap.add_argument("--bound", type=float, default=120.0,
+                    help="check.MAX_SECONDS, for the hang limit (default 120)")
     args = ap.parse_args(argv)
     if args.one is not None:
         return _one(args.one)
