@@ -121,11 +121,12 @@ class _EngineWatch:
 
     def __enter__(self):
         cls = self.cls = _engine_class()
-        self.raised, self.reports = [], []
+        self.raised, self.reports, self.ran = [], [], False
         self.render = cls.render
         watch = self
 
         def render(engine, depsgraph):
+            watch.ran = True
             try:
                 return watch.render(engine, depsgraph)
             except BaseException as exc:
@@ -185,11 +186,14 @@ def _render(out: Outcome, path: pathlib.Path):
         out.failures.append("F12 crashed:\n" + "\n".join(watch.raised))
         return
     if refused is not None:
-        if is_clear(refused):
-            out.refusals.append(f"F12: {refused.strip()}")
-        else:
+        if not is_clear(refused):
             out.failures.append(f"F12 failed:\n{refused}")
-        return
+            return
+        out.refusals.append(f"F12: {refused.strip()}")
+        if not watch.ran:                  # refused by Blender (no camera): no frame
+            return
+        # our engine draws on after some errors (a World it cannot read lights as black)
+        scenes.save_render(path)
     errors = [m for kind, m in watch.reports if "ERROR" in kind]
     frame = scenes.read_exr(path)
     r = scene.render
@@ -203,7 +207,8 @@ def _render(out: Outcome, path: pathlib.Path):
                             f"values" + (f" (engine said: {errors})" if errors else ""))
     elif frame.min() < 0.0:
         out.failures.append(f"F12 frame has negative values (min {frame.min():.3g})")
-    out.refusals += [f"F12 error: {m}" for m in errors]
+    if refused is None:
+        out.refusals += [f"F12 error: {m}" for m in errors]
 
 
 def run(seed: int, workdir) -> Outcome:

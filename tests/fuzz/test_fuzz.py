@@ -68,8 +68,9 @@ QUICK = 34
 
 
 def test_the_check_fails_bad_pixels_crashes_and_slowness(monkeypatch, tmp_path):
-    """NaN and negative pixels, an exception in the engine (Blender only prints it) or in
-    the precompute, and a scene past the time bound each fail the seed."""
+    """NaN and negative pixels (also in a frame drawn after an error), an exception in the
+    engine (Blender only prints it) or in the precompute, and a scene past the time bound
+    each fail the seed."""
     real = engine.render_pixels
 
     def poisoned(value):
@@ -83,6 +84,9 @@ def test_the_check_fails_bad_pixels_crashes_and_slowness(monkeypatch, tmp_path):
         monkeypatch.setattr(engine, "render_pixels", poisoned(value))
         out = check.run(QUICK, tmp_path)
         assert not out.ok and says in out.failures[0], check.describe(out)
+    # a frame the engine draws on after an error (no World: lit as black) is checked too
+    out = check.run(1, tmp_path)
+    assert out.refusals and "negative" in out.failures[0], check.describe(out)
 
     def crash(*args, **kwargs):
         raise ZeroDivisionError("fuzz")
