@@ -163,8 +163,8 @@ bench-bounces: setup
 # The scene fuzzer (issue 31): random scenes -- meshes open, closed and degenerate, instances
 # of instances, particles, lamps of every type, textured materials, rotated HDRIs, every method
 # -- each built, precomputed and rendered in a fresh process: no crash, finite non-negative
-# pixels, clear refusals, time and memory within tests/fuzz/check.py's bounds (about 5 s a
-# scene on 2 cores: 500 scenes in 40 minutes).  A failing seed is printed for
+# pixels, clear refusals, time and memory within tests/fuzz/check.py's bounds (about 4 s a
+# scene on 2 cores: 500 scenes in 35 minutes).  A failing seed is printed for
 # tests/fuzz/test_fuzz.py's REGRESSION_SEEDS, which make test runs.
 FUZZ_N ?= 500
 FUZZ_SEED0 ?= 0

@@ -28,7 +28,7 @@ from . import generator
 #: (docs/measurements.md, "Scene fuzzer")
 MAX_SECONDS = 120.0
 #: resident memory a scene may add at its peak over what the process held before it
-#: (Blender and the add-on loaded, ~300 MB): a clean scene adds at most 0.96 GB, of which
+#: (Blender and the add-on loaded, ~300 MB): a clean scene adds at most 1.02 GB, of which
 #: ~0.4 GB is the first F12's GPU context (llvmpipe); a dynamic object's shadows read all
 #: at once added 1.4-1.5 GB
 MAX_PEAK_MB = 1280.0
