@@ -489,7 +489,7 @@ def spot_rows_scene(count: int, power: float = 60.0, spot_deg: float = 50.0):
 
 # ------------------------------------------------------------------ rendering
 
-def _save_render(path):
+def save_render(path):
     """Save the Render Result: .exr as linear 32-bit float, .png through the view transform."""
     import bpy
     path = pathlib.Path(path)
@@ -527,7 +527,7 @@ def render(paths=(), engine: str = "PRT_RELIGHT", samples: int = 256, transparen
     bpy.ops.render.render()
     seconds = time.perf_counter() - t0
     for p in paths:
-        _save_render(p)
+        save_render(p)
     return seconds
 
 

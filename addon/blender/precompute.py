@@ -57,6 +57,12 @@ def gather(depsgraph, settings) -> PrecomputeJob:
         points = core_mesh.shading_points(arrays)
         job = ObjectJob(s.name, arrays, points, core_mesh.fingerprint(arrays), matrix=s.matrix)
         if s.owner.prt.dynamic:
+            # its shadow field follows the motion M_now M_then^-1: a scale of 0 has no inverse
+            if np.linalg.matrix_rank(s.matrix[:3, :3]) < 3:
+                raise scene_export.ExportError(
+                    f"Object '{s.name}' is marked Dynamic but scaled to 0 along an axis: its "
+                    "shadow field needs a transform that can be inverted (give it a non-zero "
+                    "scale, or unmark Dynamic in Object Properties)")
             job.dynamic, job.own = True, occluders
         else:
             tri_blocks.append(occluders)

@@ -232,8 +232,14 @@ def _cone_pairs(rel_dist, rel_dir, texel_dirs, radius, margin):
     return np.nonzero(cos >= cos_min[:, None])
 
 
+#: (point, texel) pairs read at once: each holds a few hundred bytes of temporaries, so a
+#: block of points whose pairs pass this is split (~60 MB; 512 points near an object at 6x32²
+#: directions were 3 M pairs and 1 GB at once, and 16x that at 6x128²)
+MAX_PAIRS = 1 << 17
+
+
 def occluder_fractions(field: OccluderField, points, texel_dirs, half, margin: float = 0.05,
-                       normals=None):
+                       normals=None, max_pairs: int = MAX_PAIRS):
     """Visible fraction of each (point, texel) the field's object may block, by eq. 9 at
     the eight nearest samples (each in its own frame), blended trilinearly (Xu et al. 2006
     §4.3.2).  ``points`` (P, 3) and ``texel_dirs`` (D, 3) in the field's (object) frame,
@@ -242,9 +248,19 @@ def occluder_fractions(field: OccluderField, points, texel_dirs, half, margin: f
     Returns ``(point_idx, texel_idx, fraction)``: only pairs inside the bounding sphere's
     cone of a point within the outermost shell (every other pair is 1), and with
     ``normals`` (P, 3) only texels above each point's horizon (the others are not
-    shaded)."""
+    shaded).  Points are read in blocks of at most ``max_pairs`` possible pairs."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    block = max(1, max_pairs // max(len(texel_dirs), 1))
+    if len(points) > block:
+        starts = range(0, len(points), block)
+        parts = [occluder_fractions(field, points[a:a + block], texel_dirs, half, margin,
+                                    None if normals is None else
+                                    np.asarray(normals).reshape(-1, 3)[a:a + block], max_pairs)
+                 for a in starts]
+        return (np.concatenate([p[0] + a for p, a in zip(parts, starts)]),
+                np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]))
     L = field.layout
-    q = np.asarray(points, dtype=np.float64).reshape(-1, 3) - field.centre
+    q = points - field.centre
     d = np.linalg.norm(q, axis=1)
     near = np.nonzero(d < L.outer * field.radius)[0]
     empty = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float32))

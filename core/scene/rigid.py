@@ -34,11 +34,13 @@ def rotation_part(matrix) -> np.ndarray:
 
 def local_probe(world_positions, matrix, count: int = PROBE_VERTICES) -> np.ndarray:
     """Up to ``count`` vertices (evenly spaced in index order) taken back to object space
-    by the 4x4 ``matrix`` that placed them."""
+    by the 4x4 ``matrix`` that placed them (a matrix scaled to 0 on an axis has no
+    inverse: its pseudo-inverse gives the vertices with that axis' coordinate 0, the same
+    at every pose, so a flattened object is still told moved from edited)."""
     pos = np.asarray(world_positions, dtype=np.float64).reshape(-1, 3)
     M = np.asarray(matrix, dtype=np.float64)
     idx = np.linspace(0, len(pos) - 1, min(count, len(pos))).astype(np.int64)
-    return (pos[idx] - M[:3, 3]) @ np.linalg.inv(M[:3, :3]).T
+    return (pos[idx] - M[:3, 3]) @ np.linalg.pinv(M[:3, :3]).T
 
 
 def rigid_turn(matrix, world_positions, rotation, probe,

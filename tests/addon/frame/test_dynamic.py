@@ -162,6 +162,20 @@ def test_marking_or_unmarking_dynamic_after_the_precompute_is_stale():
     assert not storage.has(cube, storage.SHADOW_FIELD)
 
 
+def test_a_dynamic_object_scaled_to_0_is_refused_by_name():
+    """Scene fuzzer seeds 31 and 35: a dynamic object flattened (scale 0 on an axis)
+    crashed the precompute inverting its matrix; it is refused with a message that names
+    it, nothing stored, and the same object static is traced."""
+    scene, cube = _scene(detail="LOW")
+    cube.scale = (1.0, 0.0, 1.0)
+    with pytest.raises(RuntimeError, match="'Cube' is marked Dynamic but scaled to 0"):
+        bpy.ops.prt.precompute()
+    assert not storage.has(cube, storage.VISIBILITY) and scene.prt.precompute_id == ""
+    cube.prt.dynamic = False
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    assert storage.has(cube, storage.VISIBILITY)
+
+
 def test_auto_stored_choice_holds_while_a_dynamic_object_moves():
     """AUTO's stored choice keys on a dynamic object's shape, not its pose: an animation
     is not re-chosen live at every frame."""

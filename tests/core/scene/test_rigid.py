@@ -73,6 +73,25 @@ def test_rigid_turn_tells_a_motion_from_an_edit():
     assert rigid.rigid_turn(M1, local[:50] @ M1[:3, :3].T, R0, probe) is None
 
 
+def test_a_flattened_object_has_a_probe_and_is_told_moved_from_edited():
+    """Scale 0 on an axis (scene fuzzer seeds 82 and 86: RSL's store of a flattened
+    object crashed inverting its matrix): a finite probe, the same after a turn; an
+    edit within its plane is still seen."""
+    local = np.random.default_rng(2).normal(size=(100, 3))
+    M0 = _matrix(R0, (1.0, 0.0, 0.5), scale=(2.0, 0.0, 2.0))
+    probe = rigid.local_probe(local @ M0[:3, :3].T + M0[:3, 3], M0)
+    idx = np.linspace(0, 99, 64).astype(np.int64)
+    np.testing.assert_allclose(probe[:, [0, 2]], local[idx][:, [0, 2]], atol=1e-12)
+    np.testing.assert_allclose(probe[:, 1], 0.0, atol=1e-12)
+    M1 = _matrix(R1, (-3.0, 4.0, 1.0), scale=(2.0, 0.0, 2.0))
+    turn = rigid.rigid_turn(M1, local @ M1[:3, :3].T + M1[:3, 3], rigid.rotation_part(M0), probe)
+    np.testing.assert_allclose(turn, rigid.rotation_part(M1) @ rigid.rotation_part(M0).T,
+                               atol=1e-12)
+    edited = local.copy()
+    edited[0, 0] += 0.01
+    assert rigid.rigid_turn(M1, edited @ M1[:3, :3].T + M1[:3, 3], R0, probe) is None
+
+
 def test_stored_rows_follow_the_turned_points():
     """Every current shading point of the turned cube maps to the stored point of the
     same vertex, material and (turned back) normal; the map is a permutation."""
