@@ -79,6 +79,7 @@ CONSTANTS = (
     ("TABLE_NODES", "addon.gpu.lights:TABLE_NODES", "int"),
     ("BLOCKER_TAPS", "addon.gpu.lights:BLOCKER_TAPS", "int"),
     ("FILTER_TAPS", "addon.gpu.lights:FILTER_TAPS", "int"),
+    ("LOBE_SAMPLES", "addon.gpu.lights:LOBE_SAMPLES", "int"),
     ("MAX_TERMS", "addon.methods.rsl.shading:MAX_TERMS", "int"),
 )
 

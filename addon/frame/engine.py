@@ -174,8 +174,12 @@ def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: in
     # progress (F12: state.tick reports it and stops on ESC): shading, then drawing
     with state.span(0.0, 0.85):
         object_draws = state.draw_objects(eye, view_dir)
-        radiance = None if object_draws is not None else state.shade(eye,
-                                                                      view_dirs_for=view_dir)
+        state.visible_only = True
+        try:
+            radiance = None if object_draws is not None else state.shade(eye,
+                                                                          view_dirs_for=view_dir)
+        finally:
+            state.visible_only = False
     state.tick(0.85)
     pixels = draw_pixels(state, radiance, view, projection, width, height, transparent,
                          supersampling, object_draws=object_draws, filter_width=filter_width,

@@ -213,6 +213,9 @@ class FrameState:
         #: the camera of the frame being drawn (set by the engine before shading):
         #: dict(clip=4×4 world-to-clip, width, height, eye, view_dir), or None
         self.camera: dict | None = None
+        #: the frame being drawn is all that shading serves (engine.render_pixels): a
+        #: method may leave out points the camera cannot see (:meth:`seen_points`)
+        self.visible_only = False
         #: set by F12 (engine.render): ``progress(fraction)`` reports 0..1 of the frame,
         #: ``cancelled()`` is true once the user pressed ESC (see :meth:`tick`)
         self.progress = None
@@ -394,6 +397,15 @@ class FrameState:
         """Whether shading changes with the camera (e.g. REFERENCE with glossy or
         layered materials); SH and diffuse-only scenes do not."""
         return self.method_impl.view_dependent(self)
+
+    def seen_points(self, st) -> np.ndarray | None:
+        """(P,) bool of ``st``'s points the frame's camera may see
+        (core.scene.mesh.seen_points), or None (all) unless :attr:`visible_only`."""
+        cam = self.camera
+        if not self.visible_only or cam is None:
+            return None
+        return core_mesh.seen_points(st.arrays, st.points, cam["clip"], st.closed_side,
+                                     cam["eye"], cam["view_dir"])
 
     # ------------------------------------------------------------------ shade
     def shade(self, eye, view_dirs_for=None):

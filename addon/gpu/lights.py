@@ -62,16 +62,20 @@ def slot_features(params: np.ndarray, albedo_source) -> tuple:
 #: shadow-map taps per source and sample with one sample per pixel: the blocker search's and
 #: the filter's (lights_frag.glsl's PCF_TAPS unless a frame defines fewer)
 BLOCKER_TAPS, FILTER_TAPS = 16, 24
+#: glossy samples per source on the disc and of the NDF with one sample per pixel
+#: (lights_frag.glsl's NL and NB; fewer per sample with several, as the filter's taps)
+LOBE_SAMPLES = 8
 
 
 def frame_features(sources, supersampling: int = 1) -> tuple:
     """The per-frame features: local lamps (point, spot) and area lamps, and with
-    ``supersampling`` s > 1 fewer filter taps per sample: a pixel's s² samples turn their
-    taps differently, so n / s taps per sample still give each pixel s times the taps of
-    one sample per pixel.  The blocker search keeps its taps: fewer miss blockers, a bias
+    ``supersampling`` s > 1 fewer filter taps and glossy samples per sample: a pixel's s²
+    samples turn their patterns differently, so n / s per sample still give each pixel s
+    times those of one sample per pixel.  The blocker search keeps its taps: fewer miss blockers, a bias
     the pixel's average does not remove."""
     s = max(1, int(supersampling))
-    out = [] if s == 1 else [f"PCF_TAPS {max(4, -(-FILTER_TAPS // s))}"]
+    out = [] if s == 1 else [f"PCF_TAPS {max(4, -(-FILTER_TAPS // s))}",
+                             f"LOBE_TAPS {max(2, -(-LOBE_SAMPLES // s))}"]
     if any(s.local and s.area is None for s in sources):
         out.append("LOCAL_LAMPS")
     if any(s.area is not None for s in sources):

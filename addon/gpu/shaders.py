@@ -111,7 +111,7 @@ SPECS: dict[str, Spec] = {
         # what a draw lacks is left out of its shader, not branched around
         switches=("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "LOCAL_LAMPS",
                   "AREA_LAMPS", "LIGHT_TILES"),
-        values=(("PCF_TAPS", ("12", "4")),)),
+        values=(("PCF_TAPS", ("12", "4")), ("LOBE_TAPS", ("4", "2")))),
     # a sun-like source's shadow map: depth only
     "shadow_depth": Spec(
         vertex=("passes/shadow_depth_vert.glsl",), fragment=("passes/shadow_depth_frag.glsl",),

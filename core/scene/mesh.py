@@ -189,6 +189,36 @@ def closed_side(mesh: MeshArrays) -> int:
     return 1 if volume > 0.0 else -1 if volume < 0.0 else 0
 
 
+def seen_points(mesh: MeshArrays, points: "ShadingPoints", clip: np.ndarray, side: int,
+                eye=None, view_dir=None, margin: float = 0.05) -> np.ndarray:
+    """(P,) bool: the shading points a camera may see -- corners of a triangle that is not
+    wholly outside one plane of the frustum (``clip``: 4×4 world-to-clip, the GL
+    ``projection @ view``, its sides widened by ``margin`` of the frame) and, on a closed
+    mesh (``side`` ±1, :func:`closed_side`), that faces the camera (``eye`` a position, or
+    ``view_dir`` a unit direction toward an orthographic camera): a closed mesh's back
+    faces are hidden by its front, and seen from inside it is drawn black.  Open and
+    two-sided meshes keep both windings.  Conservative: hidden points of front faces are
+    kept (no occlusion test)."""
+    tri_points = points.point_of_corner[mesh.triangles]
+    keep = np.zeros(points.count, dtype=bool)
+    if len(tri_points) == 0:
+        return keep
+    tp = mesh.triangle_positions                                   # (T, 3, 3)
+    h = np.concatenate([tp, np.ones(tp.shape[:2] + (1,))], axis=2) @ np.asarray(clip).T
+    x, y, z, w = h[..., 0], h[..., 1], h[..., 2], h[..., 3]
+    wide = (1.0 + margin) * w
+    outside = ((x < -wide).all(1) | (x > wide).all(1) | (y < -wide).all(1)
+               | (y > wide).all(1) | (z < -w).all(1) | (z > w).all(1))
+    inside = ~outside
+    if side in (1, -1):
+        ng = np.cross(tp[:, 1] - tp[:, 0], tp[:, 2] - tp[:, 0])
+        toward = (np.asarray(eye, np.float64) - tp.mean(axis=1) if view_dir is None
+                  else np.broadcast_to(np.asarray(view_dir, np.float64), ng.shape))
+        inside &= side * np.einsum("ij,ij->i", ng, toward) > 0.0          # edge-on: no area
+    keep[tri_points[inside].reshape(-1)] = True
+    return keep
+
+
 def bounding_diagonal(positions: np.ndarray) -> float:
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     p = p[np.isfinite(p).all(axis=1)]

@@ -14,7 +14,9 @@
  *
  * Textures (texelFetch only):
  *   pointData RGBA32F  rows of `width`, four blocks of `rows`: [normal, material], [bent view,
- *                      cos_o], [weight of lobe 0, -], [weight of lobe 1, -]
+ *                      cos_o], [weight of lobe 0, the point's index in the visibility bits
+ *                      (the glossy sums shade the points a camera may see)], [weight of
+ *                      lobe 1, -]
  *   visTex    RGBA32F  the stored visibility bits (addon/gpu/visibility.py: np.packbits, three
  *                      bytes per float as an exact integer, bit b of float q is cubemap
  *                      texel 24 q + 23 - b), `stride` texels per point, rows of ROW_TEXELS
@@ -43,7 +45,8 @@ void main()
   vec3 n = nm.xyz;
 #ifndef IRRADIANCE
   vec4 vc = texelFetch(pointData, q + ivec2(0, rows), 0);
-  vec3 w0 = texelFetch(pointData, q + ivec2(0, 2 * rows), 0).rgb;
+  vec4 w0i = texelFetch(pointData, q + ivec2(0, 2 * rows), 0);
+  vec3 w0 = w0i.rgb;
   vec3 w1 = texelFetch(pointData, q + ivec2(0, 3 * rows), 0).rgb;
   int m = int(nm.w + 0.5);
   vec4 head = texelFetch(matData, ivec2(0, m), 0);
@@ -64,7 +67,11 @@ void main()
   vec3 f01 = texelFetch(matData, ivec2(5, m), 0).rgb;
   vec3 B1 = texelFetch(matData, ivec2(6, m), 0).rgb;
 #endif
+#ifdef IRRADIANCE
   int first = p * stride;
+#else
+  int first = int(w0i.w + 0.5) * stride;       /* the point's row of the visibility bits */
+#endif
   vec3 sum = vec3(0.0);
   for (int j = 0; j < stride; j++) {
     vec4 chunk = texelFetch(visTex, row_texel(first + j), 0);

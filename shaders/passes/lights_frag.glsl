@@ -47,8 +47,19 @@
  * no fragment takes still costs registers on a GPU and its whole body on llvmpipe, which
  * runs both sides of a branch under a mask. */
 
-#define NL 8
-#define NB 8
+/* glossy samples per source and sample: LOBE_TAPS (LOBE_SAMPLES) on the disc and as many of the
+ * NDF, an area lamp's AREA_GRID^2 points on it; fewer per sample when each pixel has several
+ * (addon/gpu/lights.py frame_features), which turn their patterns differently */
+#ifndef LOBE_TAPS
+#define LOBE_TAPS LOBE_SAMPLES
+#endif
+#define NL LOBE_TAPS
+#define NB LOBE_TAPS
+#define AREA_GRID (LOBE_TAPS >= 8 ? 4 : 2)
+/* a source whose angular radius is below SMALL_SOURCE times the lobe's alpha (the reflected
+ * lobe's angular spread) lights the lobe as a point of its solid angle: the lobe's relative
+ * change over the disc is at most (r / alpha)^2 / 4 at its peak, 1 % here */
+#define SMALL_SOURCE 0.2
 /* shadow-map filter taps per source and sample: FILTER_TAPS (addon/gpu/lights.py), or fewer
  * when each pixel has several samples; the blocker search takes BLOCKER_TAPS */
 #ifndef PCF_TAPS
@@ -323,7 +334,7 @@ float local_visibility(int s, vec3 p, vec3 ng, vec3 lamp, float lamp_radius, vec
 
 /* ---------------------------------------------------------------- area lamps */
 
-#define NA 16
+#define NA (AREA_GRID * AREA_GRID)
 
 /* a point of an area lamp's shape for u in [0, 1)^2, uniform in area: the square as is,
  * the disc by the concentric map (Shirley and Chiu 1997) */
@@ -409,8 +420,19 @@ vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_
   if (!glossy) {
     return sum;
   }
+  /* small against the lobe: a point of the lamp's solid angle at its centre */
+  vec3 wc = centre - vPos;
+  float dc2 = max(dot(wc, wc), 1e-12);
+  vec3 ic = wc * inversesqrt(dc2);
+  float cos_c = -dot(ic, facing);
+  float rc = source(s, 0).w * inversesqrt(dc2);      /* angular radius of its area's disc */
+  if (rc < SMALL_SOURCE * a && cos_c > rc && dot(ng, ic) > rc) {
+    return sum + glossy_f_cos(n, o, ic, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L *
+                 (area * cos_c / dc2);
+  }
   for (int l = 0; l < NA; l++) {
-    vec2 p = shape_point((vec2(float(l % 4), float(l / 4)) + jitter) * 0.25, ellipse);
+    vec2 p = shape_point((vec2(float(l % AREA_GRID), float(l / AREA_GRID)) + jitter) /
+                         float(AREA_GRID), ellipse);
     vec3 w = centre + p.x * hx + p.y * hy - vPos;
     float d2 = max(dot(w, w), 1e-12);
     vec3 i = w * inversesqrt(d2);
@@ -619,7 +641,12 @@ void main()
         sum += kd.rgb * wd * (PI * sr * sr * nc) * L *
                (mapped ? bump_shadowing(smoothN, nd, c) : 1.0);
       }
-      for (int l = 0; l < (glossyHere || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
+      /* a disc small against the lobe and clear of both horizons: the lobe at its centre */
+      bool lobeSampled = glossyHere && !(clear && r < SMALL_SOURCE * a);
+      if (glossyHere && !lobeSampled) {
+        sum += glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1) * (omega * L);
+      }
+      for (int l = 0; l < (lobeSampled || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
         vec2 u = fract(vec2((float(l) + 0.5) / float(NL), radical_inverse(l)) + shift);
         vec3 i = cone_sample(c, cos_r, u);
         if (dot(ng, i) <= 0.0) {
@@ -630,7 +657,7 @@ void main()
           f += kd.rgb * wd * max(dot(nd, i), 0.0) * (omega / float(NL)) *
                (mapped ? bump_shadowing(smoothN, nd, i) : 1.0);
         }
-        if (glossyHere) {
+        if (lobeSampled) {
           float pl = 1.0 / omega;
           float pb = ndf_pdf(n, o, i, a, dist);
           f += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) /
@@ -638,7 +665,7 @@ void main()
         }
         sum += f * L;
       }
-      if (glossyHere) {
+      if (lobeSampled) {
         for (int b = 0; b < NB; b++) {
           vec3 i;
           if (!ndf_direction(b, n, o, a, dist, tx, ty, shift, i) ||

@@ -101,3 +101,26 @@ def test_glsl_sums_drawn_a_block_of_rows_at_a_time(registered_addon, monkeypatch
     for a, b in zip(whole, rows):
         assert np.abs(a).max() > 0.0
         np.testing.assert_allclose(b, a, rtol=1e-6, atol=1e-7 * np.abs(a).max())
+
+
+def test_glsl_sums_of_the_seen_points_only(registered_addon):
+    """With a mask of the points the camera may see, those points get the sums of the whole
+    pass (each reads its own visibility row) and the others 0."""
+    from prt_relight.addon.frame.engine import in_render
+    from prt_relight.addon.methods.reference import gpu as method
+    gpu_context()
+    pos, nrm, bits = occluded_grid(8)
+    lighting = envmap.WorldLighting(image=sky_with_sun()).to_cubemap(32)
+    views = reference.view_directions(pos, np.array([2.0, -3.0, 2.0]))
+    point_mat = np.arange(len(nrm)) % len(MATERIALS)
+    seen = np.random.default_rng(2).random(len(nrm)) < 0.4
+    st = SimpleNamespace(name="grid", bits=bits)
+
+    def sums(_d, key, mask):
+        return method.specular_radiance(st, nrm, point_mat, list(MATERIALS), CUBE, lighting,
+                                        views, key, mask)
+    whole = in_render(bpy.context.scene, lambda d: sums(d, ("all",), None))
+    some = in_render(bpy.context.scene, lambda d: sums(d, ("seen",), seen))
+    assert np.abs(whole[seen]).max() > 0.0 and not some[~seen].any()
+    np.testing.assert_allclose(some[seen], whole[seen], rtol=1e-6,
+                               atol=1e-7 * np.abs(whole).max())

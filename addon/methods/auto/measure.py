@@ -93,6 +93,7 @@ def substate(state, objects, method_id, setting=None, value=None, quiet=False):
     sub = copy.copy(state)              # shares world, warnings, background
     if quiet:
         sub.progress = None
+        sub.visible_only = False          # a measurement shades every point it asks for
     sub.objects = list(objects)
     sub.method = method_id
     if setting is not None:

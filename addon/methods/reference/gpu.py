@@ -51,10 +51,12 @@ def material_rows(materials: list, count: int) -> np.ndarray:
     return out
 
 
-def point_rows(normals, views, point_materials, materials) -> np.ndarray:
+def point_rows(normals, views, point_materials, materials, index=None) -> np.ndarray:
     """(4, P, 4) float32: per point [normal, material], [view bent above the horizon
-    (core.shading.brdf.bend_views), cos_o], and each glossy lobe's weight times its
-    multiscatter factor (the weights core.shading.brdf.specular_terms gives its terms)."""
+    (core.shading.brdf.bend_views), cos_o], each glossy lobe's weight times its
+    multiscatter factor (the weights core.shading.brdf.specular_terms gives its terms), and
+    in the first lobe's row the point's ``index`` into the visibility bits (default: its
+    row)."""
     n = core_brdf.unit_rows(normals, "normals")
     v, cos_o = core_brdf.bend_views(n, core_brdf.unit_rows(views, "views"))
     P = len(n)
@@ -63,6 +65,7 @@ def point_rows(normals, views, point_materials, materials) -> np.ndarray:
     out[0, :, 3] = point_materials
     out[1, :, :3] = v
     out[1, :, 3] = cos_o
+    out[2, :, 3] = np.arange(P) if index is None else index
     for m in np.unique(point_materials):
         mat = slot_material(materials, m)
         if mat.is_diffuse_only:
@@ -122,20 +125,26 @@ def irradiance(st, normals, cube, lighting) -> np.ndarray:
 
 
 def specular_radiance(st, normals, point_materials, materials, cube, lighting, views,
-                      lighting_key) -> np.ndarray:
+                      lighting_key, seen=None) -> np.ndarray:
     """Glossy radiance (P, 3) float32 of an object's points toward ``views`` (P, 3), by the
     GPU pass: ``st`` holds the visibility bits (``st.bits``, its texture cached per bits);
-    ``lighting_key``: what identifies ``lighting`` (addon.frame.keys.env_key)."""
+    ``lighting_key``: what identifies ``lighting`` (addon.frame.keys.env_key); ``seen``:
+    (P,) bool, the points summed (core.scene.mesh.seen_points), the others 0 (None: all)."""
     P = len(normals)
-    if P == 0:
-        return np.zeros((0, 3), np.float32)
-    rows = -(-P // WIDTH)
+    index = np.arange(P) if seen is None else np.flatnonzero(seen)
+    out = np.zeros((P, 3), np.float32)
+    S = len(index)
+    if S == 0:
+        return out
+    rows = -(-S // WIDTH)
     pts = np.zeros((4, rows * WIDTH, 4), np.float32)
-    pts[:, :P] = point_rows(normals, views, point_materials, materials)
+    pts[:, :S] = point_rows(normals[index], views[index], point_materials[index], materials,
+                            index)
     mats = material_rows(materials, int(np.max(point_materials)) + 1)
     digest = hashlib.blake2b(pts.tobytes() + mats.tobytes(), digest_size=16).digest()
 
     def run():
-        return _pass(st, pts, rows, P, cube, lighting, mats)
-    return keys.per_visibility(_SUMS, (st.name, id(st.bits), lighting_key, digest), st.bits,
-                               run).copy()
+        return _pass(st, pts, rows, S, cube, lighting, mats)
+    out[index] = keys.per_visibility(_SUMS, (st.name, id(st.bits), lighting_key, digest),
+                                     st.bits, run)
+    return out

@@ -74,7 +74,8 @@ class ReferenceShading(Shading):
                 try:
                     radiance += reference_gpu.specular_radiance(
                         st, pts.normals, pts.materials, st.materials, cube, L,
-                        reference.point_views(pts.positions, eye, view_dir), env_key)
+                        reference.point_views(pts.positions, eye, view_dir), env_key,
+                        state.seen_points(st))
                 except Exception as exc:          # numpy gives the same sums
                     state.note(f"REFERENCE GPU pass failed ({exc}); shading with numpy")
                     use_gpu = False

@@ -207,3 +207,52 @@ def test_closed_side_of_open_closed_and_mirrored_meshes():
     open_box.triangles = open_box.triangles[2:]              # one face missing
     assert mesh.closed_side(open_box) == 0
     assert mesh.closed_side(mesh.grid()) == 0
+
+
+# --------------------------------------------------------------------------- #
+# mesh.seen_points: what a camera may see
+# --------------------------------------------------------------------------- #
+
+def _clip(eye, target, fov=0.8, near=0.1, far=100.0):
+    """A GL world-to-clip matrix (perspective @ look-at, Z up)."""
+    f = unit(np.asarray(target, float) - eye)
+    s = unit(np.cross(f, [0.0, 0.0, 1.0]))
+    u = np.cross(s, f)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = s, u, -f
+    view[:3, 3] = -view[:3, :3] @ eye
+    t = 1.0 / np.tan(fov / 2)
+    proj = np.array([[t, 0, 0, 0], [0, t, 0, 0],
+                     [0, 0, -(far + near) / (far - near), -2 * far * near / (far - near)],
+                     [0, 0, -1, 0]])
+    return proj @ view
+
+
+def test_seen_points_keep_the_front_of_a_closed_mesh_in_the_frustum():
+    cube = flat_cube()
+    pts = mesh.shading_points(cube)
+    eye = np.array([5.0, 0.0, 0.0])
+    clip = _clip(eye, [0.0, 0.0, 0.0])
+    side = mesh.closed_side(cube)
+    seen = mesh.seen_points(cube, pts, clip, side, eye=eye)
+    # the face toward the camera only: its four points, whose normal is +x
+    assert seen.sum() == 4 and (pts.normals[seen] @ [1.0, 0.0, 0.0] > 0.99).all()
+    # an orthographic camera along +x sees the same face
+    ortho = mesh.seen_points(cube, pts, clip, side, view_dir=np.array([1.0, 0.0, 0.0]))
+    np.testing.assert_array_equal(ortho, seen)
+    # open (side 0): every face in the frustum is kept, both windings
+    assert mesh.seen_points(cube, pts, clip, 0, eye=eye).all()
+    # behind the camera, or off to the side of the frustum: nothing
+    assert not mesh.seen_points(cube, pts, _clip(eye, [10.0, 0.0, 0.0]), 0, eye=eye).any()
+    assert not mesh.seen_points(cube, pts, _clip(eye, [5.0, 8.0, 0.0]), 0, eye=eye).any()
+
+
+def test_seen_points_keep_a_triangle_the_frame_edge_cuts():
+    ground = mesh.grid(size=20.0, cuts=4)
+    pts = mesh.shading_points(ground)
+    eye = np.array([0.0, 0.0, 3.0])
+    seen = mesh.seen_points(ground, pts, _clip(eye, [0.0, 0.01, 0.0], fov=0.5), 0, eye=eye)
+    # the narrow view meets the middle triangles only, and keeps their corners outside it
+    assert 0 < seen.sum() < pts.count
+    far = np.linalg.norm(pts.positions[seen, :2], axis=1).max()
+    assert far > 3.0 * np.tan(0.25) * 1.5
