@@ -122,5 +122,6 @@ def test_glsl_sums_of_the_seen_points_only(registered_addon):
     whole = in_render(bpy.context.scene, lambda d: sums(d, ("all",), None))
     some = in_render(bpy.context.scene, lambda d: sums(d, ("seen",), seen))
     assert np.abs(whole[seen]).max() > 0.0 and not some[~seen].any()
-    np.testing.assert_allclose(some[seen], whole[seen], rtol=1e-6,
-                               atol=1e-7 * np.abs(whole).max())
+    # one shader on the same inputs: equal up to how a driver orders float work
+    np.testing.assert_allclose(some[seen], whole[seen], rtol=1e-4,
+                               atol=1e-6 * np.abs(whole).max())
