@@ -395,7 +395,8 @@ vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_
                float a, int dist, int lobes, bool glossy, float lam_o, vec3 ms0, vec3 ms1,
                vec3 tx, vec3 ty, vec2 shift)
 {
-  vec3 centre = source(s, 0).xyz;
+  vec4 s0 = source(s, 0);
+  vec3 centre = s0.xyz;
   vec3 L = source(s, 1).rgb;
   vec3 facing = source(s, 2).xyz;
   vec3 hx = source(s, 4).xyz, hy = source(s, 5).xyz;
@@ -425,7 +426,7 @@ vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_
   float dc2 = max(dot(wc, wc), 1e-12);
   vec3 ic = wc * inversesqrt(dc2);
   float cos_c = -dot(ic, facing);
-  float rc = source(s, 0).w * inversesqrt(dc2);      /* angular radius of its area's disc */
+  float rc = s0.w * inversesqrt(dc2);                /* angular radius of its area's disc */
   if (rc < SMALL_SOURCE * a && cos_c > rc && dot(ng, ic) > rc) {
     return sum + glossy_f_cos(n, o, ic, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L *
                  (area * cos_c / dc2);
