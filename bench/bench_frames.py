@@ -4,7 +4,9 @@ World's Mapping turned by a new angle before every frame) over Workbench's F12 o
 scene in the same run, the viewport frame after an HDRI turn (one sample per pixel,
 ``engine.render_pixels`` inside a render, the state's World turned as ``addon.frame.relit``
 turns it) over Workbench's F12 without anti-aliasing (the stand-in for its viewport frame:
-a headless Blender draws no viewport), and where one relit F12's time goes.
+a headless Blender draws no viewport), the viewport's update after an HDRI turn (a full sync
+against the World's part alone, :func:`viewport_update`), and where one relit F12's time
+goes.
 
     python bench/bench_frames.py [--kinds diffuse,sun,glossy,textured,lamps,teapot]
                                  [--methods REFERENCE,SSDF_SG,RSL,BLOCKS,SH,WAVELET,AUTO]
@@ -182,6 +184,31 @@ def viewport_frame(scene, rounds):
     return in_render(scene, viewport)
 
 
+def viewport_update(scene, rounds):
+    """Median seconds of the viewport's update after an HDRI turn (the view layer's
+    depsgraph): a full ``FrameState.sync`` (every mesh read again: what ``view_update`` did
+    for any edit) and ``FrameState.relit`` (the World alone: what it does now when the
+    update names only the World, core.pipeline.frame_status.world_only)."""
+    import bpy
+    from prt_relight.addon.frame.state import FrameState
+    full, world = [], []
+    state = None
+    for _ in range(rounds + 1):            # the first round warms the caches
+        turn_world(scene)
+        bpy.context.view_layer.update()
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        t0 = time.perf_counter()
+        fresh = FrameState()
+        fresh.sync(depsgraph)
+        t1 = time.perf_counter()
+        if state is not None:
+            state.relit(depsgraph)
+            world.append(time.perf_counter() - t1)
+            full.append(t1 - t0)
+        state = fresh
+    return statistics.median(full), statistics.median(world)
+
+
 def run(kind, methods, size, rounds, out_dir):
     """The rows of one scene kind: ratios and the profile per method."""
     import bpy
@@ -197,16 +224,19 @@ def run(kind, methods, size, rounds, out_dir):
         path = out_dir / f"{kind}.{method}.exr"
         t_f12 = relit_f12(scene, path, rounds)
         t_view = viewport_frame(scene, rounds)
+        updates = viewport_update(scene, rounds)
         steps = profile(path)
-        rows.append((kind, f"{w}×{h}", method, t_f12 / t_wb, t_view / t_wb1, t_f12, steps))
+        rows.append((kind, f"{w}×{h}", method, t_f12 / t_wb, t_view / t_wb1, t_f12, steps,
+                     updates))
         print(_row(rows[-1]), f"(Workbench F12 {1e3 * t_wb:.0f} ms, no AA {1e3 * t_wb1:.0f} ms)",
               flush=True)
     return rows
 
 
 def _row(r):
-    kind, size, method, ratio, view_ratio, t, steps = r
-    return (f"| {kind} | {size} | {method} | {ratio:.1f}× | {view_ratio:.1f}× | {1e3 * t:.0f} ms | "
+    kind, size, method, ratio, view_ratio, t, steps, (full, world) = r
+    return (f"| {kind} | {size} | {method} | {ratio:.1f}× | {view_ratio:.1f}× | "
+            f"{1e3 * full:.0f} → {1e3 * world:.0f} | {1e3 * t:.0f} ms | "
             + " | ".join(f"{1e3 * steps[k]:.0f}" for k in ("sync", "CPU shading", "GPU",
                                                              "filter", "rest")) + " |")
 
@@ -227,11 +257,12 @@ def main():
         rows += run(kind, args.methods.split(","), args.size, args.rounds, out_dir)
     lines = [f"Relit frames against Workbench ({time.strftime('%Y-%m-%d')}, one run, "
              "`make bench-frames`; relit F12 = the HDRI turned before the frame, viewport = one "
-             "sample per pixel after a turn against Workbench's F12 without AA; the profile of "
-             "one relit F12 in ms):", "",
-             "| scene | size | method | relit F12 ÷ Workbench | viewport ÷ Workbench | relit F12 "
-             "| sync | CPU shading | GPU | filter | rest |",
-             "|---|---|---|---|---|---|---|---|---|---|---|", *map(_row, rows), ""]
+             "sample per pixel after a turn against Workbench's F12 without AA; view update = "
+             "the viewport's sync after a turn, every object read again → the World alone; the "
+             "profile of one relit F12 in ms):", "",
+             "| scene | size | method | relit F12 ÷ Workbench | viewport ÷ Workbench | view "
+             "update (ms) | relit F12 | sync | CPU shading | GPU | filter | rest |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|", *map(_row, rows), ""]
     report(lines, args.append)
 
 

@@ -13,6 +13,7 @@ from mathutils import Matrix
 
 from ...core.sphere import envmap
 from ...core.common.parallel import Cancelled
+from ...core.pipeline import frame_status
 from ..gpu import drawing, lights, sharp
 from . import passes
 from .state import FrameState, TexturedRadiance
@@ -34,7 +35,10 @@ def _background(state: FrameState):
     """(texture, rotation, strength) for drawing the world, cached on the state."""
     world = state.full_world if state.full_world is not None else state.world
     cached = state.background
-    if cached is not None and cached[0] is world:
+    # the texture holds the pixels (rotation and strength are drawn as uniforms): a turned
+    # World (FrameState.relit) shares the exported pixel array
+    if cached is not None and (cached[0] is world or (
+            world.image is not None and cached[0].image is world.image)):
         tex = cached[1]
     else:
         if world.image is not None:
@@ -102,6 +106,19 @@ def frame_camera(view: Matrix, projection: Matrix, width: int, height: int, eye,
     toward an orthographic camera (as :func:`_eye` returns them)."""
     return dict(clip=np.array(projection @ view, dtype=np.float64), width=int(width),
                 height=int(height), eye=eye, view_dir=view_dir)
+
+
+def world_updates(depsgraph) -> list:
+    """Per ID the viewport's update names: (its type name, whether it is the scene's World
+    or the World's own node tree), what core.pipeline.frame_status.world_only reads."""
+    world = depsgraph.scene.world
+    mine = [] if world is None else [x for x in (world, world.node_tree) if x is not None]
+    out = []
+    for update in depsgraph.updates:
+        ident = update.id
+        original = getattr(ident, "original", ident)
+        out.append((type(ident).__name__, any(original == x for x in mine)))
+    return out
 
 
 def render_view(scene, depsgraph):
@@ -450,9 +467,15 @@ class PRTRenderEngine(bpy.types.RenderEngine):
 
     # ------------------------------------------------------------- viewport
     def view_update(self, context, depsgraph):
-        # A new state each time: a shading worker may still be reading the old one.
-        state = FrameState()
-        state.sync(depsgraph)
+        # A new state each time: a shading worker may still be reading the old one.  When
+        # the World alone changed (an HDRI turned), the objects are kept: no mesh is read
+        # again, only the World's lighting and sources.
+        old = self._state
+        if old is not None and frame_status.world_only(world_updates(depsgraph)):
+            state = old.relit(depsgraph)
+        else:
+            state = FrameState()
+            state.sync(depsgraph)
         self._state = state
         self._view_key = None
         rv3d = getattr(context, "region_data", None)

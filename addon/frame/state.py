@@ -196,6 +196,8 @@ class FrameState:
         self.sources: list = []
         self.drawn_lamps: list = []  # core.sg.lighting.Lamp drawn per pixel (addon/gpu/lights.py)
         self.warnings: list[str] = []
+        #: the warnings of the objects, lamps and method data (:meth:`relit` keeps them)
+        self.object_warnings: list[str] = []
         self.error: str | None = None
         self.resolution = 32
         self.method = "REFERENCE"
@@ -247,20 +249,11 @@ class FrameState:
 
     # ------------------------------------------------------------------ sync
     def sync(self, depsgraph):
+        """Read the whole scene: its objects, lamps and method data, then the World's part
+        (:meth:`_sync_lighting`)."""
         scene = depsgraph.scene
         self.warnings = []
         self.error = None
-        try:
-            self.world = scene_export.export_world(scene, self.warnings)
-        except scene_export.ExportError as exc:
-            self.error = str(exc)
-            self.world = envmap.WorldLighting(color=(0.0, 0.0, 0.0))
-        # the compact sources are drawn per pixel (addon/gpu/lights.py); methods shade the rest
-        self.full_world = self.world
-        self.world, self.sources = sources.split_world(self.world,
-                                                      sources.extraction_settings(scene.prt))
-        self.world_group, self.source_groups = scene_export.world_groups(
-            scene, depsgraph.view_layer, len(self.sources))
         self.resolution = scene.prt.precomputed_resolution or int(scene.prt.resolution)
         self.method = scene.prt.method
         self.settings = {name: getattr(scene.prt, name) for name in methods.scene_properties()}
@@ -374,13 +367,48 @@ class FrameState:
         self.lamps = [lamp for lamp in lamps if lamp.kind in mine]
         self.drawn_lamps = [lamp for lamp in lamps if lamp.kind not in mine]
         self.warnings += lamp_warnings
+        self.method_impl.sync(self)
+        self.bounce = bounce.FrameBounce.of(self, scene_export.light_bounces(scene))
+        self.object_warnings = list(self.warnings)
+        self._sync_lighting(depsgraph)
+
+    def _sync_lighting(self, depsgraph):
+        """The World's part of the state, all an HDRI turn changes: its lighting, its
+        compact sources and light groups, and the shadow maps' budget (sources and lamps)."""
+        scene = depsgraph.scene
+        try:
+            self.world = scene_export.export_world(scene, self.warnings)
+        except scene_export.ExportError as exc:
+            self.error = str(exc)
+            self.world = envmap.WorldLighting(color=(0.0, 0.0, 0.0))
+        # the compact sources are drawn per pixel (addon/gpu/lights.py); methods shade the rest
+        self.full_world = self.world
+        self.world, self.sources = sources.split_world(self.world,
+                                                      sources.extraction_settings(scene.prt))
+        self.world_group, self.source_groups = scene_export.world_groups(
+            scene, depsgraph.view_layer, len(self.sources))
         # every source and lamp is drawn; the panel and the log say what the shadow maps'
         # budget changed (smaller tiles; past it, no shadow)
         self.warnings += sources.shadow_plan(
             list(self.sources) + sources.lamp_sources(self.drawn_lamps)).messages
-        self.method_impl.sync(self)
-        self.bounce = bounce.FrameBounce.of(self, scene_export.light_bounces(scene))
         LAST_MESSAGES[:] = ([self.error] if self.error else []) + self.warnings
+
+    def relit(self, depsgraph) -> "FrameState":
+        """A new state for a change of the World alone (an HDRI turned, its strength
+        dragged; core.pipeline.frame_status.world_only): this state's objects, lamps and
+        method data (nothing of theirs depends on the World), the World read again.  The
+        old state is left as it was (a shading worker may still be reading it)."""
+        new = copy.copy(self)
+        new.objects = list(self.objects)
+        new.lamps, new.drawn_lamps = list(self.lamps), list(self.drawn_lamps)
+        new.warnings = list(self.object_warnings)
+        new.error = None
+        new.camera = None
+        new.visible_only = False
+        new.progress = new.cancelled = None
+        new._span = (0.0, 1.0)
+        new._sync_lighting(depsgraph)
+        return new
 
     def note(self, message: str):
         """Add a warning for the panels/status bar once (methods call this while shading)."""

@@ -1,6 +1,7 @@
 """What a frame says about each object's stored precompute: whether it is drawn with its
 stored visibility, stale, missing or unshadowed, and the messages the panels and the
-render log show for them (the policy of ``addon/frame/state.py``'s sync, bpy-free)."""
+render log show for them, and which updates leave the objects as they were (the policy of
+``addon/frame/state.py``'s sync, bpy-free)."""
 
 from __future__ import annotations
 
@@ -23,6 +24,18 @@ def stored_status(bits_found: bool, dynamic: bool, fingerprint_same: bool) -> st
     if dynamic:
         return "dynamic"
     return "ok" if fingerprint_same else "stale"
+
+
+def world_only(updates) -> bool:
+    """Whether a viewport update changed the World alone (its node values: an HDRI turned,
+    its strength dragged), so the objects, lamps and method data of the last sync still
+    hold.  ``updates``: per updated ID, ``(kind, of_world)`` -- its type name ("World",
+    "ShaderNodeTree", "Object", ...) and whether it is the scene's World or the World's own
+    node tree.  Anything else (a scene setting, an object, a material, a node group the
+    World uses, an image) is not; nor is an update that names nothing."""
+    updates = list(updates)
+    return bool(updates) and all(of_world and kind in ("World", "ShaderNodeTree")
+                                 for kind, of_world in updates)
 
 
 @dataclass

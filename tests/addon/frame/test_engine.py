@@ -123,3 +123,67 @@ def test_viewport_shades_at_once_where_the_glossy_sums_run_on_a_hardware_gpu(mon
                                engine=engine)[1]
     assert engine._state.view_dependent and not engine.workers
     assert not np.allclose(first, moved, rtol=1e-3)
+
+
+def _viewport_update(engine, change):
+    """``change()``, then the engine's ``view_update`` with the depsgraph's updates, as
+    Blender calls it after an edit (from the update handler, where ``updates`` is filled)."""
+    import types
+    calls = []
+
+    def handler(scene, depsgraph):
+        engine.view_update(types.SimpleNamespace(region_data=None), depsgraph)
+        calls.append(depsgraph)
+
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    try:
+        change()
+        bpy.context.view_layer.update()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
+    assert calls
+
+
+def test_viewport_hdri_turn_keeps_the_objects_and_draws_a_full_syncs_frame():
+    """Turning the HDRI (the World's Mapping) in the viewport reads the World again and
+    keeps the synced objects (no mesh exported again); the frame is the one a full sync of
+    the turned scene draws.  Moving an object syncs everything again."""
+    small_scene()
+    for ob in bpy.context.scene.objects:
+        if ob.type == "MESH":
+            scenes.add_bsdf_material(ob, f"{ob.name} diffuse", "ShaderNodeBsdfDiffuse")
+    bpy.context.scene.prt.method = "REFERENCE"
+    bpy.ops.prt.precompute()
+    scene = bpy.context.scene
+    nt = scene.world.node_tree
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], nt.nodes["Environment Texture"].inputs["Vector"])
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()                      # gives the gpu module a context in -b
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    w, h = 48, 36
+    view, window = cam.matrix_world.inverted(), cam.calc_matrix_camera(depsgraph, x=w, y=h)
+    engine = viewport.FakeViewEngine()
+    before = viewport.view_draw(depsgraph, view, window, w, h, engine=engine)[1]
+    first = engine._state
+
+    def turn():
+        mapping.inputs["Rotation"].default_value[2] += 1.3
+    _viewport_update(engine, turn)
+    turned = engine._state
+    assert turned is not first
+    assert all(a is b for a, b in zip(turned.objects, first.objects))
+    assert len(turned.objects) == len(first.objects) == 2
+    assert not np.allclose(turned.world.rotation, first.world.rotation)
+    shown = viewport.view_draw(depsgraph, view, window, w, h, engine=engine)[1]
+    fresh = viewport.view_draw(bpy.context.evaluated_depsgraph_get(), view, window, w, h)[1]
+    np.testing.assert_allclose(shown, fresh, rtol=1e-4, atol=1e-6)
+    assert np.abs(shown - before)[..., :3].mean() > 0.01 * before[..., :3].mean()
+
+    def move():
+        bpy.data.objects["Suzanne"].location.x += 0.2
+    _viewport_update(engine, move)
+    assert not any(a is b for a, b in zip(engine._state.objects, turned.objects))

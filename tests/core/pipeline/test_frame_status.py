@@ -1,7 +1,8 @@
 """core.pipeline.frame_status: which status an object's stored visibility gives it
 (stored_status, its truth table from the definition) and what a frame says about the
 objects drawn without their stored data (SyncNotes: which list each status goes to, the
-messages in their order, one per kind, naming the objects).  No bpy."""
+messages in their order, one per kind, naming the objects), and which viewport updates
+change the World alone (world_only).  No bpy."""
 
 from __future__ import annotations
 
@@ -97,3 +98,15 @@ def test_grouped_notes_give_one_line_per_instancer():
     assert len(got) == 3 and len(herd) == 1
     assert herd[0].startswith("2 instances of 'Herd'") and "'Herd#0'" in herd[0]
     assert frame_status.grouped_notes([]) == []
+
+
+def test_world_only_updates():
+    """An HDRI turn names the World and its node tree: the objects hold; anything else
+    (a scene setting, an object, a material's tree, a node group) or nothing does not."""
+    assert frame_status.world_only([("World", True), ("ShaderNodeTree", True)])
+    assert frame_status.world_only([("World", True)])
+    assert not frame_status.world_only([])
+    assert not frame_status.world_only([("World", True), ("Scene", False)])
+    assert not frame_status.world_only([("World", True), ("ShaderNodeTree", False)])
+    assert not frame_status.world_only([("Object", False)])
+    assert not frame_status.world_only([("Image", True)])
