@@ -17,18 +17,34 @@ from ...cases.small import small_scene, stored
 pytestmark = pytest.mark.usefixtures("registered_addon")
 
 
+def _world_mapping():
+    """A Mapping node between the World's texture coordinates and its Environment Texture
+    (its Rotation turns the HDRI)."""
+    nt = bpy.context.scene.world.node_tree
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], nt.nodes["Environment Texture"].inputs["Vector"])
+    return mapping
+
+
+def _camera_view(w, h):
+    """(depsgraph, view, window) of the scene camera at w x h, after one Workbench render
+    (it gives the gpu module a context in -b)."""
+    scene = bpy.context.scene
+    scene.render.engine = "BLENDER_WORKBENCH"
+    bpy.ops.render.render()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    return depsgraph, cam.matrix_world.inverted(), cam.calc_matrix_camera(depsgraph, x=w, y=h)
+
+
 def test_world_rotation_redraws_without_recompute(tmp_path):
     small_scene()
     bpy.ops.prt.precompute()
     a = scenes.render_exr(tmp_path / "a.exr")
     images = stored()
-    world = bpy.context.scene.world
-    nt = world.node_tree
-    coord = nt.nodes.new("ShaderNodeTexCoord")
-    mapping = nt.nodes.new("ShaderNodeMapping")
-    mapping.inputs["Rotation"].default_value[2] = 2.0
-    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
-    nt.links.new(mapping.outputs["Vector"], nt.nodes["Environment Texture"].inputs["Vector"])
+    _world_mapping().inputs["Rotation"].default_value[2] = 2.0
     b = scenes.render_exr(tmp_path / "b.exr")
     assert stored() == images
     assert np.abs(a - b)[..., :3].mean() > 0.01 * a[..., :3].mean()
@@ -48,12 +64,8 @@ def test_view_draw_path_draws_the_same_frame_as_f12(method):
     bpy.ops.prt.precompute()
     ssdf_sg_gpu.PAIR_TABLES.clear()
     scene = bpy.context.scene
-    scene.render.engine = "BLENDER_WORKBENCH"
-    bpy.ops.render.render()                      # gives the gpu module a context in -b
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    cam = scene.camera.evaluated_get(depsgraph)
     w, h = 64, 48
-    view, window = cam.matrix_world.inverted(), cam.calc_matrix_camera(depsgraph, x=w, y=h)
+    depsgraph, view, window = _camera_view(w, h)
     engine, shown = viewport.view_draw(depsgraph, view, window, w, h)
     assert engine.bound == 0 and engine._view_texture is not None
     assert engine.stats is not None
@@ -154,18 +166,9 @@ def test_viewport_hdri_turn_keeps_the_objects_and_draws_a_full_syncs_frame():
             scenes.add_bsdf_material(ob, f"{ob.name} diffuse", "ShaderNodeBsdfDiffuse")
     bpy.context.scene.prt.method = "REFERENCE"
     bpy.ops.prt.precompute()
-    scene = bpy.context.scene
-    nt = scene.world.node_tree
-    coord = nt.nodes.new("ShaderNodeTexCoord")
-    mapping = nt.nodes.new("ShaderNodeMapping")
-    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
-    nt.links.new(mapping.outputs["Vector"], nt.nodes["Environment Texture"].inputs["Vector"])
-    scene.render.engine = "BLENDER_WORKBENCH"
-    bpy.ops.render.render()                      # gives the gpu module a context in -b
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    cam = scene.camera.evaluated_get(depsgraph)
+    mapping = _world_mapping()
     w, h = 48, 36
-    view, window = cam.matrix_world.inverted(), cam.calc_matrix_camera(depsgraph, x=w, y=h)
+    depsgraph, view, window = _camera_view(w, h)
     engine = viewport.FakeViewEngine()
     before = viewport.view_draw(depsgraph, view, window, w, h, engine=engine)[1]
     first = engine._state
