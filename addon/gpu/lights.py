@@ -187,8 +187,8 @@ def material_texels(material, eye4, closed_side=0) -> np.ndarray:
     if material.has_diffuse:
         p[0, 0, :3] = np.asarray(material.diffuse_albedo) / math.pi
         p[0, 0, 3] = 1.0
-    # a slot whose lobes the sharp pass draws: it reflects the World there (its sources
-    # too), the lamps here
+    # a slot whose lobes the sharp pass draws: its lamps are drawn here, the World's compact
+    # sources where the lobe is narrower than the pixel's footprint (lights_frag.glsl)
     p[0, 9, 1] = 1.0 if material.per_pixel_lobe else 0.0
     material = replace(material, per_pixel_lobe=False)
     lobes = [] if material.is_diffuse_only else core_brdf.sharp_lobes(material)

@@ -128,8 +128,9 @@ SPECS: dict[str, Spec] = {
         fragment=_COMMON + ("lib/microfacet.glsl", "lib/texture.glsl",
                             "passes/sharp_lobe_frag.glsl"),
         push_constants=_VIEW + (("MAT3", "envRot"), ("FLOAT", "closedSide")),
-        samplers=tuple(("FLOAT_2D", n) for n in ("envTex", "mipTex", "visTex", "paramTex",
-                                                 "roughTex", "normalTex")),
+        samplers=tuple(("FLOAT_2D", n) for n in ("envTex", "mipTex", "sourcesTex",
+                                                 "sourcesMipTex", "worldSrcTex", "visTex",
+                                                 "paramTex", "roughTex", "normalTex")),
         vertex_inputs=tuple(("VEC3", n) for n in ("pos", "nrm", "triPoints", "bary", "triN0",
                                                   "triN1", "triN2"))
         + (("VEC2", "uv"), ("VEC4", "tng")),

@@ -7,7 +7,8 @@ FrameState marks such materials (:attr:`core.shading.brdf.Material.per_pixel_lob
 method shades their Lambert base only, and this pass adds the lobes per pixel
 (``shaders/passes/sharp_lobe_frag.glsl``): NDF samples, the environment filtered to each
 sample's share of the lobe from a mip pyramid of the equirect (level 0 is the
-background's texture), the shading points' stored visibility at each sample direction
+background's texture; where the lobe is narrower than the pixel's footprint, of the World's
+residual: its compact sources are then the lights pass's, addon/gpu/lights.py), the shading points' stored visibility at each sample direction
 (mixed over the triangle's corners whose normal's hemisphere holds it: only those traced it).
 The viewport and F12 draw it alike, after the method's own pass, adding with depth
 test equal.  A slot's textured Roughness and normal or bump map are read per pixel (as
@@ -28,6 +29,9 @@ from ..frame import keys
 
 #: NDF samples per pixel for a lobe of non-zero roughness (one for a mirror)
 SAMPLES = 32
+#: the World's compact sources the pass tells apart (a bit each; the Compact Sources
+#: setting allows 8)
+MAX_WORLD_SOURCES = 32
 
 #: roughness nodes of a textured Roughness' multiscatter rows (values i / (n - 1))
 ROUGHNESS_NODES = 17
@@ -37,7 +41,8 @@ TABLE = 32
 _BATCHES = drawing.gpu_cache({})
 # the vertex format every feature set of the pass draws
 _FORMAT = drawing.gpu_cache({}, limit=1)
-_MIPS = drawing.gpu_cache({})
+# per image: (level 0, mips, levels); the whole World, or its residual and its sources
+_MIPS = drawing.gpu_cache({}, limit=3)
 
 
 def _shader(features=()):
@@ -117,26 +122,52 @@ def _texture(rgba: np.ndarray):
     return drawing.float_texture(np.ascontiguousarray(rgba, dtype=np.float32))
 
 
-def _mip_texture(world):
-    """(texture, levels) of the equirect's mip pyramid below level 0 (newest world image)."""
-    img = world.image
-    key = ("color",) if img is None else keys.image_key(img)
+def _mip_texture(key, image, shown_tex=None):
+    """(level 0, mip atlas, levels) textures of an equirect ``image`` (None: black; a
+    callable: made on a miss) as this pass reads it, cached under ``key``; ``shown_tex``
+    (the background's texture) stands for level 0 where given."""
     got = _MIPS.get(key)
     if got is None:
-        if img is None:
+        level0 = None
+        image = image() if callable(image) else image
+        if image is None:
             atlas, levels = np.zeros((1, 1, 4), np.float32), 0
+            level0 = _texture(atlas) if shown_tex is None else None
         else:
-            shown = envmap.display_equirect(img)          # level 0: the background's texture
+            shown = envmap.display_equirect(image)        # level 0 as the background's
             atlas = envmap.equirect_mip_atlas(shown)
             levels = len(envmap.equirect_mip_sizes(*shown.shape[:2]))
-        got = (_texture(atlas), levels)
-        _MIPS.clear()
+            if shown_tex is None:
+                rgba = np.ones(shown.shape[:2] + (4,), np.float32)
+                rgba[:, :, :3] = shown
+                level0 = _texture(rgba)
+        got = (level0, _texture(atlas), levels)
         _MIPS[key] = got
-    return got
+    return (got[0] if shown_tex is None else shown_tex), got[1], got[2]
+
+
+def _environment(state, shown_tex):
+    """(residual level 0, its mips, sources level 0, their mips, levels, worldSrcTex, source
+    count): the World's residual and its compact sources' own image (the whole World and
+    black where none is split off), and the sources' directions and radii."""
+    world = state.full_world if state.full_world is not None else state.world
+    img = world.image
+    if img is None or state.world.image is None or state.world.image is img:
+        key = ("color",) if img is None else keys.image_key(img)
+        env_tex, mip_tex, levels = _mip_texture(("whole", key), img, shown_tex)
+        black = _mip_texture(("black",), None)
+        return env_tex, mip_tex, black[0], black[1], levels, _texture(np.zeros((1, 1, 4))), 0
+    key = keys.image_key(state.world.image)
+    res_tex, res_mip, levels = _mip_texture(("residual", key), state.world.image)
+    src_tex, src_mip, _ = _mip_texture(
+        ("sources", key), lambda: np.maximum(np.asarray(img, np.float32) - state.world.image, 0.0))
+    rows = np.array([(*s.direction, s.radius) for s in state.sources[:MAX_WORLD_SOURCES]],
+                    np.float32).reshape(1, -1, 4)
+    return res_tex, res_mip, src_tex, src_mip, levels, _texture(rows), rows.shape[1]
 
 
 def parameters(material, eye4, env_size, levels, strength, cube_n, stride, rough=None,
-               normal=None):
+               normal=None, world_sources=0):
     """The paramTex texels of one slot (layout in sharp_lobe_frag.glsl); ``rough``: the
     slot's textured Roughness (core.textures.ScalarSource) read per pixel, ``normal`` its
     core.textures.NormalSource."""
@@ -148,7 +179,7 @@ def parameters(material, eye4, env_size, levels, strength, cube_n, stride, rough
     p[0, 1] = (r * r, 0.0 if material.lobe_distribution == "BECKMANN" else 1.0, len(lobes),
                SAMPLES)
     p[0, 2] = (env_size[1], env_size[0], levels, strength)
-    p[0, 3] = (cube_n, stride, 0.0, 0.0)
+    p[0, 3] = (cube_n, stride, world_sources, 0.0)
     for j, (kind, weight, f0, B, eta) in enumerate(lobes):
         p[0, 4 + 3 * j] = (kind, weight, eta, 0.0)
         p[0, 5 + 3 * j, :3] = f0
@@ -182,10 +213,11 @@ def draws(state, eye, view_dir, background) -> list:
     todo = [(st, slots) for st in state.objects for slots in [sharp_slots(st)] if slots]
     if not todo:
         return []
-    env_tex, rotation, strength = background
+    shown_tex, rotation, strength = background
     world = state.full_world if state.full_world is not None else state.world
     env_size = (1, 1) if world.image is None else envmap.display_equirect(world.image).shape[:2]
-    mip_tex, levels = _mip_texture(world)
+    env_tex, mip_tex, src_tex, src_mip_tex, levels, world_src, count = \
+        _environment(state, shown_tex)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
     out = []
     for st, slots in todo:
@@ -204,7 +236,7 @@ def draws(state, eye, view_dir, background) -> list:
                          for got in (rough, mapped)]
             params = parameters(st.materials[slot], eye4, env_size, levels, float(strength),
                                 state.resolution, stride, rough and rough[0],
-                                mapped and mapped[0])
+                                mapped and mapped[0], count)
             slot_draws.append((batch, params, features, textures_))
 
         def draw(view_projection, slot_draws=slot_draws, vis_tex=vis_tex,
@@ -217,6 +249,9 @@ def draws(state, eye, view_dir, background) -> list:
                 sh.uniform_float("closedSide", side)
                 sh.uniform_sampler("envTex", env_tex)
                 sh.uniform_sampler("mipTex", mip_tex)
+                sh.uniform_sampler("sourcesTex", src_tex)
+                sh.uniform_sampler("sourcesMipTex", src_mip_tex)
+                sh.uniform_sampler("worldSrcTex", world_src)
                 sh.uniform_sampler("visTex", vis_tex)
                 sh.uniform_sampler("paramTex", params)
                 sh.uniform_sampler("roughTex", rough_tex)

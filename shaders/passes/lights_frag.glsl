@@ -19,7 +19,7 @@
  * distribution 0 Beckmann / 1 GGX, lobe count, glossy drawn here), 2.. per lobe (kind,
  * weight, eta, -), (f0, -), (B, -) (core.shading.brdf.sharp_lobes), 8 eye (w = 1 perspective),
  * 9 (core.scene.mesh.closed_side of the object, 1 when the sharp pass draws the slot's
- * lobes (the World's sources' glossy then left to it), -, -), 11 (roughness nodes n, alpha floor),
+ * lobes, -, -), 11 (roughness nodes n, alpha floor),
  * 12-15 a textured Roughness (texture.glsl's info, mapping rows, mix colour);
  * 16 a normal or bump map (kind 0 none / 1 Normal Map / 2 Bump, strength, distance, -),
  * 17-20 its image (info, mapping rows, mix colour: texture.glsl mapped_normal);
@@ -60,6 +60,8 @@
  * lobe's angular spread) lights the lobe as a point of its solid angle: the lobe's relative
  * change over the disc is at most (r / alpha)^2 / 4 at its peak, 1 % here */
 #define SMALL_SOURCE 0.2
+/* the footprint kernel's least spread, in samples: softens the sample's box */
+#define FOOTPRINT_SOFT 0.35
 /* shadow-map filter taps per source and sample: FILTER_TAPS (addon/gpu/lights.py), or fewer
  * when each pixel has several samples; the blocker search takes BLOCKER_TAPS */
 #ifndef PCF_TAPS
@@ -145,6 +147,50 @@ vec3 glossy_f_cos(vec3 n, vec3 o, vec3 i, float cos_o, float a, int dist, int lo
          lobe_fresnel(int(k0.x), param(3 + 3 * j, 0).rgb, param(4 + 3 * j, 0).rgb, k0.z, oh);
   }
   return f * common_term;
+}
+
+/* the sample's mirror direction, position and their change to the next sample in x and y
+ * (ray differentials: Cycles integrates the pixel over them) */
+vec3 mirror, mdx, mdy, pdx, pdy;
+
+/* erf (Abramowitz and Stegun 7.1.26-like, |error| < 2e-4) */
+float erf_approx(float x)
+{
+  float x2 = x * x;
+  return sign(x) * sqrt(1.0 - exp(-x2 * (1.2732395 + 0.147 * x2) / (1.0 + 0.147 * x2)));
+}
+
+/* the part of a Gaussian of spread s (samples) centred d samples away that falls in this
+ * sample's box: summed over the grid of samples it is 1 for any d (partition of unity) */
+float box_gauss(float d, float s)
+{
+  float k = 0.70710678 / s;
+  return 0.5 * (erf_approx((d + 0.5) * k) - erf_approx((d - 0.5) * k));
+}
+
+/* a highlight narrower than the samples: the mirror reaches the source's direction c at
+ * d = J^+ (c - mirror) samples from here (J = [ex ey], the change of mirror - c per sample:
+ * a local lamp's direction turns by (I - c c^T) dP / distance, inv_dist 0 for a distant
+ * one), where the image holds the lobe's energy over |J|^-1 of screen (per unit of
+ * f cos L omega); each sample takes the share of it that a Gaussian of the lobe's and
+ * disc's variance sr2 (radians^2 per axis, mapped to the screen by J^+) puts in its box,
+ * so the frame holds the highlight's energy whatever the samples' grid, where sampling the
+ * lobe at points would alias */
+float footprint_share(vec3 c, float sr2, float inv_dist)
+{
+  vec3 ex = mdx + (pdx - c * dot(c, pdx)) * inv_dist;
+  vec3 ey = mdy + (pdy - c * dot(c, pdy)) * inv_dist;
+  float gxx = dot(ex, ex), gyy = dot(ey, ey), gxy = dot(ex, ey);
+  float gdet = gxx * gyy - gxy * gxy;
+  if (gdet < 1e-24) {
+    return 0.0;
+  }
+  vec3 d = c - mirror;
+  float bx = dot(ex, d), by = dot(ey, d);
+  float ox = (gyy * bx - gxy * by) / gdet, oy = (gxx * by - gxy * bx) / gdet;
+  float sx = sqrt(sr2 * gyy / gdet + FOOTPRINT_SOFT * FOOTPRINT_SOFT);
+  float sy = sqrt(sr2 * gxx / gdet + FOOTPRINT_SOFT * FOOTPRINT_SOFT);
+  return box_gauss(ox, sx) * box_gauss(oy, sy) * inversesqrt(gdet);
 }
 
 /* pdf of the NDF sampling of sample_ndf mapped to directions: D (n.h) / (4 o.h) */
@@ -508,13 +554,15 @@ void main()
   if (dot(ng, o) > 0.0) {
     n = valid_reflection_normal(ng, o, n);
   }
-  /* the (sub)pixel's mirror directions span |dx x dy| (ray differentials), which Cycles
-   * integrates the pixel over: a lobe narrower than that box (per-axis variance
-   * |d|^2 / 12 against the lobe's 2 alpha^2) is widened to it, so a source smaller than
-   * the pixel's reflection lights the pixel by its share, not by a hit or a miss */
-  vec3 mirror = reflect(-o, n);
-  float footprint = length(cross(dFdx(mirror), dFdy(mirror)));
   o = bent_view(n, o);
+  /* the mirror as the sharp pass takes it (its footprint decides which pass draws a
+   * compact source of the World for a mirror-like slot) */
+  mirror = reflect(-o, n);
+  mdx = dFdx(mirror);
+  mdy = dFdy(mirror);
+  pdx = dFdx(vPos);
+  pdy = dFdy(vPos);
+  float mxx = dot(mdx, mdx), myy = dot(mdy, mdy);
   float cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
   vec4 kd = param(0, 0);
 #ifdef ALBEDO_TEX
@@ -524,8 +572,13 @@ void main()
 #endif
   vec4 lobe = param(1, 0);
   float a = texAlpha > 0.0 ? texAlpha : max(lobe.x, MICROFACET_ALPHA_MIN);
-  a = max(a, sqrt(footprint / 24.0));
   int dist = int(lobe.y);
+  /* where the samples sample the lobe (area lamps, discs wider than the footprint, mapped
+   * normals) it is widened to the footprint's variance (a box's |dx x dy| / 12 per axis
+   * against the lobe's 2 alpha^2), so a shape's edge is the pixel's share of it; a0 the
+   * slot's own */
+  float a0 = a;
+  a = max(a, sqrt(length(cross(mdx, mdy)) / 24.0));
   int lobes = int(lobe.z);
 #ifdef GLOSSY
   bool glossy = lobe.w > 0.5 && lobes > 0;
@@ -537,6 +590,15 @@ void main()
   vec3 wd = table(1, cos_o);
   vec3 ms0 = table(2, cos_o), ms1 = table(3, cos_o);
   float lam_o = smith_lambda(dist, a, cos_o);
+  /* the lobes' whole reflectance (f cos over the sampling pdf at the mirror: F G for a
+   * narrow lobe), for the highlights narrower than the footprint's shorter side (reach2),
+   * drawn through it */
+  float ndf_peak = glossy ? ndf_pdf(n, o, mirror, a, dist) : 0.0;
+  vec3 spec_w = ndf_peak > 0.0 ?
+      glossy_f_cos(n, o, mirror, cos_o, a, dist, lobes, lam_o, ms0, ms1) / ndf_peak : vec3(0.0);
+  /* (a mapped normal's mirror turns with the map's texels, not linearly over a sample:
+   * its highlights are sampled, the lobe widened) */
+  float reach2 = mapped ? 0.0 : min(mxx, myy);
   vec3 tx, ty;
   tangent_frame(n, tx, ty);
   vec2 shift = pixel_shift();
@@ -570,10 +632,12 @@ void main()
     vec3 c = s0.xyz;
     float r = s0.w;
     float kind = s1.w;      /* 0 disc, 1 point-like direction, 2 point, 3 spot, 4/5 area */
-    /* a slot whose lobes the sharp pass draws reflects the World there, its compact
-     * sources included (srcTex texel 8: 1 for a source of the World's image); its lamps
-     * only here */
-    bool glossyHere = glossy && !(sharpSlot && kind < 1.5 && source(s, 8).x > 0.5);
+    float inv_dist = 0.0;   /* a local lamp: 1 / its distance (footprint_share) */
+    /* a slot whose lobes the sharp pass draws reflects a compact source of the World here
+     * only where it is drawn through the footprint (the sharp pass leaves its pixels out
+     * there, sharp_lobe_frag.glsl; elsewhere it reads them, the source's true shape) */
+    bool glossyHere = glossy && (!sharpSlot || kind > 1.5 || source(s, 8).x < 0.5 ||
+                                 2.0 * a0 * a0 + (kind > 0.5 ? 0.0 : 0.25 * r * r) < reach2);
 #ifdef AREA_LAMPS
     if (kind > 3.5) {                 /* an area lamp: a rectangle (4) or an ellipse (5) */
       if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
@@ -592,6 +656,7 @@ void main()
     if (kind > 1.5) {                 /* a local lamp: the sphere seen from here */
       vec3 to_lamp = s0.xyz - vPos;
       float d2 = max(dot(to_lamp, to_lamp), 1e-12);
+      inv_dist = inversesqrt(d2);
       c = to_lamp * inversesqrt(d2);
       float e = 1.0 / (4.0 * PI * d2);              /* Cycles: Phi / (4 pi d^2) at normal */
       if (kind > 2.5) {                             /* spot cone (core.sg.lighting) */
@@ -622,10 +687,18 @@ void main()
       continue;
     }
     vec3 sum = vec3(0.0);
+    /* the highlight's spread per axis (lobe 2 alpha^2, disc r^2 / 4): narrower than the
+     * samples, it is drawn through the footprint */
+    float sr2 = 2.0 * a0 * a0 + (kind > 0.5 ? 0.0 : 0.25 * r * r);
+    bool through = glossyHere && sr2 < reach2;
+    vec3 glossy_through = through && dot(n, c) > 0.0 &&
+                          !(mappedN && dot(smoothN, c) * dot(smoothN, n) < 0.0)
+                          ? spec_w * footprint_share(c, sr2, inv_dist) : vec3(0.0);
     if (kind > 0.5) {                               /* point-like: its irradiance */
       if (dot(ng, c) > 0.0) {
         sum = (kd.rgb * wd * max(dot(nd, c), 0.0) * (mapped ? bump_shadowing(smoothN, nd, c) : 1.0) +
-               (glossyHere ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
+               (through ? glossy_through :
+                glossyHere ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
                        : vec3(0.0))) * s1.rgb;
       }
     }
@@ -643,8 +716,11 @@ void main()
                (mapped ? bump_shadowing(smoothN, nd, c) : 1.0);
       }
       /* a disc small against the lobe and clear of both horizons: the lobe at its centre */
-      bool lobeSampled = glossyHere && !(clear && r < SMALL_SOURCE * a);
-      if (glossyHere && !lobeSampled) {
+      bool lobeSampled = glossyHere && !through && !(clear && r < SMALL_SOURCE * a);
+      if (through) {
+        sum += glossy_through * (omega * L);
+      }
+      else if (glossyHere && !lobeSampled) {
         sum += glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1) * (omega * L);
       }
       for (int l = 0; l < (lobeSampled || (kd.w > 0.5 && !clear) ? NL : 0); l++) {

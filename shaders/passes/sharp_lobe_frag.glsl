@@ -16,7 +16,8 @@
  *
  * paramTex row 0: 0 eye (xyz, w = 1 perspective / 0 direction toward the viewer),
  * 1 (alpha, distribution 0 Beckmann / 1 GGX, lobe count, samples K), 2 (W0, H0, levels
- * below level 0, strength), 3 (cube N, visibility texels per point), then per lobe
+ * below level 0, strength), 3 (cube N, visibility texels per point, the World's compact
+ * sources in worldSrcTex (at most 32), -), then per lobe
  * (kind, weight, eta, -), (f0 rgb, -), (B rgb, -); kinds: 0 F = f0, 1 Schlick,
  * 2 Principled dielectric, 3 F82-tint (core.shading.brdf.sharp_lobes); 10 (roughness nodes n:
  * 1 = the slot's roughness, else a textured Roughness at i / (n - 1)), 11-14 its image
@@ -50,8 +51,16 @@ void level_size(int l, out int w, out int h, out int row)
   }
 }
 
+/* which image env_fetch reads: false the World's residual (the whole World where none of
+ * its compact sources is split off), true its compact sources alone */
+bool sourcesImage = false;
+
 vec3 env_fetch(int l, int x, int y, int row)
 {
+  if (sourcesImage) {
+    return l == 0 ? texelFetch(sourcesTex, ivec2(x, y), 0).rgb :
+                    texelFetch(sourcesMipTex, ivec2(x, row + y), 0).rgb;
+  }
   return l == 0 ? texelFetch(envTex, ivec2(x, y), 0).rgb :
                   texelFetch(mipTex, ivec2(x, row + y), 0).rgb;
 }
@@ -265,6 +274,22 @@ void main()
    * too when it has a footprint. */
   vec3 mirror = reflect(-o, n);
   vec3 dx = dFdx(mirror), dy = dFdy(mirror);
+  /* the World's compact sources (worldSrcTex: direction, radius) whose highlight, lobe and
+   * disc, is narrower than the footprint's shorter side are drawn by the lights pass
+   * (lights_frag.glsl footprint_share): this pass reads the others' pixels only */
+  float reach2 = mapped ? 0.0 : min(dot(dx, dx), dot(dy, dy));   /* as lights_frag.glsl */
+  int sourceCount = int(param(3).z);
+  uint drawnThere = 0u;
+  bool anyKept = false;
+  for (int k = 0; k < sourceCount; k++) {
+    float r = texelFetch(worldSrcTex, ivec2(k, 0), 0).w;
+    if (2.0 * a * a + 0.25 * r * r < reach2) {
+      drawnThere |= 1u << uint(k);
+    }
+    else {
+      anyKept = true;
+    }
+  }
   dx *= sqrt(max(1.0 - 24.0 * a * a / max(dot(dx, dx), 1e-12), 0.0));
   dy *= sqrt(max(1.0 - 24.0 * a * a / max(dot(dy, dy), 1e-12), 0.0));
   float footprint = length(cross(dx, dy));
@@ -305,7 +330,25 @@ void main()
      * NDF's samples); the horizon tests above are the fragment's own */
     vec2 at = fract(float(s) * vec2(0.7548776662, 0.5698402910) + shift.yx) - 0.5;
     vec3 seen = normalize(i + at.x * dx + at.y * dy);
-    vec3 light = env_filtered(seen, omega, footprint / float(K)) * visibility(seen);
+    vec3 light = env_filtered(seen, omega, footprint / float(K));
+    if (anyKept) {
+      /* the sources' image there is the nearest source's */
+      int nearest = 0;
+      float best = -2.0;
+      for (int k = 0; k < sourceCount; k++) {
+        float c = dot(seen, texelFetch(worldSrcTex, ivec2(k, 0), 0).xyz);
+        if (c > best) {
+          best = c;
+          nearest = k;
+        }
+      }
+      if ((drawnThere & (1u << uint(nearest))) == 0u) {
+        sourcesImage = true;
+        light += env_filtered(seen, omega, footprint / float(K));
+        sourcesImage = false;
+      }
+    }
+    light *= visibility(seen);
     vec3 f = vec3(0.0);
     for (int j = 0; j < min(lobes, 2); j++) {
       vec4 k0 = param(4 + 3 * j);

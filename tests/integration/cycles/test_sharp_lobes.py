@@ -93,13 +93,27 @@ def test_chrome_sphere_reflecting_sub_pixel_lamps_matches_cycles(tmp_path):
     assert abs(ours[..., :3].sum() / mean.sum() - 1.0) < 0.05
 
 
+def _highlights(image, count, half=2):
+    """The windows (2 half + 1 pixels square) around the image's count brightest separate
+    peaks, brightest first."""
+    luminance = image[..., :3].sum(axis=2).copy()
+    windows = []
+    for _ in range(count):
+        y, x = np.unravel_index(luminance.argmax(), luminance.shape)
+        window = (slice(max(y - half, 0), y + half + 1), slice(max(x - half, 0), x + half + 1))
+        windows.append(window)
+        luminance[window] = -np.inf
+    return windows
+
+
 @pytest.mark.slow
 def test_lamps_reflected_in_a_mirror_like_metal_match_cycles(tmp_path):
-    """A metal sphere (roughness 0.02: its lobes drawn by the sharp pass) under three small
-    point lamps and 'night', 48^2: the lamps' highlights were not drawn at all (the lights
-    pass took the slot for diffuse only; the image's energy 0.78 of Cycles', 42 % off with
-    them drawn but not widened to the pixel's footprint); now within 1 % of Cycles' energy
-    and within its noise."""
+    """A metal sphere (roughness 0.1) under three 1 cm point lamps and 'night', 48^2: each
+    lamp's highlight is narrower than the pixel's mirror footprint.  The lights pass widened
+    the lobe to the footprint's variance, so the supersamples sampled it at about its own
+    width and their sum aliased: the highlights read 2.0x, 0.98x and 0.70x of Cycles'
+    energy (67 % off a converged frame of 6 seeds x 4096 spp); drawn through the footprint
+    (each sample its share of the highlight's energy) each is within 7 % (4.4 %)."""
     from prt_relight.core.report.metrics import rel_l2_converged
     scenes.reset()
     scenes.add_world("night")
@@ -108,7 +122,7 @@ def test_lamps_reflected_in_a_mirror_like_metal_match_cycles(tmp_path):
                                          location=(0.0, 0.0, 0.7))
     bpy.ops.object.shade_smooth()
     bpy.context.object.data.materials.append(scenes.bsdf_material(
-        "Metal", "ShaderNodeBsdfPrincipled", Metallic=1.0, Roughness=0.02,
+        "Metal", "ShaderNodeBsdfPrincipled", Metallic=1.0, Roughness=0.1,
         **{"Base Color": (0.9, 0.9, 0.9, 1.0)}))
     for k, location in enumerate(((1.5, -2.0, 2.5), (-2.0, -1.0, 3.0), (0.5, 1.5, 3.5))):
         data = bpy.data.lights.new(f"Lamp{k}", "POINT")
@@ -117,11 +131,14 @@ def test_lamps_reflected_in_a_mirror_like_metal_match_cycles(tmp_path):
         lamp.location = location
         bpy.context.scene.collection.objects.link(lamp)
     scenes.add_camera(location=(0.0, -4.5, 1.6), rotation=(1.35, 0.0, 0.0), resolution=(48, 48))
-    truth = [scenes.render_exr(tmp_path / f"cycles{k}.exr", "CYCLES", 1024, seed=k)
+    truth = [scenes.render_exr(tmp_path / f"cycles{k}.exr", "CYCLES", 4096, seed=k)
              for k in range(2)]
     assert bpy.ops.prt.precompute() == {"FINISHED"}
     bpy.context.scene.prt.method = "REFERENCE"
     ours = scenes.render_exr(tmp_path / "ours.exr")
     mean = 0.5 * (truth[0][..., :3] + truth[1][..., :3])
-    assert abs(ours[..., :3].sum() / mean.sum() - 1.0) < 0.06
-    assert rel_l2_converged(ours, truth)[2] < 0.2
+    for k, window in enumerate(_highlights(mean, 3)):
+        ratio = ours[window][..., :3].sum() / mean[window].sum()
+        assert abs(ratio - 1.0) < 0.2, (k, ratio)
+    assert abs(ours[..., :3].sum() / mean.sum() - 1.0) < 0.05
+    assert rel_l2_converged(ours, truth)[2] < 0.12
