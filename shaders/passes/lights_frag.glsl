@@ -60,8 +60,9 @@
  * lobe's angular spread) lights the lobe as a point of its solid angle: the lobe's relative
  * change over the disc is at most (r / alpha)^2 / 4 at its peak, 1 % here */
 #define SMALL_SOURCE 0.2
-/* the footprint kernel's least spread, in samples: softens the sample's box */
-#define FOOTPRINT_SOFT 0.35
+/* the footprint kernel's least spread, in samples: the sample's box softened by a box's
+ * variance (1/12), about a tent, so the samples interpolate a highlight linearly */
+#define FOOTPRINT_SOFT 0.2887
 /* shadow-map filter taps per source and sample: FILTER_TAPS (addon/gpu/lights.py), or fewer
  * when each pixel has several samples; the blocker search takes BLOCKER_TAPS */
 #ifndef PCF_TAPS
@@ -185,7 +186,13 @@ float footprint_share(vec3 c, float sr2, float inv_dist)
   if (gdet < 1e-24) {
     return 0.0;
   }
-  vec3 d = c - mirror;
+  /* c in the mirror's tangent plane (gnomonic): a direction far from the mirror stays far
+   * (c - mirror's tangent part alone would bring one near -mirror back to d ~ 0) */
+  float cm = dot(c, mirror);
+  if (cm <= 0.0) {
+    return 0.0;
+  }
+  vec3 d = c / cm - mirror;
   float bx = dot(ex, d), by = dot(ey, d);
   float ox = (gyy * bx - gxy * by) / gdet, oy = (gxx * by - gxy * bx) / gdet;
   float sx = sqrt(sr2 * gyy / gdet + FOOTPRINT_SOFT * FOOTPRINT_SOFT);
