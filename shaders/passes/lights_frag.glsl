@@ -569,7 +569,6 @@ void main()
   mdy = dFdy(mirror);
   pdx = dFdx(vPos);
   pdy = dFdy(vPos);
-  float mxx = dot(mdx, mdx), myy = dot(mdy, mdy);
   float cos_o = clamp(dot(n, o), COS_VIEW_MIN, 1.0);
   vec4 kd = param(0, 0);
 #ifdef ALBEDO_TEX
@@ -600,12 +599,10 @@ void main()
   /* the lobes' whole reflectance (f cos over the sampling pdf at the mirror: F G for a
    * narrow lobe), for the highlights narrower than the footprint's shorter side (reach2),
    * drawn through it */
-  float ndf_peak = glossy ? ndf_pdf(n, o, mirror, a, dist) : 0.0;
+  float reach2 = through_reach2(mdx, mdy, mapped);
+  float ndf_peak = glossy && reach2 > 0.0 ? ndf_pdf(n, o, mirror, a, dist) : 0.0;
   vec3 spec_w = ndf_peak > 0.0 ?
       glossy_f_cos(n, o, mirror, cos_o, a, dist, lobes, lam_o, ms0, ms1) / ndf_peak : vec3(0.0);
-  /* (a mapped normal's mirror turns with the map's texels, not linearly over a sample:
-   * its highlights are sampled, the lobe widened) */
-  float reach2 = mapped ? 0.0 : min(mxx, myy);
   vec3 tx, ty;
   tangent_frame(n, tx, ty);
   vec2 shift = pixel_shift();
@@ -644,7 +641,7 @@ void main()
      * only where it is drawn through the footprint (the sharp pass leaves its pixels out
      * there, sharp_lobe_frag.glsl; elsewhere it reads them, the source's true shape) */
     bool glossyHere = glossy && (!sharpSlot || kind > 1.5 || source(s, 8).x < 0.5 ||
-                                 2.0 * a0 * a0 + (kind > 0.5 ? 0.0 : 0.25 * r * r) < reach2);
+                                 highlight_spread2(a0, kind > 0.5 ? 0.0 : r) < reach2);
 #ifdef AREA_LAMPS
     if (kind > 3.5) {                 /* an area lamp: a rectangle (4) or an ellipse (5) */
       if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
@@ -696,7 +693,7 @@ void main()
     vec3 sum = vec3(0.0);
     /* the highlight's spread per axis (lobe 2 alpha^2, disc r^2 / 4): narrower than the
      * samples, it is drawn through the footprint */
-    float sr2 = 2.0 * a0 * a0 + (kind > 0.5 ? 0.0 : 0.25 * r * r);
+    float sr2 = highlight_spread2(a0, kind > 0.5 ? 0.0 : r);
     bool through = glossyHere && sr2 < reach2;
     vec3 glossy_through = through && dot(n, c) > 0.0 &&
                           !(mappedN && dot(smoothN, c) * dot(smoothN, n) < 0.0)

@@ -277,13 +277,13 @@ void main()
   /* the World's compact sources (worldSrcTex: direction, radius) whose highlight, lobe and
    * disc, is narrower than the footprint's shorter side are drawn by the lights pass
    * (lights_frag.glsl footprint_share): this pass reads the others' pixels only */
-  float reach2 = mapped ? 0.0 : min(dot(dx, dx), dot(dy, dy));   /* as lights_frag.glsl */
+  float reach2 = through_reach2(dx, dy, mapped);
   int sourceCount = int(param(3).z);
   uint drawnThere = 0u;
   bool anyKept = false;
   for (int k = 0; k < sourceCount; k++) {
     float r = texelFetch(worldSrcTex, ivec2(k, 0), 0).w;
-    if (2.0 * a * a + 0.25 * r * r < reach2) {
+    if (highlight_spread2(a, r) < reach2) {
       drawnThere |= 1u << uint(k);
     }
     else {
