@@ -5,6 +5,8 @@ lighting, only on a hardware GPU), numpy otherwise."""
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from ....core.sphere import directions
@@ -43,8 +45,12 @@ class ReferenceShading(Shading):
             tick = parallel.part(state.tick, i / n, (i + 1) / n)
             state.tick(i / n)
             cached = []
+            # an F12 frame sums only the points its camera may see (the others are drawn
+            # by no pixel: 0 there); a viewport's sums serve every view, so all points
+            seen = state.seen_points(st)
+            seen_key = None if seen is None else hashlib.sha1(np.packbits(seen)).hexdigest()
 
-            def irradiance_sums(st=st, pts=pts, tick=tick):
+            def irradiance_sums(st=st, pts=pts, tick=tick, seen=seen):
                 cached.append(1)
                 # a dense sum (every visible texel, no BRDF): BLAS is the faster on a
                 # software rasterizer's cores (diffuse Suzanne and ground: 0.13 s, the
@@ -54,10 +60,18 @@ class ReferenceShading(Shading):
                         return reference_gpu.irradiance(st, pts.normals, cube, L)
                     except Exception as exc:          # numpy gives the same sums
                         state.note(f"REFERENCE GPU pass failed ({exc}); shading with numpy")
-                return reference.diffuse_irradiance(st.bits, pts.normals, cube, L,
-                                                    parallel.part(tick, 0.0, 0.5))
+                if seen is None or seen.all():
+                    return reference.diffuse_irradiance(st.bits, pts.normals, cube, L,
+                                                        parallel.part(tick, 0.0, 0.5))
+                rows = np.flatnonzero(seen)
+                out = np.zeros((len(pts.normals), 3), dtype=np.float32)
+                out[rows] = reference.diffuse_irradiance(
+                    np.asarray(st.bits)[rows], np.asarray(pts.normals)[rows], cube, L,
+                    parallel.part(tick, 0.0, 0.5))
+                return out
             irradiance = keys.per_visibility(
-                IRRADIANCE_CACHE, (st.name, id(st.bits), env_key), st.bits, irradiance_sums)
+                IRRADIANCE_CACHE, (st.name, id(st.bits), env_key, seen_key), st.bits,
+                irradiance_sums)
             if cached:
                 tick = parallel.part(tick, 0.5, 1.0)
             view_dirs = None
