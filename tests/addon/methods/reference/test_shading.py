@@ -15,7 +15,7 @@ def test_f12_sums_the_seen_points_as_every_point_and_leaves_the_others(registere
     """A diffuse Suzanne on a ground the camera sees part of: with the frame's camera the
     seen points' radiance is what the sums over every point give (the same dense sum on
     fewer rows) and the unseen points, which no pixel draws, are left at 0."""
-    from prt_relight.addon.frame.engine import frame_camera, render_view, _eye
+    from prt_relight.addon.frame.engine import frame_camera, render_view
     from prt_relight.addon.frame.state import FrameState
     scenes.reset()
     scenes.add_world("forest")
@@ -30,9 +30,10 @@ def test_f12_sums_the_seen_points_as_every_point_and_leaves_the_others(registere
     state = FrameState()
     state.sync(depsgraph)
     view, projection, width, height, persp = render_view(scene, depsgraph)
-    eye, view_dir = _eye(view, persp)
+    assert persp
+    eye = np.linalg.inv(np.array(view, dtype=np.float64))[:3, 3]      # the camera's place
     every = state.shade(eye)
-    state.camera = frame_camera(view, projection, width, height, eye, view_dir)
+    state.camera = frame_camera(view, projection, width, height, eye, None)
     state.visible_only = True
     seen_only = state.shade(eye)
     unseen = 0
