@@ -117,6 +117,19 @@ def _with_base(state, value: float):
     return sub
 
 
+def _textured_mean(st) -> np.ndarray:
+    """(C, 1 or 3) per corner of ``st``: the base colour of its slot where that slot is
+    textured (the texture's mean colour, what plain radiance is shaded with), else 0."""
+    pts = st.points
+    count = max(len(st.materials), 1)
+    colours = np.zeros((count, 3), np.float32)
+    for k, m in enumerate(st.materials):
+        if st.slot_of[k] in st.textures:
+            colours[k] = m.diffuse_albedo
+    index = np.clip(np.asarray(pts.materials, np.int64), 0, count - 1)[pts.point_of_corner]
+    return colours[index]
+
+
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "_bits", "_pose", "status", "data",
                  "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of", "dynamic",
@@ -218,6 +231,10 @@ class FrameState:
         #: the frame being drawn is all that shading serves (engine.render_pixels): a
         #: method may leave out points the camera cannot see (:meth:`seen_points`)
         self.visible_only = False
+        #: the whole frame's state when this one shades a part of its objects (:meth:`shade`:
+        #: the untextured objects, the textured ones at base colour white and black): what a
+        #: stored AUTO choice is checked against; None for the whole frame itself
+        self.whole = None
         #: set by F12 (engine.render): ``progress(fraction)`` reports 0..1 of the frame,
         #: ``cancelled()`` is true once the user pressed ESC (see :meth:`tick`)
         self.progress = None
@@ -442,27 +459,45 @@ class FrameState:
         ``eye``: camera position for perspective views; ``view_dirs_for`` a unit
         direction toward an orthographic camera (then ``eye`` is ignored).
         """
-        out = self._method_shade(self, eye, view_dirs_for)
-        bounced = white = glossy = None
-        if out is not None and self.bounce is not None:
+        textured = [i for i, st in enumerate(self.objects) if st.textures]
+        plain = [i for i in range(len(self.objects)) if i not in set(textured)]
+        out = [None] * len(self.objects)
+        if plain:
+            sub = copy.copy(self)
+            sub.objects, sub.whole = [self.objects[i] for i in plain], self
+            shaded = self._method_shade(sub, eye, view_dirs_for)
+            if shaded is None:                 # the method draws per pixel
+                return None
+            for i, r in zip(plain, shaded):
+                out[i] = r
+        if textured:
+            # Radiance is linear in a slot's base colour (Lambert base, metal F0): shaded
+            # with white and with black, their difference is what the texture multiplies
+            # per pixel, and black + mean colour x difference is the radiance at the
+            # textured slots' mean colours (not shaded a third time)
+            sub = copy.copy(self)
+            sub.objects, sub.whole = [self.objects[i] for i in textured], self
+            white_radiance = self._method_shade(_with_base(sub, 1.0), eye, view_dirs_for)
+            if white_radiance is None:
+                return None
+            black = self._method_shade(_with_base(sub, 0.0), eye, view_dirs_for)
+            for i, w, b in zip(textured, white_radiance, black):
+                st = self.objects[i]
+                diff = np.asarray(w) - np.asarray(b)
+                out[i] = (np.asarray(b) + _textured_mean(st) * diff).astype(np.float32)
+                out[i] = TexturedRadiance.of(out[i], diff, b)
+        if self.bounce is not None:
             # the bounce reaches every receiver (addon.frame.bounce)
             bounced, white, glossy = self.bounced_radiance(eye, view_dirs_for)
-            out = [r if b is None else np.asarray(r) + b for r, b in zip(out, bounced)]
-        textured = [i for i, st in enumerate(self.objects) if st.textures]
-        if out is None or not textured:
-            return out
-        # Radiance is linear in a slot's base colour (Lambert base, metal F0): shaded with
-        # white and with black, their difference is what the texture multiplies per pixel
-        sub = copy.copy(self)
-        sub.objects = [self.objects[i] for i in textured]
-        white_radiance = self._method_shade(_with_base(sub, 1.0), eye, view_dirs_for)
-        black = self._method_shade(_with_base(sub, 0.0), eye, view_dirs_for)
-        for i, w, b in zip(textured, white_radiance, black):
-            diffuse = np.asarray(w) - np.asarray(b)
-            if white is not None and white[i] is not None:
-                diffuse = diffuse + white[i]
-                b = np.asarray(b) + glossy[i]
-            out[i] = TexturedRadiance.of(out[i], diffuse, b)
+            for i, b in enumerate(bounced):
+                if b is None:
+                    continue
+                r = out[i]
+                if isinstance(r, TexturedRadiance):
+                    out[i] = TexturedRadiance.of(np.asarray(r) + b, r.diffuse + white[i],
+                                                 r.specular + glossy[i])
+                else:
+                    out[i] = np.asarray(r) + b
         return out
 
     def _method_shade(self, state, eye, view_dirs_for):

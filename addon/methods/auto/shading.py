@@ -339,12 +339,14 @@ class AutoShading(Shading):
         record = parse_choice(state.settings.get("auto_choice", ""))
         if record is None:
             return None, "AUTO has no stored choice"
-        changed = [part for part, value in choice_key(state, measure.candidates()).items()
+        # a part of the frame (FrameState.shade) holds the whole frame's choice
+        whole = state.whole if getattr(state, "whole", None) is not None else state
+        changed = [part for part, value in choice_key(whole, measure.candidates()).items()
                    if record["key"].get(part) != value]
         if changed:
             return None, f"AUTO choice is out of date ({', '.join(changed)} changed)"
         by_name = {c["object"]: c for c in record["objects"]}
-        chosen = [by_name.get(st.name) for st in state.objects]
+        chosen = [by_name.get(st.name) for st in whole.objects]
         for c in chosen:
             m = REGISTRY.get(c["method"]) if c is not None else None
             if m is None or m.shading is self or \
@@ -352,7 +354,8 @@ class AutoShading(Shading):
                     (c["setting"] is not None and c["setting"] not in state.settings):
                 return None, ("AUTO choice is out of date (it names an object or method no "
                               "longer present)")
-        return [(c["method"], c["setting"], c["value"]) for c in chosen], chosen
+        return [(c["method"], c["setting"], c["value"])
+                for c in (by_name[st.name] for st in state.objects)], chosen
 
     def _frame_assignment(self, state):
         """The frame's assignment, notes and whether it was chosen live: the stored choice

@@ -71,7 +71,9 @@ def test_view_draw_path_draws_the_same_frame_as_f12(method):
     assert engine.stats is not None
     direct = render_pixels(engine._state, view, window, w, h,
                            scene.render.film_transparent, True)
-    np.testing.assert_array_equal(shown, direct)
+    # the same pixels up to float rounding: F12 sums only the points its camera may see
+    # (REFERENCE), the viewport every point, and a dense sum's rows take BLAS's blocking
+    np.testing.assert_allclose(shown, direct, rtol=1e-6, atol=1e-7)
     assert np.isfinite(shown).all() and shown[..., :3].max() > 0.05
     assert bool(ssdf_sg_gpu.PAIR_TABLES) == (method == "SSDF_SG")
 

@@ -221,3 +221,36 @@ def test_choose_stores_the_choice_for_the_scene_camera(monkeypatch):
     cam.location = (0.0, -6.0, 3.0)
     cam.data.type = "PERSP"
     assert _drawn_with_stored(synced_state("AUTO"), np.array(cam.location))
+
+
+def test_a_textured_object_is_drawn_with_the_stored_choice(monkeypatch):
+    """A colour texture on Suzanne: the frame shades the untextured ground and the textured
+    Suzanne (at base colour white and black) as parts of the frame, each holding the whole
+    frame's stored choice -- nothing is timed or chosen live, and the panel's last choices
+    are every object's."""
+    fewer_candidates(monkeypatch)
+    auto_scene(method="REFERENCE", rotation_z=0.3)
+    suzanne = bpy.data.objects["Suzanne"]
+    suzanne.data.uv_layers.new(name="UVMap")
+    mat = bpy.data.materials.new("Textured")
+    nt = mat.node_tree
+    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    y, x = np.mgrid[0:16, 0:16] / 16.0
+    tex.image = scenes.float_image("checker", np.stack(
+        [0.2 + 0.6 * ((x * 4).astype(int) % 2), 0.5 + 0.0 * x, 0.3 + 0.4 * y], -1))
+    nt.links.new(tex.outputs["Color"], diffuse.inputs["Color"])
+    nt.links.new(diffuse.outputs["BSDF"], nt.nodes["Material Output"].inputs["Surface"])
+    suzanne.data.materials.clear()
+    suzanne.data.materials.append(mat)
+    bpy.context.scene.prt.method = "AUTO"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    record = stored_choice()
+    eye = np.array(bpy.context.scene.camera.matrix_world.translation)
+    _untimed(monkeypatch)
+    state = synced_state("AUTO")
+    assert any(st.textures for st in state.objects)
+    assert _drawn_with_stored(state, eye), state.warnings
+    assert not any("out of date" in w for w in state.warnings), state.warnings
+    assert [c["object"] for c in auto.LAST_CHOICES] == \
+        [c["object"] for c in record["objects"]] == ["Ground", "Suzanne"]
