@@ -111,21 +111,27 @@ def _with_base(state, value: float):
         twin = copy.copy(st)
         twin.data = st.data
         twin.materials = [replace(m, diffuse_albedo=(value, value, value))
-                          if st.slot_of[i] in st.textures else m
-                          for i, m in enumerate(st.materials)]
+                          if textured else m
+                          for m, textured in zip(st.materials, _textured_slots(st))]
         sub.objects.append(twin)
     return sub
 
 
+def _textured_slots(st) -> list[bool]:
+    """Per entry of ``st.materials``: whether its slot has a colour texture."""
+    return [st.slot_of[k] in st.textures for k in range(len(st.materials))]
+
+
 def _textured_mean(st) -> np.ndarray:
-    """(C, 1 or 3) per corner of ``st``: the base colour of its slot where that slot is
-    textured (the texture's mean colour, what plain radiance is shaded with), else 0."""
+    """(C, 3) per corner of ``st``: the base colour of its slot where that slot is textured
+    (the texture's mean colour, what plain radiance is shaded with), else 0."""
     pts = st.points
     count = max(len(st.materials), 1)
     colours = np.zeros((count, 3), np.float32)
-    for k, m in enumerate(st.materials):
-        if st.slot_of[k] in st.textures:
+    for k, (m, textured) in enumerate(zip(st.materials, _textured_slots(st))):
+        if textured:
             colours[k] = m.diffuse_albedo
+    # the index clamped into the slots, as core.shading.materials.slot_material does
     index = np.clip(np.asarray(pts.materials, np.int64), 0, count - 1)[pts.point_of_corner]
     return colours[index]
 
@@ -460,12 +466,10 @@ class FrameState:
         direction toward an orthographic camera (then ``eye`` is ignored).
         """
         textured = [i for i, st in enumerate(self.objects) if st.textures]
-        plain = [i for i in range(len(self.objects)) if i not in set(textured)]
+        plain = [i for i, st in enumerate(self.objects) if not st.textures]
         out = [None] * len(self.objects)
         if plain:
-            sub = copy.copy(self)
-            sub.objects, sub.whole = [self.objects[i] for i in plain], self
-            shaded = self._method_shade(sub, eye, view_dirs_for)
+            shaded = self._method_shade(self._part(plain), eye, view_dirs_for)
             if shaded is None:                 # the method draws per pixel
                 return None
             for i, r in zip(plain, shaded):
@@ -475,17 +479,16 @@ class FrameState:
             # with white and with black, their difference is what the texture multiplies
             # per pixel, and black + mean colour x difference is the radiance at the
             # textured slots' mean colours (not shaded a third time)
-            sub = copy.copy(self)
-            sub.objects, sub.whole = [self.objects[i] for i in textured], self
+            sub = self._part(textured)
             white_radiance = self._method_shade(_with_base(sub, 1.0), eye, view_dirs_for)
             if white_radiance is None:
                 return None
             black = self._method_shade(_with_base(sub, 0.0), eye, view_dirs_for)
             for i, w, b in zip(textured, white_radiance, black):
-                st = self.objects[i]
                 diff = np.asarray(w) - np.asarray(b)
-                out[i] = (np.asarray(b) + _textured_mean(st) * diff).astype(np.float32)
-                out[i] = TexturedRadiance.of(out[i], diff, b)
+                out[i] = TexturedRadiance.of(
+                    (np.asarray(b) + _textured_mean(self.objects[i]) * diff).astype(np.float32),
+                    diff, b)
         if self.bounce is not None:
             # the bounce reaches every receiver (addon.frame.bounce)
             bounced, white, glossy = self.bounced_radiance(eye, view_dirs_for)
@@ -499,6 +502,13 @@ class FrameState:
                 else:
                     out[i] = np.asarray(r) + b
         return out
+
+    def _part(self, indices) -> "FrameState":
+        """A shallow copy holding the objects at ``indices``, a part of this frame
+        (:attr:`whole`)."""
+        sub = copy.copy(self)
+        sub.objects, sub.whole = [self.objects[i] for i in indices], self
+        return sub
 
     def _method_shade(self, state, eye, view_dirs_for):
         """The method's per-corner radiance of ``state``; zero without computing it when

@@ -62,7 +62,7 @@
 #define SMALL_SOURCE 0.2
 /* the footprint kernel's least spread, in samples: the sample's box softened by a box's
  * variance (1/12), about a tent, so the samples interpolate a highlight linearly */
-#define FOOTPRINT_SOFT 0.2887
+#define FOOTPRINT_SOFT 0.28867513
 /* shadow-map filter taps per source and sample: FILTER_TAPS (addon/gpu/lights.py), or fewer
  * when each pixel has several samples; the blocker search takes BLOCKER_TAPS */
 #ifndef PCF_TAPS
@@ -637,11 +637,14 @@ void main()
     float r = s0.w;
     float kind = s1.w;      /* 0 disc, 1 point-like direction, 2 point, 3 spot, 4/5 area */
     float inv_dist = 0.0;   /* a local lamp: 1 / its distance (footprint_share) */
+    /* the highlight's spread per axis (lobe 2 alpha^2, disc r^2 / 4; a point-like or
+     * local source's none): narrower than the samples, it is drawn through the footprint */
+    float sr2 = highlight_spread2(a0, kind > 0.5 ? 0.0 : r);
     /* a slot whose lobes the sharp pass draws reflects a compact source of the World here
      * only where it is drawn through the footprint (the sharp pass leaves its pixels out
      * there, sharp_lobe_frag.glsl; elsewhere it reads them, the source's true shape) */
     bool glossyHere = glossy && (!sharpSlot || kind > 1.5 || source(s, 8).x < 0.5 ||
-                                 highlight_spread2(a0, kind > 0.5 ? 0.0 : r) < reach2);
+                                 sr2 < reach2);
 #ifdef AREA_LAMPS
     if (kind > 3.5) {                 /* an area lamp: a rectangle (4) or an ellipse (5) */
       if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
@@ -691,9 +694,6 @@ void main()
       continue;
     }
     vec3 sum = vec3(0.0);
-    /* the highlight's spread per axis (lobe 2 alpha^2, disc r^2 / 4): narrower than the
-     * samples, it is drawn through the footprint */
-    float sr2 = highlight_spread2(a0, kind > 0.5 ? 0.0 : r);
     bool through = glossyHere && sr2 < reach2;
     vec3 glossy_through = through && dot(n, c) > 0.0 &&
                           !(mappedN && dot(smoothN, c) * dot(smoothN, n) < 0.0)

@@ -340,7 +340,7 @@ class AutoShading(Shading):
         if record is None:
             return None, "AUTO has no stored choice"
         # a part of the frame (FrameState.shade) holds the whole frame's choice
-        whole = state.whole if getattr(state, "whole", None) is not None else state
+        whole = state.whole if state.whole is not None else state
         changed = [part for part, value in choice_key(whole, measure.candidates()).items()
                    if record["key"].get(part) != value]
         if changed:

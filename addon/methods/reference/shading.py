@@ -48,6 +48,8 @@ class ReferenceShading(Shading):
             # an F12 frame sums only the points its camera may see (the others are drawn
             # by no pixel: 0 there); a viewport's sums serve every view, so all points
             seen = state.seen_points(st)
+            if seen is not None and seen.all():
+                seen = None                    # every point: the viewport's sums
             seen_key = None if seen is None else hashlib.sha1(np.packbits(seen)).hexdigest()
 
             def irradiance_sums(st=st, pts=pts, tick=tick, seen=seen):
@@ -60,15 +62,8 @@ class ReferenceShading(Shading):
                         return reference_gpu.irradiance(st, pts.normals, cube, L)
                     except Exception as exc:          # numpy gives the same sums
                         state.note(f"REFERENCE GPU pass failed ({exc}); shading with numpy")
-                if seen is None or seen.all():
-                    return reference.diffuse_irradiance(st.bits, pts.normals, cube, L,
-                                                        parallel.part(tick, 0.0, 0.5))
-                rows = np.flatnonzero(seen)
-                out = np.zeros((len(pts.normals), 3), dtype=np.float32)
-                out[rows] = reference.diffuse_irradiance(
-                    np.asarray(st.bits)[rows], np.asarray(pts.normals)[rows], cube, L,
-                    parallel.part(tick, 0.0, 0.5))
-                return out
+                return reference.diffuse_irradiance(st.bits, pts.normals, cube, L,
+                                                    parallel.part(tick, 0.0, 0.5), seen)
             irradiance = keys.per_visibility(
                 IRRADIANCE_CACHE, (st.name, id(st.bits), env_key, seen_key), st.bits,
                 irradiance_sums)

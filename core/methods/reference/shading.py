@@ -30,12 +30,19 @@ from ...common.parallel import for_blocks, block_points, part
 
 
 def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
-                       lighting: CubeLighting, tick=None) -> np.ndarray:
+                       lighting: CubeLighting, tick=None, seen=None) -> np.ndarray:
     """E(x) = sum_k L_k V_k max(0, n.w_k) dw_k per point, (P, 3) float32.
 
     ``w_k`` is the lighting's mean direction vector in texel k, so the cosine is
-    the texel's mean cosine (exact for texels above the horizon).
+    the texel's mean cosine (exact for texels above the horizon).  ``seen``: (P,) bool,
+    the points summed (core.scene.mesh.seen_points), the others 0 (None: all).
     """
+    if seen is not None:
+        rows = np.flatnonzero(seen)
+        out = np.zeros((len(seen), 3), dtype=np.float32)
+        out[rows] = diffuse_irradiance(np.asarray(vis_bits)[rows], np.asarray(normals)[rows],
+                                       cube, lighting, tick)
+        return out
     normals = np.asarray(normals, dtype=np.float32)
     dirs = np.asarray(lighting.directions, dtype=np.float32)
     # L dw folded together; the bits multiply as 0/1 bytes (no bool or float copy)

@@ -230,3 +230,18 @@ def test_bent_normals_and_open_sky_against_quadrature():
     # x: ∫cos φ dφ over the half (-2) times ∫cos θ sin² θ dθ (1/3); z: π ∫cos² θ sin θ dθ
     want = np.array([-2.0 / 3.0, 0.0, np.pi / 3.0])
     np.testing.assert_allclose(bent[1], want / np.linalg.norm(want), atol=5e-3)
+
+
+def test_diffuse_irradiance_of_the_seen_points_only():
+    """With a mask (core.scene.mesh.seen_points), the masked points get the sums of every
+    point (the same dense sum on fewer rows) and the others 0."""
+    rng = np.random.default_rng(5)
+    nrm = unit(rng.normal(size=(40, 3)))
+    pts = rng.normal(size=(40, 3))
+    bits, _ = trace(wall_triangles(), pts, nrm)
+    cube, light = directions.cubemap(N), white_world()
+    seen = rng.random(40) < 0.5
+    every = reference.diffuse_irradiance(bits, nrm, cube, light)
+    some = reference.diffuse_irradiance(bits, nrm, cube, light, seen=seen)
+    assert every[seen].min() > 0.0 and not some[~seen].any()
+    np.testing.assert_allclose(some[seen], every[seen], rtol=1e-5, atol=1e-6)
