@@ -80,13 +80,20 @@ def has(ob, name: str) -> bool:
 def get(ob, name: str):
     """``(arrays, meta)`` of ``ob``'s blob ``name`` of its current precompute, or None;
     :data:`Unreadable` (its message says why) when it cannot be read."""
+    data = blob(ob, name)
+    return None if data is None else codec.unpack(data)
+
+
+def blob(ob, name: str) -> bytes | None:
+    """The packed bytes of ``ob``'s blob ``name`` of its current precompute (main thread;
+    :func:`get` unpacks them), or None; :data:`Unreadable` when it is no blob."""
     if key(ob, name) is None:
         return None
     entry = _entry(ob, name)
-    blob = entry.get("blob") if hasattr(entry, "get") else None
-    if not isinstance(blob, bytes):
+    data = entry.get("blob") if hasattr(entry, "get") else None
+    if not isinstance(data, bytes):
         raise codec.NewerFormatError("stored in a layout this prt_relight does not know")
-    return codec.unpack(blob)
+    return data
 
 
 def load(ob, name: str, cache, convert=None, note=None):

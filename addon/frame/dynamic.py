@@ -183,7 +183,8 @@ def apply(state):
         if not st.near and not moved:
             continue
 
-        def product(st=st, stored=st.bits, poses=poses_of(st)):
+        def product(st=st, poses=poses_of(st)):
+            stored = st.stored_bits()
             key = (st.name, id(stored), state.resolution, poses)
             return keys.held(_POSED, key, (stored,), lambda: posed_bits(
                 st, stored, st.near, cube, state))

@@ -25,25 +25,42 @@ from . import bounce, dynamic, keys
 from . import sources
 from .. import methods
 from ..blender import scene_export, storage, surfaces, texture_export
+from ...core.common import codec
 from ...core.common.parallel import Cancelled  # noqa: F401  (raised by FrameState.tick)
 
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
 LAST_MESSAGES: list = []
-# Decoded visibility per stored blob (storage.key): room for every object of a big scene,
-# else each sync decodes them again and everything keyed on the bits is made anew
-_VIS_CACHE = keys.cache(128)
+# Decoded visibility per stored blob (storage.key), the only copy a frame holds: an object
+# keeps its compressed blob and decodes it through here when read, so a scene of many
+# objects (a thousand instances) holds at most this many decoded at once
+VIS_CACHE = keys.cache(128)
+
+
+class StoredBits:
+    """An object's stored visibility, read without bpy (the viewport shades in a worker
+    thread): its compressed blob, taken on the main thread at the sync, decoded when read
+    and kept in :data:`VIS_CACHE` (bounded), not by the object."""
+    __slots__ = ("key", "blob")
+
+    def __init__(self, key, blob: bytes):
+        self.key, self.blob = key, blob
+
+    def __call__(self) -> np.ndarray:
+        return keys.held(VIS_CACHE, self.key, (),
+                         lambda: codec.unpack(self.blob))[0]["bits"]
 
 
 def stored_visibility(ob_orig, points: int, nbytes: int, note=None):
-    """Decoded visibility bits of an object, or None if missing/unusable (``note`` is
-    told why a stored blob cannot be read)."""
+    """A :class:`StoredBits` of an object's visibility, or None if missing/unusable
+    (``note`` is told why a stored blob cannot be read)."""
     if ob_orig.prt.point_count != points:
         return None
-    stored = storage.load(ob_orig, storage.VISIBILITY, _VIS_CACHE, note=note)
+    k = storage.key(ob_orig, storage.VISIBILITY)
+    stored = storage.load(ob_orig, storage.VISIBILITY, VIS_CACHE, note=note)
     bits = None if stored is None else stored[0].get("bits")
     if bits is None or bits.shape != (points, nbytes):
         return None
-    return bits
+    return StoredBits(k, storage.blob(ob_orig, storage.VISIBILITY))
 
 
 def open_visibility(normals: np.ndarray, cube) -> np.ndarray:
@@ -137,7 +154,8 @@ def _textured_mean(st) -> np.ndarray:
 
 
 class ObjectState:
-    __slots__ = ("name", "arrays", "points", "materials", "_bits", "_pose", "status", "data",
+    __slots__ = ("name", "arrays", "points", "materials", "_bits", "_stored", "_pose", "status",
+                 "data",
                  "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of", "dynamic",
                  "bounce", "matrix",
                  "shape", "near")
@@ -151,7 +169,11 @@ class ObjectState:
         self.points = points
         self.materials = materials
         self._pose = None
-        self.bits = bits
+        self._stored = None
+        if isinstance(bits, StoredBits):
+            self._bits, self._stored = None, bits
+        else:
+            self.bits = bits
         #: "ok", "stale" (changed since its precompute), "missing" (never precomputed),
         #: "unshadowed" (hidden from renders, drawn in the viewport only, never traced) or
         #: "posed" (its bits are the product with dynamic objects' fields: addon.frame.dynamic)
@@ -186,16 +208,21 @@ class ObjectState:
 
     @property
     def bits(self):
-        """Visibility bits (P, 6N²/8): stored, or their product with the fields of the
-        dynamic objects near (made when first read: RSL reads the fields instead)."""
+        """Visibility bits (P, 6N²/8): stored (decoded through a bounded cache, not held
+        here), or their product with the fields of the dynamic objects near (made when
+        first read and held: RSL reads the fields instead)."""
         if self._pose is not None:
             make, self._pose = self._pose, None
-            self._bits = make()
-        return self._bits
+            self._bits, self._stored = make(), None
+        return self.stored_bits()
 
     @bits.setter
     def bits(self, value):
-        self._bits, self._pose = value, None
+        self._bits, self._stored, self._pose = value, None, None
+
+    def stored_bits(self):
+        """The bits as stored (or as set), before any dynamic object's field."""
+        return self._stored() if self._stored is not None else self._bits
 
     def pose(self, make):
         """The bits become ``make()`` when next read (addon.frame.dynamic)."""

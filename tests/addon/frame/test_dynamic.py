@@ -108,7 +108,7 @@ def test_an_object_beyond_its_outermost_shell_casts_nothing():
     assert ground.status == "ok"
     stored = runtime.stored_visibility(bpy.data.objects["Ground"], ground.points.count,
                                        ground.bits.shape[1])
-    np.testing.assert_array_equal(ground.bits, stored)
+    np.testing.assert_array_equal(ground.bits, stored())
 
 
 def test_two_dynamic_objects_shadow_each_other():
