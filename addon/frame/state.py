@@ -155,10 +155,8 @@ def _textured_mean(st) -> np.ndarray:
 
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "_bits", "_stored", "_pose", "status",
-                 "data",
-                 "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of", "dynamic",
-                 "bounce", "matrix",
-                 "shape", "near")
+                 "data", "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of",
+                 "dynamic", "bounce", "matrix", "shape", "near")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -221,7 +219,8 @@ class ObjectState:
         self._bits, self._stored, self._pose = value, None, None
 
     def stored_bits(self):
-        """The bits as stored (or as set), before any dynamic object's field."""
+        """The bits as stored (or as set); once a posed product is made (:attr:`bits`),
+        that product."""
         return self._stored() if self._stored is not None else self._bits
 
     def pose(self, make):
