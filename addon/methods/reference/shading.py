@@ -20,6 +20,9 @@ from . import gpu as reference_gpu
 
 # View-independent diffuse sums per (object, visibility, lighting).
 IRRADIANCE_CACHE = keys.cache(64)
+# The visible texels near each point's horizon per (object, visibility): what the diffuse
+# sums of another lighting (a turned HDRI) check the cosine's clamp at
+HORIZON_CACHE = keys.cache(64)
 
 
 class ReferenceShading(Shading):
@@ -62,8 +65,12 @@ class ReferenceShading(Shading):
                         return reference_gpu.irradiance(st, pts.normals, cube, L)
                     except Exception as exc:          # numpy gives the same sums
                         state.note(f"REFERENCE GPU pass failed ({exc}); shading with numpy")
+                pairs = keys.per_visibility(
+                    HORIZON_CACHE, (st.name, st.fingerprint), st.bits,
+                    lambda: reference.horizon_pairs(st.bits, pts.normals, cube))
                 return reference.diffuse_irradiance(st.bits, pts.normals, cube, L,
-                                                    parallel.part(tick, 0.0, 0.5), seen)
+                                                    parallel.part(tick, 0.0, 0.5), seen,
+                                                    pairs)
             irradiance = keys.per_visibility(
                 IRRADIANCE_CACHE, (st.name, id(st.bits), env_key, seen_key), st.bits,
                 irradiance_sums)

@@ -18,6 +18,7 @@ view and are evaluated per frame.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,36 +30,128 @@ from ...scene.visibility import unpack_visibility
 from ...common.parallel import for_blocks, block_points, part
 
 
+#: the band of the :class:`HorizonPairs`: a visible texel whose centre's cosine to the point's
+#: normal is below this is listed (the horizon may cross it); a texel whose light's mean
+#: direction lies farther from its centre than this allows is checked at every point instead
+HORIZON_BAND = 0.02
+
+
+@dataclass(frozen=True)
+class HorizonPairs:
+    """The (point, texel) pairs of visible texels near or below the point's horizon,
+    ``n . c_k < HORIZON_BAND`` (``c_k`` the texel's centre): the only texels whose light's
+    mean direction can lie below the horizon, where the clamp of the cosine matters
+    (:func:`diffuse_irradiance`).  They depend on the visibility and the normals, not the
+    lighting: callers cache them per visibility."""
+
+    rows: np.ndarray        # (M,) int32 point
+    texels: np.ndarray      # (M,) int32 texel
+    cosines: np.ndarray     # (M,) float32 n . c_k
+
+    @property
+    def nbytes(self) -> int:
+        return self.rows.nbytes + self.texels.nbytes + self.cosines.nbytes
+
+
+def horizon_pairs(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
+                  tick=None) -> HorizonPairs:
+    """The :class:`HorizonPairs` of every point (rows of ``vis_bits``)."""
+    normals = np.asarray(normals, dtype=np.float32).reshape(-1, 3)
+    centres = cube.directions.astype(np.float32)
+    bits = np.asarray(vis_bits, dtype=np.uint8)
+    spans = {}
+
+    def block_pairs(a, b):
+        nc = normals[a:b] @ centres.T
+        # packed, so the visible texels among them are found a byte at a time
+        near = np.packbits(nc < HORIZON_BAND, axis=1)
+        near &= bits[a:b]
+        r, byte = np.nonzero(near)
+        r8, j = np.nonzero(np.unpackbits(near[r, byte][:, None], axis=1))
+        r, k = r[r8], byte[r8].astype(np.int32) * 8 + j
+        spans[a] = ((r + a).astype(np.int32), k.astype(np.int32), nc[r, k])
+
+    for_blocks(len(normals), block_points(cube.resolution), block_pairs, tick)
+    got = [spans[a] for a in sorted(spans)]
+    if not got:
+        empty = np.zeros(0, np.int32)
+        return HorizonPairs(empty, empty, np.zeros(0, np.float32))
+    return HorizonPairs(*(np.concatenate(parts) for parts in zip(*got)))
+
+
+def _light_offsets(cube: Cubemap, directions: np.ndarray) -> np.ndarray:
+    """(D,) per texel the sine of the angle between its centre and its light's mean
+    direction (2 past a right angle, or for a texel without a direction): a point whose
+    cosine to the centre is at least this sees the light above its horizon."""
+    length = np.linalg.norm(directions, axis=1)
+    cos = np.einsum("kd,kd->k", directions, cube.directions) / np.maximum(length, 1e-30)
+    off = np.sqrt(np.clip(1.0 - cos * cos, 0.0, 1.0)) + 1e-6
+    off[(cos < 0.0) | (length == 0.0)] = 2.0
+    return off.astype(np.float32)
+
+
 def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
-                       lighting: CubeLighting, tick=None, seen=None) -> np.ndarray:
+                       lighting: CubeLighting, tick=None, seen=None,
+                       pairs: HorizonPairs | None = None) -> np.ndarray:
     """E(x) = sum_k L_k V_k max(0, n.w_k) dw_k per point, (P, 3) float32.
 
     ``w_k`` is the lighting's mean direction vector in texel k, so the cosine is
     the texel's mean cosine (exact for texels above the horizon).  ``seen``: (P,) bool,
     the points summed (core.scene.mesh.seen_points), the others 0 (None: all).
+
+    Summed as ``n . sum_k V_k w_k L_k dw_k`` (the bits times one (6N², 9) matrix) plus
+    ``-n.w_k L_k dw_k`` where that cosine is negative: only where the point's horizon
+    passes within the texel's light offset of its centre (:func:`_light_offsets`), so
+    among ``pairs`` (:func:`horizon_pairs` of every point, made here when not given), and
+    for a texel whose light lies farther from its centre than the pairs' band, at every
+    point.  The clamp is kept exactly; only the order of the sums differs.
     """
-    if seen is not None:
-        rows = np.flatnonzero(seen)
-        out = np.zeros((len(seen), 3), dtype=np.float32)
-        out[rows] = diffuse_irradiance(np.asarray(vis_bits)[rows], np.asarray(normals)[rows],
-                                       cube, lighting, tick)
-        return out
-    normals = np.asarray(normals, dtype=np.float32)
+    normals = np.asarray(normals, dtype=np.float32).reshape(-1, 3)
+    bits = np.asarray(vis_bits, dtype=np.uint8)
+    rows = np.arange(len(normals)) if seen is None else np.flatnonzero(seen)
+    if pairs is None:
+        pairs = horizon_pairs(bits[rows], normals[rows], cube)
+        pairs = replace(pairs, rows=rows[pairs.rows].astype(np.int32))
     dirs = np.asarray(lighting.directions, dtype=np.float32)
-    # L dw folded together; the bits multiply as 0/1 bytes (no bool or float copy)
+    # L dw folded together
     Ldw = (np.asarray(lighting.radiance, dtype=np.float64)
            * cube.solid_angles[:, None]).astype(np.float32)
+    moments = (dirs[:, :, None] * Ldw[:, None, :]).reshape(-1, 9)
     out = np.zeros((len(normals), 3), dtype=np.float32)
     block = block_points(cube.resolution)
-    bits = np.asarray(vis_bits, dtype=np.uint8)
+    sub_normals = normals[rows]
 
     def block_irradiance(a, b):
-        cos = normals[a:b] @ dirs.T
-        np.maximum(cos, 0.0, out=cos)
-        np.multiply(cos, np.unpackbits(bits[a:b], axis=1, count=cube.size), out=cos)
-        out[a:b] = cos @ Ldw
+        vis = np.unpackbits(bits[rows[a:b]], axis=1, count=cube.size).astype(np.float32)
+        m = (vis @ moments).reshape(-1, 3, 3)
+        out[rows[a:b]] = np.einsum("pd,pdc->pc", sub_normals[a:b], m)
 
-    for_blocks(len(normals), block, block_irradiance, tick)
+    for_blocks(len(rows), block, block_irradiance, tick)
+    lit = Ldw.any(axis=1)
+    offsets = _light_offsets(cube, dirs)
+    covered = offsets <= HORIZON_BAND
+    # the listed pairs whose texel's light may lie below the point's horizon
+    off = offsets[pairs.texels]
+    near = (pairs.cosines < off) & (off <= HORIZON_BAND)
+    if seen is not None:
+        near &= np.asarray(seen, bool)[pairs.rows]
+    r, k = pairs.rows[near], pairs.texels[near]
+    cos = np.einsum("pd,pd->p", normals[r], dirs[k])
+    below = cos < 0.0
+    r, k, cos = r[below], k[below], cos[below]
+    for c in range(3):
+        out[:, c] -= np.bincount(r, weights=cos * Ldw[k, c], minlength=len(out)).astype(np.float32)
+    # texels whose light lies too far from their centre for the pairs: every point
+    far = np.flatnonzero(~covered & lit)
+    if len(far) and len(rows):
+        byte, shift = far >> 3, (7 - (far & 7)).astype(np.uint8)
+        for a in range(0, len(rows), 4096):
+            sel = rows[a:a + 4096]
+            hidden = ((bits[sel[:, None], byte] >> shift) & 1) == 0
+            cos = sub_normals[a:a + 4096] @ dirs[far].T
+            np.minimum(cos, 0.0, out=cos)
+            cos[hidden] = 0.0
+            out[sel] -= cos @ Ldw[far]
     return out
 
 

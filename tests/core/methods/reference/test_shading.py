@@ -245,3 +245,36 @@ def test_diffuse_irradiance_of_the_seen_points_only():
     some = reference.diffuse_irradiance(bits, nrm, cube, light, seen=seen)
     assert every[seen].min() > 0.0 and not some[~seen].any()
     np.testing.assert_allclose(some[seen], every[seen], rtol=1e-5, atol=1e-6)
+
+
+def test_diffuse_irradiance_keeps_the_clamp_where_the_light_lies_off_centre():
+    """The linear sum and its horizon correction equal the clamped sum texel by texel, with
+    lights whose mean direction lies anywhere in its texel (a one-pixel sun near an edge),
+    farther than the pairs' band (every point checked), opposite its centre or absent, and
+    with bits set below a point's horizon (a turned object's posed bits)."""
+    rng = np.random.default_rng(11)
+    cube = directions.cubemap(8)
+    k = cube.size
+    nrm = unit(rng.normal(size=(300, 3)))
+    bits = np.packbits(rng.random((300, k)) < 0.6, axis=1)
+    # light directions: the centre tilted by up to a texel's size, a few far off centre
+    tilt = rng.normal(size=(k, 3)) * rng.choice([0.01, 0.1, 0.3], size=(k, 1), p=[.6, .3, .1])
+    dirs = unit(cube.directions + tilt) * rng.uniform(0.5, 1.0, size=(k, 1))
+    dirs[:5] = -cube.directions[:5]
+    dirs[5:9] = 0.0
+    radiance = rng.uniform(0.0, 2.0, size=(k, 3)).astype(np.float32)
+    light = envmap.CubeLighting(radiance, dirs.astype(np.float32))
+    vis = visibility.unpack_visibility(bits, k).astype(np.float64)
+    cos = np.maximum(nrm @ dirs.T, 0.0)
+    want = (vis * cos) @ (radiance * cube.solid_angles[:, None])
+    got = reference.diffuse_irradiance(bits, nrm, cube, light)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
+    # the linear sum alone misses the clamp by far more than that
+    linear = (vis * (nrm @ dirs.T)) @ (radiance * cube.solid_angles[:, None])
+    assert np.abs(linear - want).max() > 1e-3 * want.max()
+    # the pairs made once (cached by callers) give the same sums, on a subset too
+    pairs = reference.horizon_pairs(bits, nrm, cube)
+    seen = rng.random(300) < 0.5
+    some = reference.diffuse_irradiance(bits, nrm, cube, light, seen=seen, pairs=pairs)
+    np.testing.assert_allclose(some[seen], want[seen], rtol=1e-5, atol=1e-6 * want.max())
+    assert not some[~seen].any()
