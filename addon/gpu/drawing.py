@@ -275,17 +275,6 @@ def draw_frame(batches, background, view_projection, transparent: bool, object_d
     fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
     gpu.state.blend_set("NONE")
     gpu.state.face_culling_set("NONE")
-    if not transparent and background is not None:
-        texture, rotation, strength = background
-        gpu.state.depth_test_set("NONE")
-        gpu.state.depth_mask_set(False)
-        sh = background_shader()
-        sh.bind()
-        sh.uniform_float("invViewProjection", view_projection.inverted())
-        sh.uniform_float("texRotation", rotation)
-        sh.uniform_float("strength", float(strength))
-        sh.uniform_sampler("envMap", texture)
-        _quad_batch().draw(sh)
     if keep is not None:
         _keep_pilot(keep, first=True)
     gpu.state.depth_test_set("LESS_EQUAL")
@@ -303,6 +292,18 @@ def draw_frame(batches, background, view_projection, transparent: bool, object_d
         for draw in added_draws:
             draw(view_projection)
         gpu.state.blend_set("NONE")
+    if not transparent and background is not None:
+        # last, at the far plane: only the samples no surface covers read the world
+        texture, rotation, strength = background
+        gpu.state.depth_test_set("LESS_EQUAL")
+        gpu.state.depth_mask_set(False)
+        sh = background_shader()
+        sh.bind()
+        sh.uniform_float("invViewProjection", view_projection.inverted())
+        sh.uniform_float("texRotation", rotation)
+        sh.uniform_float("strength", float(strength))
+        sh.uniform_sampler("envMap", texture)
+        _quad_batch().draw(sh)
     if keep is not None:
         _keep_pilot(keep, first=False)
     gpu.state.depth_test_set("NONE")
