@@ -29,7 +29,9 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     warnings = []
     scene_export.export_world(scene, warnings)       # validate lighting early
     objects = []
-    tri_blocks, all_tris = [], []
+    # the static occluders in float32 (what Embree holds: the precompute's largest arrays at
+    # scale), and each object's box for the scene's size
+    tri_blocks, extents = [], []
     empty = []
     hidden = scene_export.hidden_in_viewport(depsgraph.view_layer, depsgraph)
     if hidden:
@@ -65,16 +67,20 @@ def gather(depsgraph, settings) -> PrecomputeJob:
                     "scale, or unmark Dynamic in Object Properties)")
             job.dynamic, job.own = True, occluders
         else:
-            tri_blocks.append(occluders)
-        all_tris.append(occluders)
+            tri_blocks.append(occluders.astype(np.float32))
+        corners = occluders.reshape(-1, 3)
+        corners = corners[np.isfinite(corners).all(axis=1)]
+        if len(corners):
+            extents.append(np.array([corners.min(axis=0), corners.max(axis=0)]))
         objects.append(job)
     if empty:
         warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
     job_bytes = shared.nbytes()
     if not objects:
         raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")
-    occluders = np.concatenate(tri_blocks) if tri_blocks else np.zeros((0, 3, 3))
-    diag = core_mesh.bounding_diagonal(np.concatenate(all_tris).reshape(-1, 3))
+    occluders = np.concatenate(tri_blocks) if tri_blocks else np.zeros((0, 3, 3), np.float32)
+    del tri_blocks
+    diag = core_mesh.bounding_diagonal(np.concatenate(extents) if extents else np.zeros((0, 3)))
     offset = float(settings.ray_offset) * max(diag, 1e-6)
     two_sided(objects, occluders, offset, scene.camera)
     # static objects first: each trace group is one run of rows
