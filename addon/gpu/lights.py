@@ -85,8 +85,9 @@ def frame_features(sources, supersampling: int = 1) -> tuple:
     return tuple(out)
 
 
-def _surface_batch(pos, nrm, uv, attr, tng):
-    """A batch of the pass's vertex layout (any feature set's shader draws it)."""
+def _surface_batch(pos, nrm, uv, attr, tng, triangles):
+    """A batch of the pass's vertex layout (any feature set's shader draws it): per face
+    corner its values, ``triangles`` (T, 3) indexing them."""
     import gpu
     fmt = _GPU.get("format")
     if fmt is None:
@@ -96,7 +97,8 @@ def _surface_batch(pos, nrm, uv, attr, tng):
     vbo = gpu.types.GPUVertBuf(fmt, len(pos))
     for ident, data in (("pos", pos), ("nrm", nrm), ("uv", uv), ("attr", attr), ("tng", tng)):
         vbo.attr_fill(ident, np.ascontiguousarray(data, dtype=np.float32))
-    return gpu.types.GPUBatch(type="TRIS", buf=vbo)
+    ibo = gpu.types.GPUIndexBuf(type="TRIS", seq=np.ascontiguousarray(triangles, np.int32))
+    return gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=ibo)
 
 
 def _depth_shader():
@@ -121,26 +123,27 @@ def _object_batches(st):
     corner_pos = arrays.positions[arrays.corner_verts].astype(np.float32)
     depth = batch_for_shader(_depth_shader(), "TRIS", {"pos": np.ascontiguousarray(corner_pos)},
                              indices=np.ascontiguousarray(tri, dtype=np.int32))
-    corner = tri.reshape(-1)
-    pos = np.ascontiguousarray(corner_pos[corner])
-    nrm = np.ascontiguousarray(arrays.corner_normals[corner].astype(np.float32))
-    tri_slot = np.repeat(arrays.corner_materials[tri[:, 0]], 3)
+    tri_slot = arrays.corner_materials[tri[:, 0]]
     surfaces = []
     for slot in np.unique(tri_slot):
-        sel = tri_slot == slot
-        uv = np.zeros((int(sel.sum()), 2), np.float32)
-        attr = np.ones((int(sel.sum()), 4), np.float32)
+        # the face corners of the slot's triangles, each once (the triangles index them)
+        corner, index = np.unique(tri[tri_slot == slot], return_inverse=True)
+        n = len(corner)
+        uv = np.zeros((n, 2), np.float32)
+        attr = np.ones((n, 4), np.float32)
         source, values = st.textures.get(int(slot), (None, None))
         uvs = texture_export.slot_uvs(st, int(slot))
         if uvs is not None:
-            uv[:] = uvs[1][corner[sel]]
+            uv[:] = uvs[1][corner]
         if source is not None and source.texture is None:
-            attr[:] = values[corner[sel]]
-        tng = np.zeros((int(sel.sum()), 4), np.float32)
+            attr[:] = values[corner]
+        tng = np.zeros((n, 4), np.float32)
         mapped = texture_export.shader_normal(st, int(slot))
         if mapped is not None:
-            tng[:] = mapped[1][corner[sel]]
-        surfaces.append((int(slot), _surface_batch(pos[sel], nrm[sel], uv, attr, tng)))
+            tng[:] = mapped[1][corner]
+        surfaces.append((int(slot), _surface_batch(
+            corner_pos[corner], arrays.corner_normals[corner], uv, attr, tng,
+            index.reshape(-1, 3))))
     if len(_BATCHES) >= 64:
         _BATCHES.pop(next(iter(_BATCHES)))
     got = _BATCHES[key] = (depth, surfaces)
