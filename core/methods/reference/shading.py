@@ -18,7 +18,7 @@ view and are evaluated per frame.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -30,27 +30,50 @@ from ...scene.visibility import unpack_visibility
 from ...common.parallel import for_blocks, block_points, part
 
 
-#: the band of the :class:`HorizonPairs`: a visible texel whose centre's cosine to the point's
-#: normal is below this is listed (the horizon may cross it); a texel whose light's mean
-#: direction lies farther from its centre than this allows is checked at every point instead
+#: the band of the :class:`HorizonPairs` at 6x32^2 (:func:`horizon_band`): a visible texel
+#: whose centre's cosine to the point's normal is below it is listed (the horizon may cross
+#: it); a texel whose light's mean direction lies farther from its centre than it allows is
+#: checked at every point instead
 HORIZON_BAND = 0.02
+
+
+def horizon_band(cube: Cubemap) -> float:
+    """The pairs' band at ``cube``'s resolution: :data:`HORIZON_BAND` scaled with the
+    texels' size (a light's offset within its texel shrinks with it; a fixed band would
+    list about as many pairs as a fine cubemap has bits)."""
+    return HORIZON_BAND * 32.0 / cube.resolution
 
 
 @dataclass(frozen=True)
 class HorizonPairs:
     """The (point, texel) pairs of visible texels near or below the point's horizon,
-    ``n . c_k < HORIZON_BAND`` (``c_k`` the texel's centre): the only texels whose light's
-    mean direction can lie below the horizon, where the clamp of the cosine matters
+    ``n . c_k <`` :func:`horizon_band` (``c_k`` the texel's centre): the only texels whose
+    light's mean direction can lie below the horizon, where the clamp of the cosine matters
     (:func:`diffuse_irradiance`).  They depend on the visibility and the normals, not the
-    lighting: callers cache them per visibility."""
+    lighting: callers cache them per visibility.  Compact (4 B a pair at 6x32^2 and
+    6x64^2): point p's pairs are ``starts[p]:starts[p + 1]``, each cosine rounded down to
+    float16 (a pair it lets through is checked exactly)."""
 
-    rows: np.ndarray        # (M,) int32 point
-    texels: np.ndarray      # (M,) int32 texel
-    cosines: np.ndarray     # (M,) float32 n . c_k
+    starts: np.ndarray      # (P + 1,) int64
+    texels: np.ndarray      # (M,) uint16 (uint32 past 65536 texels)
+    cosines: np.ndarray     # (M,) float16, at most n . c_k
 
     @property
     def nbytes(self) -> int:
-        return self.rows.nbytes + self.texels.nbytes + self.cosines.nbytes
+        return self.starts.nbytes + self.texels.nbytes + self.cosines.nbytes
+
+    def rows(self) -> np.ndarray:
+        """(M,) each pair's point."""
+        count = len(self.starts) - 1
+        return np.repeat(np.arange(count, dtype=np.int32), np.diff(self.starts))
+
+
+def _below(values: np.ndarray) -> np.ndarray:
+    """``values`` as float16, each at most its float32 value."""
+    half = values.astype(np.float16)
+    up = half.astype(np.float32) > values
+    half[up] = np.nextafter(half[up], np.float16(-np.inf))
+    return half
 
 
 def horizon_pairs(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
@@ -59,24 +82,27 @@ def horizon_pairs(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
     normals = np.asarray(normals, dtype=np.float32).reshape(-1, 3)
     centres = cube.directions.astype(np.float32)
     bits = np.asarray(vis_bits, dtype=np.uint8)
+    band = horizon_band(cube)
+    index = np.uint16 if cube.size <= 65536 else np.uint32
     spans = {}
 
     def block_pairs(a, b):
         nc = normals[a:b] @ centres.T
         # packed, so the visible texels among them are found a byte at a time
-        near = np.packbits(nc < HORIZON_BAND, axis=1)
+        near = np.packbits(nc < band, axis=1)
         near &= bits[a:b]
         r, byte = np.nonzero(near)
         r8, j = np.nonzero(np.unpackbits(near[r, byte][:, None], axis=1))
-        r, k = r[r8], byte[r8].astype(np.int32) * 8 + j
-        spans[a] = ((r + a).astype(np.int32), k.astype(np.int32), nc[r, k])
+        r, k = r[r8], byte[r8].astype(np.int64) * 8 + j
+        spans[a] = (np.bincount(r, minlength=b - a), k.astype(index), _below(nc[r, k]))
 
     for_blocks(len(normals), block_points(cube.resolution), block_pairs, tick)
     got = [spans[a] for a in sorted(spans)]
     if not got:
-        empty = np.zeros(0, np.int32)
-        return HorizonPairs(empty, empty, np.zeros(0, np.float32))
-    return HorizonPairs(*(np.concatenate(parts) for parts in zip(*got)))
+        return HorizonPairs(np.zeros(1, np.int64), np.zeros(0, index), np.zeros(0, np.float16))
+    counts, texels, cosines = (np.concatenate(parts) for parts in zip(*got))
+    return HorizonPairs(np.concatenate([[0], np.cumsum(counts)]).astype(np.int64), texels,
+                        cosines)
 
 
 def _light_offsets(cube: Cubemap, directions: np.ndarray) -> np.ndarray:
@@ -111,7 +137,9 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
     rows = np.arange(len(normals)) if seen is None else np.flatnonzero(seen)
     if pairs is None:
         pairs = horizon_pairs(bits[rows], normals[rows], cube)
-        pairs = replace(pairs, rows=rows[pairs.rows].astype(np.int32))
+        pair_rows = rows[pairs.rows()]
+    else:
+        pair_rows = pairs.rows()
     dirs = np.asarray(lighting.directions, dtype=np.float32)
     # L dw folded together
     Ldw = (np.asarray(lighting.radiance, dtype=np.float64)
@@ -129,13 +157,14 @@ def diffuse_irradiance(vis_bits: np.ndarray, normals: np.ndarray, cube: Cubemap,
     for_blocks(len(rows), block, block_irradiance, tick)
     lit = Ldw.any(axis=1)
     offsets = _light_offsets(cube, dirs)
-    covered = offsets <= HORIZON_BAND
+    band = horizon_band(cube)
+    covered = offsets <= band
     # the listed pairs whose texel's light may lie below the point's horizon
     off = offsets[pairs.texels]
-    near = (pairs.cosines < off) & (off <= HORIZON_BAND)
+    near = (pairs.cosines < off) & (off <= band)
     if seen is not None:
-        near &= np.asarray(seen, bool)[pairs.rows]
-    r, k = pairs.rows[near], pairs.texels[near]
+        near &= np.asarray(seen, bool)[pair_rows]
+    r, k = pair_rows[near], pairs.texels[near]
     cos = np.einsum("pd,pd->p", normals[r], dirs[k])
     below = cos < 0.0
     r, k, cos = r[below], k[below], cos[below]

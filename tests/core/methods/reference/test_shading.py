@@ -278,3 +278,20 @@ def test_diffuse_irradiance_keeps_the_clamp_where_the_light_lies_off_centre():
     some = reference.diffuse_irradiance(bits, nrm, cube, light, seen=seen, pairs=pairs)
     np.testing.assert_allclose(some[seen], want[seen], rtol=1e-5, atol=1e-6 * want.max())
     assert not some[~seen].any()
+
+
+def test_diffuse_irradiance_at_a_fine_cubemap():
+    """At 6x128^2 (texel indices past 16 bits, a narrower band) the sums with the pairs
+    equal the clamped texel loop too."""
+    rng = np.random.default_rng(12)
+    cube = directions.cubemap(128)
+    nrm = unit(rng.normal(size=(40, 3)))
+    vis = ((nrm @ cube.directions.T) > 0) & (rng.random((40, cube.size)) < 0.7)
+    dirs = unit(cube.directions + rng.normal(size=(cube.size, 3)) * 0.004)
+    radiance = rng.uniform(0.0, 2.0, size=(cube.size, 3)).astype(np.float32)
+    light = envmap.CubeLighting(radiance, dirs.astype(np.float32))
+    want = (vis * np.maximum(nrm @ dirs.T, 0.0)) @ (radiance * cube.solid_angles[:, None])
+    pairs = reference.horizon_pairs(np.packbits(vis, axis=1), nrm, cube)
+    assert pairs.texels.dtype == np.uint32 and len(pairs.texels) > 0
+    got = reference.diffuse_irradiance(np.packbits(vis, axis=1), nrm, cube, light, pairs=pairs)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * want.max())
