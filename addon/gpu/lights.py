@@ -21,6 +21,7 @@ from ...core.shading.materials import Material
 from ...core.scene import textures
 from . import drawing, light_tiles, shaders, shadow_maps
 from ..blender import texture_export
+from ..frame import keys
 from ..frame.sources import lamp_sources, shadow_plan
 
 #: view-cosine nodes of the per-material tables (lights_frag.glsl table)
@@ -183,8 +184,22 @@ def slot_texels(st, slot, eye4) -> np.ndarray:
     return np.concatenate([p] + nodes, axis=0)
 
 
+# paramTex rows per (material, eye, closed side): a frame's pilot and its samples, and the
+# frames after an HDRI turn, draw the same (a textured roughness has 17 materials per slot)
+_MATERIAL_TEXELS = keys.cache(256)
+
+
 def material_texels(material, eye4, closed_side=0) -> np.ndarray:
-    """The paramTex rows of one material slot of an object (layout in lights_frag.glsl)."""
+    """The paramTex rows of one material slot of an object (layout in lights_frag.glsl):
+    a new array (the caller writes into it)."""
+    key = (material, tuple(float(v) for v in eye4), float(closed_side))
+    got = _MATERIAL_TEXELS.get(key)
+    if got is None:
+        got = _MATERIAL_TEXELS[key] = _material_texels(material, eye4, closed_side)
+    return got.copy()
+
+
+def _material_texels(material, eye4, closed_side) -> np.ndarray:
     p = np.zeros((4, max(TABLE_NODES, 10), 4), np.float32)
     p[0, 9, 0] = closed_side
     if material.has_diffuse:
