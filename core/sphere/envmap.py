@@ -157,6 +157,29 @@ def equirect_directions(height: int, width: int, supersample: int = 1):
     return _band_directions(height, width, int(supersample), 0, height)
 
 
+# The newest environment images checked (and clamped at zero), per array: every frame's
+# WorldLighting of an HDRI shares the exported pixel array (an array is not modified in
+# place: new pixels are a new array), so a turned HDRI is not read twice more per frame
+_CHECKED_IMAGES = Cache(2)
+
+
+def _checked_image(image: np.ndarray) -> np.ndarray:
+    """``image`` as (H, W, 3) radiance: refused with a NaN or infinite pixel, negative
+    channels drawn as zero."""
+    got = _CHECKED_IMAGES.get(id(image))
+    if got is not None and got[0] is image:
+        return got[1]
+    img = as_rgb(image)
+    bad = count_non_finite(img)
+    if bad:
+        raise EnvironmentError_(
+            f"environment image has {bad} NaN/Inf pixel(s); fix or replace the image")
+    if (img < 0).any():
+        img = np.maximum(img, 0.0)
+    _CHECKED_IMAGES[id(image)] = (image, img)
+    return img
+
+
 @dataclass
 class WorldLighting:
     """The world's radiance: ``strength * E(rotation @ d)`` or a constant colour.
@@ -172,14 +195,7 @@ class WorldLighting:
 
     def __post_init__(self):
         if self.image is not None:
-            img = as_rgb(self.image)
-            bad = count_non_finite(img)
-            if bad:
-                raise EnvironmentError_(
-                    f"environment image has {bad} NaN/Inf pixel(s); fix or replace the image")
-            if (img < 0).any():
-                img = np.maximum(img, 0.0)
-            self.image = img
+            self.image = _checked_image(self.image)
         self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
         if not np.isfinite(self.strength):
             raise EnvironmentError_("world Background strength is not finite")

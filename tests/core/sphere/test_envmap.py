@@ -265,3 +265,18 @@ def test_mip_atlas_keeps_each_levels_energy():
     constant = envmap.equirect_mip_atlas(np.full((16, 32, 3), 0.7, np.float32))
     for level in _levels(constant, envmap.equirect_mip_sizes(16, 32)):
         np.testing.assert_allclose(level, 0.7, rtol=1e-6)
+
+
+def test_a_turned_world_checks_its_image_once():
+    """Worlds of one pixel array (every frame of a turned HDRI) share its checked pixels;
+    new pixels are checked again (a NaN refused, negatives drawn as zero)."""
+    img = np.ones((8, 16, 3), np.float32)
+    a = envmap.WorldLighting(img, rotation=envmap.euler_xyz_matrix(0.0, 0.0, 0.3))
+    b = envmap.WorldLighting(img, rotation=envmap.euler_xyz_matrix(0.0, 0.0, 1.1))
+    assert a.image is b.image
+    bad = img.copy()
+    bad[2, 3, 0] = np.nan
+    with pytest.raises(envmap.EnvironmentError_):
+        envmap.WorldLighting(bad)
+    negative = -img
+    assert not envmap.WorldLighting(negative).image.any()
