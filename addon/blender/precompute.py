@@ -68,10 +68,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
             job.dynamic, job.own = True, occluders
         else:
             tri_blocks.append(occluders.astype(np.float32))
-        corners = occluders.reshape(-1, 3)
-        corners = corners[np.isfinite(corners).all(axis=1)]
-        if len(corners):
-            extents.append(np.array([corners.min(axis=0), corners.max(axis=0)]))
+        extents.append(core_mesh.bounding_box(occluders))
         objects.append(job)
     if empty:
         warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
@@ -80,7 +77,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
         raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")
     occluders = np.concatenate(tri_blocks) if tri_blocks else np.zeros((0, 3, 3), np.float32)
     del tri_blocks
-    diag = core_mesh.bounding_diagonal(np.concatenate(extents) if extents else np.zeros((0, 3)))
+    diag = core_mesh.bounding_diagonal(np.concatenate(extents))
     offset = float(settings.ray_offset) * max(diag, 1e-6)
     two_sided(objects, occluders, offset, scene.camera)
     # static objects first: each trace group is one run of rows

@@ -101,8 +101,10 @@ def corner_radiance(state: FrameState, eye, view_dir) -> list:
     out = []
     for st, rad in zip(state.objects, frame):
         pts = st.points
-        E = (reference.diffuse_irradiance(st.bits, pts.normals, cube, full)
-             - reference.diffuse_irradiance(st.bits, pts.normals, cube, rest)).astype(np.float64)
+        pairs = reference.horizon_pairs(st.bits, pts.normals, cube)     # both sums' clamp
+        E = (reference.diffuse_irradiance(st.bits, pts.normals, cube, full, pairs=pairs)
+             - reference.diffuse_irradiance(st.bits, pts.normals, cube, rest, pairs=pairs)
+             ).astype(np.float64)
         if lamps:
             E += core_bounce.lamp_irradiance(lamps, pts.positions, pts.normals, occluded)
         views = reference.point_views(pts.positions, eye, view_dir)

@@ -16,7 +16,7 @@ import sys
 import numpy as np
 
 from ...core.sphere import envmap
-from ...core.common.cache import CACHES, Cache, clear_all
+from ...core.common.cache import CACHES, Cache, clear_all, held
 
 __all__ = ["CACHES", "Cache", "cache", "held", "per_visibility", "image_key", "env_key",
            "environment_cubemap", "free"]
@@ -26,25 +26,6 @@ def cache(limit: int, name: str = "") -> Cache:
     """A new cache of at most ``limit`` entries, listed for :func:`free` (named after the
     calling module's variable unless ``name`` is given)."""
     return Cache(limit, name, module=sys._getframe(1).f_globals.get("__name__", ""))
-
-
-def held(cache: Cache, key, refs, compute, limit: int | None = None):
-    """``cache[key]``, made by ``compute()`` from the objects ``refs`` -- made again when
-    missing or when it was made from other objects.  An entry keeps its ``refs`` alive,
-    so ids of them in ``key`` cannot be reused meanwhile.  The cache's bound applies
-    (least recently used entries go); ``limit``, when given, lowers it for this call.
-    ``compute`` runs outside the cache's lock."""
-    refs = tuple(refs)
-    entry = cache.get(key)
-    if entry is not None and len(entry[0]) == len(refs) and \
-            all(a is b for a, b in zip(entry[0], refs)):
-        return entry[1]
-    value = compute()
-    with cache.lock:
-        cache[key] = (refs, value)
-        if limit is not None:
-            cache.trim(limit)
-    return value
 
 
 def per_visibility(cache: Cache, key, bits, compute, limit: int | None = None):

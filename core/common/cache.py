@@ -9,9 +9,11 @@ listed so that the add-on's unregister empties every cache (no bpy).
   compute it, the later write wins.
 * :func:`memo` -- ``functools.lru_cache`` (bounded, thread-safe) for pure functions of
   small hashable arguments, listed like a :class:`Cache`.
+* :func:`held` -- an entry made from given objects (arrays), made again when asked for
+  with other ones: what a cache keyed on an array's ``id`` reads through.
 * :data:`CACHES` -- every cache made by either; :func:`clear_all` empties them.
 
-The add-on's helpers on top of it (``held``, ``per_visibility``, ``image_key``) are in
+The add-on's helpers on top of it (``per_visibility``, ``image_key``) are in
 ``addon/frame/keys.py``; docs/README.md lists every cache with its bound.
 """
 
@@ -102,6 +104,25 @@ class Cache(MutableMapping):
         with self.lock:
             while len(self._data) > max(int(limit), 0):
                 self._data.popitem(last=False)
+
+
+def held(cache: Cache, key, refs, compute, limit: int | None = None):
+    """``cache[key]``, made by ``compute()`` from the objects ``refs`` -- made again when
+    missing or when it was made from other objects.  An entry keeps its ``refs`` alive,
+    so ids of them in ``key`` cannot be reused meanwhile.  The cache's bound applies
+    (least recently used entries go); ``limit``, when given, lowers it for this call.
+    ``compute`` runs outside the cache's lock."""
+    refs = tuple(refs)
+    entry = cache.get(key)
+    if entry is not None and len(entry[0]) == len(refs) and \
+            all(a is b for a, b in zip(entry[0], refs)):
+        return entry[1]
+    value = compute()
+    with cache.lock:
+        cache[key] = (refs, value)
+        if limit is not None:
+            cache.trim(limit)
+    return value
 
 
 def memo(maxsize: int):

@@ -219,12 +219,19 @@ def seen_points(mesh: MeshArrays, points: "ShadingPoints", clip: np.ndarray, sid
     return keep
 
 
-def bounding_diagonal(positions: np.ndarray) -> float:
+def bounding_box(positions: np.ndarray) -> np.ndarray:
+    """(2, 3) the least and greatest coordinates of the finite ``positions`` ((0, 3) when
+    none is finite): a box the precompute gathers per object, whose corners bound the scene."""
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     p = p[np.isfinite(p).all(axis=1)]
     if len(p) == 0:
-        return 0.0
-    return float(np.linalg.norm(p.max(axis=0) - p.min(axis=0)))
+        return np.zeros((0, 3))
+    return np.array([p.min(axis=0), p.max(axis=0)])
+
+
+def bounding_diagonal(positions: np.ndarray) -> float:
+    box = bounding_box(positions)
+    return float(np.linalg.norm(box[1] - box[0])) if len(box) else 0.0
 
 
 def repair_normals(mesh: MeshArrays) -> int:

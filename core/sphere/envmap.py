@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..common.cache import Cache
+from ..common.cache import Cache, held
 from .directions import Cubemap, cubemap
 from .resample import LUMINANCE, ImageSums, texel_sums
 
@@ -166,18 +166,14 @@ _CHECKED_IMAGES = Cache(2)
 def _checked_image(image: np.ndarray) -> np.ndarray:
     """``image`` as (H, W, 3) radiance: refused with a NaN or infinite pixel, negative
     channels drawn as zero."""
-    got = _CHECKED_IMAGES.get(id(image))
-    if got is not None and got[0] is image:
-        return got[1]
-    img = as_rgb(image)
-    bad = count_non_finite(img)
-    if bad:
-        raise EnvironmentError_(
-            f"environment image has {bad} NaN/Inf pixel(s); fix or replace the image")
-    if (img < 0).any():
-        img = np.maximum(img, 0.0)
-    _CHECKED_IMAGES[id(image)] = (image, img)
-    return img
+    def check():
+        img = as_rgb(image)
+        bad = count_non_finite(img)
+        if bad:
+            raise EnvironmentError_(
+                f"environment image has {bad} NaN/Inf pixel(s); fix or replace the image")
+        return np.maximum(img, 0.0) if (img < 0).any() else img
+    return held(_CHECKED_IMAGES, id(image), (image,), check)
 
 
 @dataclass
@@ -261,12 +257,7 @@ _RESAMPLE_CACHE = Cache(1)
 
 def _image_sums(img: np.ndarray) -> ImageSums:
     """:class:`ImageSums` of ``img``, kept for the newest image."""
-    key = (id(img), img.shape)
-    got = _RESAMPLE_CACHE.get(key)
-    if got is not None and got.image is img:
-        return got
-    sums = _RESAMPLE_CACHE[key] = ImageSums(img)
-    return sums
+    return held(_RESAMPLE_CACHE, (id(img), img.shape), (img,), lambda: ImageSums(img))
 
 
 def resample_equirect_to_cubemap(image: np.ndarray, cube: Cubemap, rotation=None) -> CubeLighting:
