@@ -117,8 +117,8 @@ def test_occluder_fractions_are_read_in_bounded_blocks(l_field):
     whole = occluder_fields.occluder_fractions(field, pts, cube.directions, half,
                                                max_pairs=1 << 30)
     assert len(whole[0]) > 400_000              # ~100 MB of temporaries read at once
-    for a, b in zip(blocks, whole):
-        np.testing.assert_array_equal(a, b)
+    for a, b in zip(blocks, whole):     # per pair alike; a vector kernel's tail may differ
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7)
     assert peak < 40.0, peak                    # the results (~25 MB) and one block
 
 
