@@ -650,6 +650,13 @@ void main()
       if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
         continue;                                   /* behind its emitting side */
       }
+      /* the whole lamp below the shading normals' horizons adds nothing: no shadow taps
+       * (its corners, an ellipse's 16-gon reaching 1.013 of its half axes) */
+      vec3 w0 = s0.xyz - vPos, hx = 1.02 * source(s, 4).xyz, hy = 1.02 * source(s, 5).xyz;
+      if ((kd.w < 0.5 || dot(nd, w0) + abs(dot(nd, hx)) + abs(dot(nd, hy)) <= 0.0) &&
+          (!glossyHere || dot(n, w0) + abs(dot(n, hx)) + abs(dot(n, hy)) <= 0.0)) {
+        continue;
+      }
       float Va = local_visibility(s, vPos, ng, s0.xyz, s0.w, shift);
       if (Va > 0.0) {
         color += Va * area_lamp(s, kind > 4.5, n, nd, ng, o, cos_o, kd, wd, a, dist, lobes,
@@ -681,8 +688,14 @@ void main()
       s1.rgb *= kind > 0.5 ? e : e / (PI * sin(r) * sin(r));
     }
 #endif
-    if (dot(ng, c) < -sin(r)) {
+    float below = -sin(r);
+    if (dot(ng, c) < below) {
       continue;                                     /* the whole disc is below the plane */
+    }
+    /* or below the shading normals' horizons (the diffuse term's, the glossy lobes'): it adds
+     * nothing there, and its shadow taps are the pass's largest cost */
+    if ((kd.w < 0.5 || dot(nd, c) < below) && (!glossyHere || dot(n, c) < below)) {
+      continue;
     }
 #ifdef LOCAL_LAMPS
     float V = s1.w > 1.5 ? local_visibility(s, vPos, ng, s0.xyz, s0.w, shift)
