@@ -13,7 +13,8 @@
  * (its mean cosine), no material.
  *
  * Textures (texelFetch only):
- *   pointData RGBA32F  rows of `width`, four blocks of `rows`: [normal, material], [bent view,
+ *   pointData RGBA32F  rows of `width` (points by 4x4 blocks: point_of), four blocks of `rows`:
+ *                      [normal, material], [bent view,
  *                      cos_o], [weight of lobe 0, the point's index in the visibility bits
  *                      (the glossy sums shade the points a camera may see)], [weight of
  *                      lobe 1, -]
@@ -32,11 +33,19 @@ vec4 at(sampler2D tex, int i, int width, int row0)
   return texelFetch(tex, ivec2(i % width, row0 + i / width), 0);
 }
 
+/* the point a pixel holds: points 16 b .. 16 b + 15 fill the b-th 4x4 block of pixels row by
+ * row (addon/methods/reference/gpu.py tiled_pixels), so a block's lanes shade neighbours */
+int point_of(ivec2 q)
+{
+  ivec2 block = q >> 2;
+  return 16 * (block.y * (width >> 2) + block.x) + 4 * (q.y & 3) + (q.x & 3);
+}
+
 void main()
 {
   /* this draw's rows start at row firstRow of the points (drawn a block of rows at a time) */
   ivec2 q = ivec2(gl_FragCoord.xy) + ivec2(0, firstRow);
-  int p = q.y * width + q.x;
+  int p = point_of(q);
   if (p >= pointCount) {
     fragColor = vec4(0.0);
     return;

@@ -78,7 +78,7 @@ def test_glsl_irradiance_equals_numpy(registered_addon):
 
 
 def test_glsl_sums_drawn_a_block_of_rows_at_a_time(registered_addon, monkeypatch):
-    """Points drawn in several draws (one row of points each here) give the one draw's
+    """Points drawn in several draws (one row of 4x4 blocks each here) give the one draw's
     sums: each draw reads its own rows of the points."""
     from prt_relight.addon.frame.engine import in_render
     from prt_relight.addon.methods.reference import gpu as method
@@ -95,8 +95,8 @@ def test_glsl_sums_drawn_a_block_of_rows_at_a_time(registered_addon, monkeypatch
                 method.irradiance(st, nrm, CUBE, lighting))
 
     whole = in_render(bpy.context.scene, lambda d: sums(d, ("whole",)))
-    monkeypatch.setattr(method, "WIDTH", 16)          # 81 points: six rows of 16
-    monkeypatch.setattr(method, "CHUNK_ROWS", 1)
+    monkeypatch.setattr(method, "WIDTH", 16)    # 81 points: eight rows of 16, two draws
+    monkeypatch.setattr(method, "CHUNK_ROWS", 4)
     rows = in_render(bpy.context.scene, lambda d: sums(d, ("rows",)))
     for a, b in zip(whole, rows):
         assert np.abs(a).max() > 0.0
@@ -125,3 +125,19 @@ def test_glsl_sums_of_the_seen_points_only(registered_addon):
     # one shader on the same inputs: equal up to how a driver orders float work
     np.testing.assert_allclose(some[seen], whole[seen], rtol=1e-4,
                                atol=1e-6 * np.abs(whole).max())
+
+
+def test_points_fill_four_by_four_blocks_the_shader_reads_back():
+    """tiled_pixels puts each point on its own pixel, 16 consecutive points in one 4x4 block,
+    and reference_sums_frag.glsl's point_of (written out here) reads each pixel's point back;
+    the rows are whole blocks."""
+    from prt_relight.addon.methods.reference import gpu as method
+    for count, width in ((1, 16), (81, 16), (5000, 1024)):
+        pix, rows = method.tiled_pixels(count, width)
+        assert rows % 4 == 0 and rows * width >= count
+        assert len(np.unique(pix)) == count and pix.max() < rows * width
+        x, y = pix % width, pix // width
+        back = 16 * ((y >> 2) * (width >> 2) + (x >> 2)) + 4 * (y & 3) + (x & 3)
+        np.testing.assert_array_equal(back, np.arange(count))
+        block = (y // 4) * (width // 4) + x // 4
+        assert np.all(block == np.arange(count) // 16)

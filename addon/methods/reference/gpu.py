@@ -20,7 +20,9 @@ from ...gpu import drawing, shaders, visibility
 WIDTH = 1024
 #: texels per row of the environment's data
 ENV_WIDTH = 1024
-#: rows of points per draw (65536 points): a draw a GPU driver would reset (about 2 s on
+#: the side of the square blocks of pixels the pass's points fill in order (tiled_pixels)
+TILE = 4
+#: rows of points per draw (65536 points; whole blocks): a draw a GPU driver would reset (about 2 s on
 #: Windows) needs millions of points at 6×128²
 CHUNK_ROWS = 64
 # the newest sums per (object, bits, lighting, what the pass reads of the points): a textured
@@ -91,14 +93,35 @@ def environment_rows(cube, lighting) -> tuple[np.ndarray, int]:
     return out.reshape(3 * rows, ENV_WIDTH, 4), rows
 
 
-def _pass(st, pts, rows, P, cube, lighting, mats=None):
-    """The pass over an object's points (``pts``: its point data, (4 blocks, rows * WIDTH,
-    4)): the glossy sums with the material rows ``mats``, the irradiance without."""
+def tiled_pixels(count: int, width: int) -> tuple[np.ndarray, int]:
+    """Where the pass draws each of ``count`` points: (count,) indices into its target's
+    pixels (rows of ``width``), and its rows (a multiple of TILE).  Points ``16 b .. 16 b + 15``
+    fill the b-th TILE x TILE block, row by row (reference_sums_frag.glsl's point_of): a GPU
+    shades a block's pixels together (a warp; llvmpipe a 4x4 block of SIMD lanes), so
+    neighbouring points, which see much the same texels, run the loop over them in step
+    (llvmpipe: the glossy pass 12 % faster than points laid along rows)."""
+    rows = -(-max(count, 1) // width)
+    rows = -(-rows // TILE) * TILE
+    k = np.arange(count)
+    block, within = k // (TILE * TILE), k % (TILE * TILE)
+    per_row = width // TILE
+    x = (block % per_row) * TILE + within % TILE
+    y = (block // per_row) * TILE + within // TILE
+    return y * width + x, rows
+
+
+def _pass(st, pts, cube, lighting, mats=None):
+    """The pass over an object's points (``pts``: its point data, (blocks, P, 4) in point
+    order): the glossy sums (P, 3) with the material rows ``mats``, the irradiance without."""
+    P = pts.shape[1]
+    pix, rows = tiled_pixels(P, WIDTH)
+    data = np.zeros((len(pts), rows * WIDTH, 4), np.float32)
+    data[:, pix] = pts
     vis_tex, stride = visibility.texture(st)
     env, env_rows = environment_rows(cube, lighting)
     # the textures stay referenced until the pass has read them; the irradiance variant
     # reads neither the material rows nor the point data past its normals
-    textures = (("pointData", _texture(pts.reshape(-1, WIDTH, 4))), ("visTex", vis_tex),
+    textures = (("pointData", _texture(data.reshape(-1, WIDTH, 4))), ("visTex", vis_tex),
                 ("envData", _texture(env)))
     ints = (("width", WIDTH), ("pointCount", P), ("stride", stride), ("envWidth", ENV_WIDTH),
             ("envRows", env_rows))
@@ -106,11 +129,12 @@ def _pass(st, pts, rows, P, cube, lighting, mats=None):
         textures += (("matData", _texture(mats)),)
         ints += (("rows", rows),)
     shader = shaders.shader("reference_sums", () if mats is not None else ("IRRADIANCE",))
+    chunk = max(TILE, CHUNK_ROWS - CHUNK_ROWS % TILE)     # whole blocks per draw
     out = np.concatenate([
-        drawing.texel_pass(shader, WIDTH, min(rows - first, CHUNK_ROWS),
+        drawing.texel_pass(shader, WIDTH, min(rows - first, chunk),
                            ints=ints + (("firstRow", first),), samplers=textures)
-        for first in range(0, rows, CHUNK_ROWS)])
-    return out[:P, :3]
+        for first in range(0, rows, chunk)])
+    return out[pix, :3]
 
 
 def irradiance(st, normals, cube, lighting) -> np.ndarray:
@@ -118,10 +142,9 @@ def irradiance(st, normals, cube, lighting) -> np.ndarray:
     P = len(normals)
     if P == 0:
         return np.zeros((0, 3), np.float32)
-    rows = -(-P // WIDTH)
-    pts = np.zeros((1, rows * WIDTH, 4), np.float32)
-    pts[0, :P, :3] = normals
-    return _pass(st, pts, rows, P, cube, lighting)
+    pts = np.zeros((1, P, 4), np.float32)
+    pts[0, :, :3] = normals
+    return _pass(st, pts, cube, lighting)
 
 
 def specular_radiance(st, normals, point_materials, materials, cube, lighting, views,
@@ -136,15 +159,12 @@ def specular_radiance(st, normals, point_materials, materials, cube, lighting, v
     S = len(index)
     if S == 0:
         return out
-    rows = -(-S // WIDTH)
-    pts = np.zeros((4, rows * WIDTH, 4), np.float32)
-    pts[:, :S] = point_rows(normals[index], views[index], point_materials[index], materials,
-                            index)
+    pts = point_rows(normals[index], views[index], point_materials[index], materials, index)
     mats = material_rows(materials, int(np.max(point_materials)) + 1)
     digest = hashlib.blake2b(pts.tobytes() + mats.tobytes(), digest_size=16).digest()
 
     def run():
-        return _pass(st, pts, rows, S, cube, lighting, mats)
+        return _pass(st, pts, cube, lighting, mats)
     out[index] = keys.per_visibility(_SUMS, (st.name, id(st.bits), lighting_key, digest),
                                      st.bits, run)
     return out
