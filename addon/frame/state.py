@@ -263,6 +263,9 @@ class FrameState:
         #: the frame being drawn is all that shading serves (engine.render_pixels): a
         #: method may leave out points the camera cannot see (:meth:`seen_points`)
         self.visible_only = False
+        #: :meth:`seen_points` of the frame's camera, per object's points (its parts and
+        #: their base-colour twins share them): computed once per frame, not per method pass
+        self._seen_memo: dict = {}
         #: the whole frame's state when this one shades a part of its objects (:meth:`shade`:
         #: the untextured objects, the textured ones at base colour white and black): what a
         #: stored AUTO choice is checked against; None for the whole frame itself
@@ -454,6 +457,7 @@ class FrameState:
         new.error = None
         new.camera = None
         new.visible_only = False
+        new._seen_memo = {}
         new.progress = new.cancelled = None
         new._span = (0.0, 1.0)
         new._sync_lighting(depsgraph)
@@ -481,8 +485,18 @@ class FrameState:
         cam = self.camera
         if not self.visible_only or cam is None:
             return None
-        return core_mesh.seen_points(st.arrays, st.points, cam["clip"], st.closed_side,
-                                     cam["eye"], cam["view_dir"])
+        memo = self._seen_memo
+        if memo.get("camera") is not cam:
+            memo.clear()
+            memo["camera"] = cam
+        got = memo.get(id(st.points))
+        if got is None or got[0] is not st.arrays or got[1] is not st.points \
+                or got[2] != st.closed_side:
+            seen = core_mesh.seen_points(st.arrays, st.points, cam["clip"], st.closed_side,
+                                         cam["eye"], cam["view_dir"])
+            seen.flags.writeable = False                # shared by the frame's passes
+            got = memo[id(st.points)] = (st.arrays, st.points, st.closed_side, seen)
+        return got[3]
 
     # ------------------------------------------------------------------ shade
     def shade(self, eye, view_dirs_for=None):
