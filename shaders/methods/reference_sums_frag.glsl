@@ -27,10 +27,12 @@
  *                      -), then per lobe j at 1 + 3 j: (kind, eta, -, -), (f0, -), (B, -)
  */
 
-/* texel i of a row-major block of `width` texels starting at row `row0` */
+/* texel i of a row-major block of `width` texels starting at row `row0`; `width` a power of
+ * two (ENV_WIDTH): a mask and a shift, where an integer division per texel costs a
+ * software rasterizer a scalar division per lane */
 vec4 at(sampler2D tex, int i, int width, int row0)
 {
-  return texelFetch(tex, ivec2(i % width, row0 + i / width), 0);
+  return texelFetch(tex, ivec2(i & (width - 1), row0 + (i >> findMSB(width))), 0);
 }
 
 /* the point a pixel holds: points 16 b .. 16 b + 15 fill the b-th 4x4 block of pixels row by

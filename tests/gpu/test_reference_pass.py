@@ -79,7 +79,8 @@ def test_glsl_irradiance_equals_numpy(registered_addon):
 
 def test_glsl_sums_drawn_a_block_of_rows_at_a_time(registered_addon, monkeypatch):
     """Points drawn in several draws (one row of 4x4 blocks each here) give the one draw's
-    sums: each draw reads its own rows of the points."""
+    sums: each draw reads its own rows of the points; the environment's texels read from
+    rows of another width give the same sums."""
     from prt_relight.addon.frame.engine import in_render
     from prt_relight.addon.methods.reference import gpu as method
     gpu_context()
@@ -97,6 +98,7 @@ def test_glsl_sums_drawn_a_block_of_rows_at_a_time(registered_addon, monkeypatch
     whole = in_render(bpy.context.scene, lambda d: sums(d, ("whole",)))
     monkeypatch.setattr(method, "WIDTH", 16)    # 81 points: eight rows of 16, two draws
     monkeypatch.setattr(method, "CHUNK_ROWS", 4)
+    monkeypatch.setattr(method, "ENV_WIDTH", 256)     # the texels in 24 rows, not 6
     rows = in_render(bpy.context.scene, lambda d: sums(d, ("rows",)))
     for a, b in zip(whole, rows):
         assert np.abs(a).max() > 0.0

@@ -18,7 +18,7 @@ from ...gpu import drawing, shaders, visibility
 
 #: points per row of the pass's target (and of its point data)
 WIDTH = 1024
-#: texels per row of the environment's data
+#: texels per row of the environment's data (a power of two: the pass indexes it by mask and shift)
 ENV_WIDTH = 1024
 #: the side of the square blocks of pixels the pass's points fill in order (tiled_pixels)
 TILE = 4
