@@ -4,15 +4,23 @@
  * texInfo = (interpolation, extension, source: -1 none / 0 image / 1 attribute, mix mode);
  * texMap0/1 = the Mapping node's 2D rows; mixColor = (constant colour, factor). */
 
+/* i modulo n in [0, n) by a float floor (an integer remainder is a scalar division per lane
+ * on a software rasterizer); the quotient of integers below 2^24 rounds to within one of
+ * its floor, which the two corrections take back, so the result is exact */
+int tex_mod(int i, int n)
+{
+  int m = i - n * int(floor(float(i) / float(n)));
+  m = m < 0 ? m + n : m;
+  return m >= n ? m - n : m;
+}
+
 int tex_wrap(int i, int n, int ext)
 {
   if (ext == 0) {
-    int m = i % n;
-    return m < 0 ? m + n : m;
+    return tex_mod(i, n);
   }
   if (ext == 3) {
-    int m = i % (2 * n);
-    m = m < 0 ? m + 2 * n : m;
+    int m = tex_mod(i, 2 * n);
     return m < n ? m : 2 * n - 1 - m;
   }
   return clamp(i, 0, n - 1);

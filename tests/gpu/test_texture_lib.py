@@ -23,7 +23,9 @@ pytestmark = pytest.mark.usefixtures("registered_addon")
 
 @pytest.mark.parametrize("interpolation, extension, mapping", [
     ("Linear", "REPEAT", None), ("Closest", "EXTEND", None), ("Cubic", "MIRROR", None),
-    ("Linear", "CLIP", (0.3, -0.2, 0.0))])
+    ("Linear", "CLIP", (0.3, -0.2, 0.0)),
+    # many periods away (texel indices far below zero and past the size): the wrap's modulo
+    ("Linear", "REPEAT", (-13.3, 25.7, 0.0)), ("Cubic", "MIRROR", (-9.4, 31.2, 0.0))])
 def test_glsl_texture_equals_numpy_at_every_pixel(tmp_path, interpolation, extension, mapping):
     """An unoccluded Lambert plane under a white world shows its albedo: each pixel is the
     texture read (core.scene.textures.sample) at the pixel centre's UV."""
