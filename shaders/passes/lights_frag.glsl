@@ -419,7 +419,7 @@ float polygon_cosine(vec3 p, vec3 n, vec3 verts[POLY], int count)
   vec3 clipped[POLY + 1];
   int m = 0;
   for (int k = 0; k < count; k++) {
-    vec3 a = verts[k] - p, b = verts[(k + 1) % count] - p;
+    vec3 a = verts[k] - p, b = verts[k + 1 == count ? 0 : k + 1] - p;
     float da = dot(a, n), db = dot(b, n);
     if (da > 0.0) {
       clipped[m++] = a;
@@ -430,7 +430,7 @@ float polygon_cosine(vec3 p, vec3 n, vec3 verts[POLY], int count)
   }
   float sum = 0.0;
   for (int k = 0; k < m; k++) {
-    vec3 a = normalize(clipped[k]), b = normalize(clipped[(k + 1) % m]);
+    vec3 a = normalize(clipped[k]), b = normalize(clipped[k + 1 == m ? 0 : k + 1]);
     vec3 c = cross(a, b);
     float l = length(c);
     if (l > 1e-9) {
