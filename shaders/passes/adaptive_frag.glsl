@@ -5,7 +5,9 @@
  * and last with depth test EQUAL (their colour). */
 void main()
 {
-  ivec2 p = ivec2(gl_FragCoord.xy) / samples;
+  /* the sample's pixel: centres (i + 0.5) / s floor to i / s exactly (a float division,
+   * not an integer one per lane) */
+  ivec2 p = ivec2(floor(gl_FragCoord.xy / float(samples)));
   if (texelFetch(maskTex, p, 0).r > 0.5) {
     discard;
   }
