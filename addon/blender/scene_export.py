@@ -18,7 +18,7 @@ import numpy as np
 from ...core.sg import lamp_lobes
 from ...core.sphere import envmap
 from ...core.shading.materials import DEFAULT_MATERIAL, Material, principled_material
-from ...core.scene.mesh import MeshArrays
+from ...core.scene.mesh import MeshArrays, normal_matrix
 from ..frame import keys
 
 #: Principled inputs we do not model: (socket, "is non-zero" test, what it is).
@@ -93,8 +93,7 @@ def transformed(positions, normals, M):
     """Positions and unit normals (float64) placed by the 4x4 matrix ``M`` (normals by its
     inverse transpose)."""
     pos = positions.astype(np.float64) @ M[:3, :3].T + M[:3, 3]
-    N = np.linalg.inv(M[:3, :3]).T if abs(np.linalg.det(M[:3, :3])) > 1e-30 else M[:3, :3]
-    nrm = normals.astype(np.float64) @ N.T
+    nrm = normals.astype(np.float64) @ normal_matrix(M).T
     length = np.linalg.norm(nrm, axis=1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         nrm = nrm / length

@@ -17,6 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ...core.scene import mesh as core_mesh
 from ...core.scene.mesh import MeshArrays
 from . import scene_export, storage
 
@@ -126,6 +127,11 @@ class SharedArrays:
 
     def __init__(self):
         self.local = {}
+        self._fingerprints = {}
+
+    @staticmethod
+    def _key(surface: Surface):
+        return id(surface.ob) if isinstance(surface.ob, GeometrySource) else surface.ob.name_full
 
     def arrays(self, surface: Surface) -> MeshArrays:
         """World-space arrays of ``surface``: an object's as scene_export.mesh_arrays; an
@@ -133,10 +139,25 @@ class SharedArrays:
         arrays (corners, triangles, materials) shared with every other instance of it."""
         if not surface.instance:
             return scene_export.mesh_arrays(surface.ob)
-        key = id(surface.ob) if isinstance(surface.ob, GeometrySource) else surface.ob.name_full
+        key = self._key(surface)
         if key not in self.local:
             self.local[key] = scene_export.mesh_arrays(surface.ob, np.eye(4))
         return placed(self.local[key], surface.matrix)
+
+    def source(self, surface: Surface, arrays: MeshArrays):
+        """An instance's source as the lights pass shares it (addon/gpu/lights.py): the
+        core.scene.mesh.fingerprint of its object-space arrays and those arrays, when
+        ``arrays`` (what sync made of :meth:`arrays`) still index its corners (not re-sided);
+        None for an object."""
+        if not surface.instance:
+            return None
+        key = self._key(surface)
+        local = self.local.get(key)
+        if local is None or not np.may_share_memory(local.triangles, arrays.triangles):
+            return None
+        if key not in self._fingerprints:
+            self._fingerprints[key] = core_mesh.fingerprint(local)
+        return self._fingerprints[key], local
 
     def nbytes(self) -> int:
         """Bytes of the shared object-space arrays."""

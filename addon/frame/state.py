@@ -156,7 +156,7 @@ def _textured_mean(st) -> np.ndarray:
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "_bits", "_stored", "_pose", "status",
                  "data", "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of",
-                 "dynamic", "bounce", "matrix", "shape", "near")
+                 "dynamic", "bounce", "matrix", "shape", "near", "source")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -203,6 +203,8 @@ class ObjectState:
         self.bounce = None
         #: its world matrix (4x4; an instance's placed by its instancer)
         self.matrix = np.eye(4)
+        #: an instance's source as the lights pass shares it (surfaces.SharedArrays.source)
+        self.source = None
 
     @property
     def bits(self):
@@ -251,8 +253,7 @@ class FrameState:
         self.background = None       # (world, GPU texture) cached by the engine
         #: the frame's bounced light (addon.frame.bounce.FrameBounce), None: direct only
         self.bounce = None
-        #: the light group of the World and of each compact source (addon.frame.passes;
-        #: each lamp carries its own, core.sg.lamp_lobes.Lamp.group)
+        #: the light group of the World and of each compact source (addon.frame.passes)
         self.world_group = "World"
         self.source_groups: list[str] = []
         #: the World is muted (a light group pass without it): its part of the frame is zero
@@ -263,8 +264,7 @@ class FrameState:
         #: the frame being drawn is all that shading serves (engine.render_pixels): a
         #: method may leave out points the camera cannot see (:meth:`seen_points`)
         self.visible_only = False
-        #: :meth:`seen_points` of the frame's camera, per object's points (its parts and
-        #: their base-colour twins share them): computed once per frame, not per method pass
+        #: :meth:`seen_points` per object's points, once per camera (parts and twins share)
         self._seen_memo: dict = {}
         #: the whole frame's state when this one shades a part of its objects (:meth:`shade`:
         #: the untextured objects, the textured ones at base colour white and black): what a
@@ -375,6 +375,7 @@ class FrameState:
             st = ObjectState(surface.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
             st.matrix = surface.matrix
+            st.source = shared.source(surface, arrays)
             st.normals = _per_corner(texture_export.slot_normals(ob, self.warnings,
                                                                  surface.matrix), corners)
             if status == "ok" and moving is None:
@@ -485,18 +486,17 @@ class FrameState:
         cam = self.camera
         if not self.visible_only or cam is None:
             return None
-        memo = self._seen_memo
+        memo, key = self._seen_memo, (id(st.arrays), id(st.points), st.closed_side)
         if memo.get("camera") is not cam:
             memo.clear()
             memo["camera"] = cam
-        got = memo.get(id(st.points))
-        if got is None or got[0] is not st.arrays or got[1] is not st.points \
-                or got[2] != st.closed_side:
+        got = memo.get(key)
+        if got is None or got[0] is not st.arrays or got[1] is not st.points:
             seen = core_mesh.seen_points(st.arrays, st.points, cam["clip"], st.closed_side,
                                          cam["eye"], cam["view_dir"])
             seen.flags.writeable = False                # shared by the frame's passes
-            got = memo[id(st.points)] = (st.arrays, st.points, st.closed_side, seen)
-        return got[3]
+            got = memo[key] = (st.arrays, st.points, seen)
+        return got[2]
 
     # ------------------------------------------------------------------ shade
     def shade(self, eye, view_dirs_for=None):

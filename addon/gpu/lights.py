@@ -18,6 +18,7 @@ import numpy as np
 
 from ...core.shading import brdf as core_brdf
 from ...core.shading.materials import Material
+from ...core.scene import mesh as core_mesh
 from ...core.scene import textures
 from . import drawing, light_tiles, shaders, shadow_maps
 from ..blender import texture_export
@@ -28,7 +29,7 @@ from ..frame.sources import lamp_sources, shadow_plan
 TABLE_NODES = 32
 
 _GPU = drawing.gpu_cache({})
-_BATCHES = drawing.gpu_cache({})
+BATCHES = drawing.gpu_cache({})
 #: texels per source in srcTex (lights_frag.glsl's layout)
 SOURCE_TEXELS = 36
 
@@ -86,20 +87,37 @@ def frame_features(sources, supersampling: int = 1) -> tuple:
     return tuple(out)
 
 
+def _vertex_buffer(columns):
+    """A vertex buffer of the pass's attributes ``columns`` ((name, (C, n) values), in the
+    order of :data:`_LAYOUT`), one format per set of names."""
+    import gpu
+    names = tuple(name for name, _ in columns)
+    fmt = _GPU.get(("format", names))
+    if fmt is None:
+        fmt = _GPU[("format", names)] = gpu.types.GPUVertFormat()
+        for ident in names:
+            fmt.attr_add(id=ident, comp_type="F32", len=_LAYOUT[ident], fetch_mode="FLOAT")
+    vbo = gpu.types.GPUVertBuf(fmt, len(columns[0][1]))
+    for ident, data in columns:
+        vbo.attr_fill(ident, np.ascontiguousarray(data, dtype=np.float32))
+    return vbo
+
+
+#: the pass's per-corner attributes and their lengths (lights_vert.glsl)
+_LAYOUT = {"pos": 3, "nrm": 3, "uv": 2, "attr": 4, "tng": 4}
+
+
+def _index_buffer(triangles):
+    import gpu
+    return gpu.types.GPUIndexBuf(type="TRIS", seq=np.ascontiguousarray(triangles, np.int32))
+
+
 def _surface_batch(pos, nrm, uv, attr, tng, triangles):
     """A batch of the pass's vertex layout (any feature set's shader draws it): per face
     corner its values, ``triangles`` (T, 3) indexing them."""
     import gpu
-    fmt = _GPU.get("format")
-    if fmt is None:
-        fmt = _GPU["format"] = gpu.types.GPUVertFormat()
-        for ident, n in (("pos", 3), ("nrm", 3), ("uv", 2), ("attr", 4), ("tng", 4)):
-            fmt.attr_add(id=ident, comp_type="F32", len=n, fetch_mode="FLOAT")
-    vbo = gpu.types.GPUVertBuf(fmt, len(pos))
-    for ident, data in (("pos", pos), ("nrm", nrm), ("uv", uv), ("attr", attr), ("tng", tng)):
-        vbo.attr_fill(ident, np.ascontiguousarray(data, dtype=np.float32))
-    ibo = gpu.types.GPUIndexBuf(type="TRIS", seq=np.ascontiguousarray(triangles, np.int32))
-    return gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=ibo)
+    vbo = _vertex_buffer((("pos", pos), ("nrm", nrm), ("uv", uv), ("attr", attr), ("tng", tng)))
+    return gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=_index_buffer(triangles))
 
 
 def _depth_shader():
@@ -109,17 +127,75 @@ def _depth_shader():
 # --------------------------------------------------------------------------- geometry
 
 def _object_batches(st):
-    """(depth batch, [(slot, surface batch)]) of one object, cached per geometry."""
+    """(depth batch, [(slot, surface batch)], model matrix) of one object, cached per
+    geometry.  An instance placed from its source's arrays as they are, with no per-corner
+    texture data (:func:`placed`), draws its source's shared batches: the depth batch in
+    object space with its world matrix as the model matrix, the surface batches with only
+    their positions its own (its world positions, as every other pass draws them, so the
+    pass's depth test EQUAL holds) and its source's normals turned by its normal matrix.
+    The others' batches are in world space (model: the identity)."""
+    if not placed(st):
+        key = (st.name, st.fingerprint, tuple(sorted((slot, id(values)) for slot, (_, values)
+                                                     in st.textures.items())),
+               tuple(sorted((slot, id(got[2])) for slot, got in st.normals.items())),
+               tuple(sorted((slot, id(v)) for slot, got in st.inputs[0].items()
+                            for _, v in got.values())))
+        return (*keys.held(BATCHES, key, (), lambda: build_batches(st, st.arrays)), _IDENTITY)
+    depth, shared = keys.held(BATCHES, ("source", st.source[0]), (),
+                              lambda: _source_batches(st))
+
+    def own():
+        import gpu
+        corner_pos = st.arrays.positions[st.arrays.corner_verts].astype(np.float32)
+        out = []
+        for slot, corner, vbo, ibo in shared:
+            batch = gpu.types.GPUBatch(type="TRIS", buf=_vertex_buffer((("pos",
+                                                                         corner_pos[corner]),)),
+                                       elem=ibo)
+            batch.vertbuf_add(vbo)
+            out.append((slot, batch))
+        return out
+    return depth, keys.held(BATCHES, (st.name, st.fingerprint, "placed"), (), own), \
+        np.asarray(st.matrix, np.float64)
+
+
+_IDENTITY = np.eye(4)
+
+
+def placed(st) -> bool:
+    """Whether ``st`` draws its source's shared batches: an instance placed from its
+    source's arrays as they are, with no per-corner texture data (UVs, colours, tangents)."""
+    return st.source is not None and not st.textures and not st.normals and not st.inputs[0]
+
+
+def _source_batches(st):
+    """An instance's source's shared batches: (depth batch in object space, per slot (slot,
+    its corners, their vertex buffer of normals and constant texture data, index buffer))."""
     from gpu_extras.batch import batch_for_shader
-    key = (st.name, st.fingerprint, tuple(sorted((slot, id(values)) for slot, (_, values)
-                                                 in st.textures.items())),
-           tuple(sorted((slot, id(got[2])) for slot, got in st.normals.items())),
-           tuple(sorted((slot, id(v)) for slot, got in st.inputs[0].items()
-                        for _, v in got.values())))
-    got = _BATCHES.get(key)
-    if got is not None:
-        return got
-    arrays = st.arrays
+    # the source's normals repaired as sync repairs each instance's (a copy: the arrays are
+    # the instances')
+    arrays = replace(st.source[1], corner_normals=st.source[1].corner_normals.copy())
+    core_mesh.repair_normals(arrays)
+    tri = arrays.triangles
+    corner_pos = arrays.positions[arrays.corner_verts].astype(np.float32)
+    depth = batch_for_shader(_depth_shader(), "TRIS", {"pos": np.ascontiguousarray(corner_pos)},
+                             indices=np.ascontiguousarray(tri, dtype=np.int32))
+    tri_slot = arrays.corner_materials[tri[:, 0]]
+    out = []
+    for slot in np.unique(tri_slot):
+        corner, index = np.unique(tri[tri_slot == slot], return_inverse=True)
+        n = len(corner)
+        vbo = _vertex_buffer((("nrm", arrays.corner_normals[corner]),
+                              ("uv", np.zeros((n, 2))), ("attr", np.ones((n, 4))),
+                              ("tng", np.zeros((n, 4)))))
+        out.append((int(slot), corner, vbo, _index_buffer(index.reshape(-1, 3))))
+    return depth, out
+
+
+def build_batches(st, arrays):
+    """(depth batch, [(slot, surface batch)]) of ``arrays`` (``st``'s), with ``st``'s
+    per-corner texture data."""
+    from gpu_extras.batch import batch_for_shader
     tri = arrays.triangles
     corner_pos = arrays.positions[arrays.corner_verts].astype(np.float32)
     depth = batch_for_shader(_depth_shader(), "TRIS", {"pos": np.ascontiguousarray(corner_pos)},
@@ -145,10 +221,15 @@ def _object_batches(st):
         surfaces.append((int(slot), _surface_batch(
             corner_pos[corner], arrays.corner_normals[corner], uv, attr, tng,
             index.reshape(-1, 3))))
-    if len(_BATCHES) >= 64:
-        _BATCHES.pop(next(iter(_BATCHES)))
-    got = _BATCHES[key] = (depth, surfaces)
-    return got
+    return depth, surfaces
+
+
+def normal_texels(model) -> np.ndarray:
+    """(3, 4) float32: the rows of ``model``'s normal matrix (core.scene.mesh.normal_matrix),
+    as the PLACED vertex stage reads them (paramTex row 0, texels 21-23)."""
+    out = np.zeros((3, 4), np.float32)
+    out[:, :3] = core_mesh.normal_matrix(model)
+    return out
 
 
 # --------------------------------------------------------------------------- parameters
@@ -263,7 +344,8 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
     plan = shadow_plan(sources)
     distant = [s for s in sources if not s.local]
     local = [s for s in sources if s.local]
-    depth = [_object_batches(st)[0] for st in casters]
+    depth = [(got[0], None if got[2] is _IDENTITY else got[2])        # (batch, model)
+             for got in map(_object_batches, casters)]
     mapped = distant[:plan.distant_shadowed]
     shadow_tex, tiles = shadow_maps.distant_atlas(mapped, casters, depth, plan.distant_tile) \
         if mapped else (drawing.white_texture(), [])
@@ -308,12 +390,16 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
     out = []
     for st in state.objects:
         slots = []
-        for slot, batch in _object_batches(st)[1]:
+        _depth, surfaces, model = _object_batches(st)
+        for slot, batch in surfaces:
             texels = slot_texels(st, slot, eye4)
             source = st.textures.get(slot, (None, None))[0]
+            features = slot_features(texels, source) + per_frame
+            if model is not _IDENTITY:           # row 0, texels 21-23 (lights_vert.glsl)
+                texels[0, 21:24] = normal_texels(model)
+                features += ("PLACED",)
             slots.append((batch, _texture(texels), source, _input_texture(st, slot),
-                          _normal_texture(st, slot),
-                          slot_features(texels, source) + per_frame))
+                          _normal_texture(st, slot), features))
 
         def draw(view_projection, slots=slots):
             for batch, params, source, rough, bump, features in slots:

@@ -109,7 +109,7 @@ SPECS: dict[str, Spec] = {
             ("VEC3", "vPos"), ("VEC3", "vNrm"), ("VEC2", "vUv"), ("VEC4", "vAttr"),
             ("VEC4", "vTng"))),
         # what a draw lacks is left out of its shader, not branched around
-        switches=("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "LOCAL_LAMPS",
+        switches=("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "PLACED", "LOCAL_LAMPS",
                   "AREA_LAMPS", "LIGHT_TILES"),
         values=(("PCF_TAPS", ("12", "4")), ("LOBE_TAPS", ("4", "2")))),
     # a sun-like source's shadow map: depth only
@@ -120,8 +120,11 @@ SPECS: dict[str, Spec] = {
     "shadow_distance": Spec(
         vertex=("passes/shadow_distance_vert.glsl",),
         fragment=("passes/shadow_distance_frag.glsl",),
-        push_constants=_VIEW + (("VEC3", "lamp"),), vertex_inputs=(("VEC3", "pos"),),
-        varyings=(("smooth", "VEC3", "vPos"),)),
+        push_constants=_VIEW + (("VEC3", "lamp"), ("INT", "caster")),
+        samplers=(("FLOAT_2D", "modelTex"),), vertex_inputs=(("VEC3", "pos"),),
+        varyings=(("smooth", "VEC3", "vPos"),),
+        # an instance over its source's shared batch (addon/gpu/lights.py _object_batches)
+        switches=("PLACED",)),
     # glossy lobes too narrow for the cubemap (sharp.py)
     "sharp_lobe": Spec(
         vertex=("passes/sharp_lobe_vert.glsl",),

@@ -62,7 +62,8 @@ def _begin():
 def distant_atlas(sources, casters, depth_batches, size: int):
     """Every distant source's shadow map, a ``size``² tile each, in one depth atlas:
     (texture, per source (matrix, tile (x, y, size), depth range, texel size)).
-    ``depth_batches`` are the casters' depth batches.  Cached per geometry and directions."""
+    ``depth_batches``: the casters' depth batches, each with its model matrix (4x4; None for
+    a batch in world space).  Cached per geometry and directions."""
     import gpu
     import mathutils
     positions = [st.arrays.positions for st in casters]
@@ -96,8 +97,9 @@ def distant_atlas(sources, casters, depth_batches, size: int):
             gpu.state.viewport_set(x, y, size, size)
             M = light_matrix(s.direction, centre, radius)
             sh.bind()
-            sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
-            for batch in depth_batches:
+            for batch, model in depth_batches:
+                placed = M if model is None else M @ model
+                sh.uniform_float("viewProjection", mathutils.Matrix(placed.tolist()))
                 batch.draw(sh)
             tiles.append((M, (x, y, size), 2.0 * radius, 2.0 * radius / size))
     gpu.state.viewport_set(*saved)
@@ -128,7 +130,12 @@ def cube_atlas(sources, faces, casters, depth_batches, size: int):
     depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
     fb = gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=colour)
     saved = gpu.state.viewport_get()
-    sh = shaders.shader("shadow_distance")
+    # the placed casters' world matrices, a row of three texels per caster (PLACED)
+    rows = np.zeros((max(len(depth_batches), 1), 3, 4), np.float32)
+    for i, (_batch, model) in enumerate(depth_batches):
+        if model is not None:
+            rows[i] = np.asarray(model, np.float64)[:3]
+    models = drawing.float_texture(rows)
     out, k = [], 0
     with fb.bind():
         fb.clear(color=(1e30, 1e30, 1e30, 1e30), depth=1.0)
@@ -148,10 +155,14 @@ def cube_atlas(sources, faces, casters, depth_batches, size: int):
                 k += 1
                 origins.append((float(x), float(y)))
                 gpu.state.viewport_set(x, y, size, size)
-                sh.bind()
-                sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
-                sh.uniform_float("lamp", tuple(map(float, s.position)))
-                for batch in depth_batches:
+                for k_caster, (batch, model) in enumerate(depth_batches):
+                    sh = shaders.shader("shadow_distance", () if model is None else ("PLACED",))
+                    sh.bind()
+                    sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
+                    sh.uniform_float("lamp", tuple(map(float, s.position)))
+                    if model is not None:
+                        sh.uniform_int("caster", k_caster)
+                        sh.uniform_sampler("modelTex", models)
                     batch.draw(sh)
             out.append((origins, mats))
     gpu.state.viewport_set(*saved)

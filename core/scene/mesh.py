@@ -219,6 +219,13 @@ def seen_points(mesh: MeshArrays, points: "ShadingPoints", clip: np.ndarray, sid
     return keep
 
 
+def normal_matrix(matrix) -> np.ndarray:
+    """(3, 3) what turns normals when ``matrix`` (4x4 or 3x3) places positions: the inverse
+    transpose of its 3x3 (the 3x3 itself when singular)."""
+    A = np.asarray(matrix, np.float64)[:3, :3]
+    return np.linalg.inv(A).T if abs(np.linalg.det(A)) > 1e-30 else A
+
+
 def bounding_box(positions: np.ndarray) -> np.ndarray:
     """(2, 3) the least and greatest coordinates of the finite ``positions`` ((0, 3) when
     none is finite): a box the precompute gathers per object, whose corners bound the scene."""

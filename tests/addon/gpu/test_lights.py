@@ -293,3 +293,36 @@ def test_every_lamp_is_drawn_with_its_shadow_past_the_old_cap_of_eight(tmp_path,
     named = [m for m in runtime.LAST_MESSAGES if "past the atlas's budget" in m]
     assert len(named) == 1 and "11 local lamps" in named[0] and "'Lamp" in named[0] \
         and "and 5 more" in named[0], runtime.LAST_MESSAGES
+
+
+def test_instances_share_one_batch_per_source_and_draw_as_placed_copies(tmp_path, monkeypatch):
+    """A herd of three collection instances (one turned and scaled unevenly) under a sun
+    lamp and a point lamp: the lights pass keeps one set of their source's batches (the
+    depth batch placed by each instance's world matrix in the shadow maps, the normals
+    turned by its normal matrix), each instance only its positions, and the frame is the
+    frame of per-instance world-space batches."""
+    from prt_relight.addon.blender import surfaces
+    from prt_relight.addon.gpu import lights
+    instancers = scenes.instanced_herd("COLLECTION", count=3, size=(48, 36))
+    instancers[1].scale = (1.3, 0.8, 1.1)
+    sun_lamp(3.0, math.radians(2.0), tilt=0.5)
+    local_lamp("POINT", 300.0, (1.0, -1.0, 2.5), radius=0.05)
+    scene = bpy.context.scene
+    scene.prt.method = "SH"
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+
+    def kinds():
+        keys = list(lights.BATCHES)
+        return (sum(1 for k in keys if k[0] == "source"),
+                sum(1 for k in keys if k[-1] == "placed"), len(keys))
+    lights.BATCHES.clear()
+    shared = scenes.render_exr(tmp_path / "shared.exr")
+    assert kinds() == (1, 3, 5)              # the source's, three instances', the ground's
+
+    monkeypatch.setattr(surfaces.SharedArrays, "source", lambda self, surface, arrays: None)
+    lights.BATCHES.clear()
+    placed = scenes.render_exr(tmp_path / "placed.exr")
+    assert kinds() == (0, 0, 4)              # each instance's own, the ground's
+    assert np.abs(placed[..., :3]).max() > 0.0
+    np.testing.assert_allclose(shared[..., :3], placed[..., :3], rtol=1e-4,
+                               atol=1e-5 * np.abs(placed[..., :3]).max())
