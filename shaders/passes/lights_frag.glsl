@@ -22,7 +22,8 @@
  * lobes, -, -), 11 (roughness nodes n, alpha floor),
  * 12-15 a textured Roughness (texture.glsl's info, mapping rows, mix colour);
  * 16 a normal or bump map (kind 0 none / 1 Normal Map / 2 Bump, strength, distance, -),
- * 17-20 its image (info, mapping rows, mix colour: texture.glsl mapped_normal);
+ * 17-20 its image (info, mapping rows, mix colour: texture.glsl mapped_normal), 21-23 an
+ * instance's normal matrix over its source's shared batch (PLACED: lights_vert.glsl);
  * row 1: the Lambert base's view weight at mu = i / (TABLE_NODES - 1) (Principled layering),
  * rows 2, 3: each lobe's multiscatter factor at mu (core.shading.brdf.multiscatter_factor);
  * with a textured Roughness rows 4k + 4 .. 4k + 7 the same four rows at roughness node
