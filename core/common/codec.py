@@ -111,20 +111,32 @@ class RowWriter:
         self.shape = tuple(int(s) for s in shape)
         self.meta = dict(meta or {})
         self.rows = 0
-        self._z = zlib.compressobj(LEVEL)
+        # the deflate state (about 256 KiB) lives from the first row to the last only: a
+        # precompute opens a writer per object (a thousand instances) and fills them in turn
+        self._z = None
+        self._flushed = False
         self._parts: list = []
 
     def write(self, rows: np.ndarray):
         rows = np.ascontiguousarray(rows, dtype=self.dtype)
         if rows.shape[1:] != self.shape[1:] or self.rows + len(rows) > self.shape[0]:
             raise ValueError(f"rows {rows.shape} do not continue an array of {self.shape}")
+        if self._z is None:
+            self._z = zlib.compressobj(LEVEL)
         self._parts.append(self._z.compress(rows.reshape(-1).view(np.uint8)))
         self.rows += len(rows)
+        if self.rows == self.shape[0]:
+            self._flush()
+
+    def _flush(self):
+        if not self._flushed:
+            self._parts.append((self._z or zlib.compressobj(LEVEL)).flush())
+            self._z, self._flushed = None, True
 
     def finish(self) -> bytes:
         if self.rows != self.shape[0]:
             raise ValueError(f"{self.rows} of {self.shape[0]} rows written")
-        self._parts.append(self._z.flush())
+        self._flush()
         data = b"".join(self._parts)
         self._parts = []
         header = json.dumps({"arrays": [[self.name, _dtype_name(self.dtype), list(self.shape),

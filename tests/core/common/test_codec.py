@@ -143,6 +143,9 @@ def test_row_writer_makes_the_blob_pack_makes():
             w.write(bits[at:at + n])
             at += n
         assert w.finish() == whole
+    empty = np.zeros((0, 96), np.uint8)            # an object without points: no row written
+    assert codec.RowWriter("bits", np.uint8, empty.shape).finish() == \
+        codec.pack({"bits": empty})
     w = codec.RowWriter("bits", np.uint8, bits.shape)
     w.write(bits[:10])
     with pytest.raises(ValueError):
