@@ -168,59 +168,62 @@ def placed(st) -> bool:
     return st.source is not None and not st.textures and not st.normals and not st.inputs[0]
 
 
-def _source_batches(st):
-    """An instance's source's shared batches: (depth batch in object space, per slot (slot,
-    its corners, their vertex buffer of normals and constant texture data, index buffer))."""
+def _corner_layout(arrays):
+    """What both kinds of batches are made of: the face corners' positions (C, 3) float32, the
+    depth batch, and per slot (slot, the face corners of its triangles, each once, and the
+    triangles indexing them)."""
     from gpu_extras.batch import batch_for_shader
-    # the source's normals repaired as sync repairs each instance's (a copy: the arrays are
-    # the instances')
-    arrays = replace(st.source[1], corner_normals=st.source[1].corner_normals.copy())
-    core_mesh.repair_normals(arrays)
     tri = arrays.triangles
     corner_pos = arrays.positions[arrays.corner_verts].astype(np.float32)
     depth = batch_for_shader(_depth_shader(), "TRIS", {"pos": np.ascontiguousarray(corner_pos)},
                              indices=np.ascontiguousarray(tri, dtype=np.int32))
     tri_slot = arrays.corner_materials[tri[:, 0]]
-    out = []
+    slots = []
     for slot in np.unique(tri_slot):
         corner, index = np.unique(tri[tri_slot == slot], return_inverse=True)
+        slots.append((int(slot), corner, index.reshape(-1, 3)))
+    return corner_pos, depth, slots
+
+
+def _source_batches(st):
+    """An instance's source's shared batches: (depth batch in object space, per slot (slot,
+    its corners, their vertex buffer of normals and constant texture data, index buffer))."""
+    # the source's normals repaired as sync repairs each instance's (a copy: the arrays are
+    # the instances')
+    arrays = replace(st.source[1], corner_normals=st.source[1].corner_normals.copy())
+    core_mesh.repair_normals(arrays)
+    _pos, depth, slots = _corner_layout(arrays)
+    out = []
+    for slot, corner, index in slots:
         n = len(corner)
         vbo = _vertex_buffer((("nrm", arrays.corner_normals[corner]),
                               ("uv", np.zeros((n, 2))), ("attr", np.ones((n, 4))),
                               ("tng", np.zeros((n, 4)))))
-        out.append((int(slot), corner, vbo, _index_buffer(index.reshape(-1, 3))))
+        out.append((slot, corner, vbo, _index_buffer(index)))
     return depth, out
 
 
 def build_batches(st, arrays):
     """(depth batch, [(slot, surface batch)]) of ``arrays`` (``st``'s), with ``st``'s
     per-corner texture data."""
-    from gpu_extras.batch import batch_for_shader
-    tri = arrays.triangles
-    corner_pos = arrays.positions[arrays.corner_verts].astype(np.float32)
-    depth = batch_for_shader(_depth_shader(), "TRIS", {"pos": np.ascontiguousarray(corner_pos)},
-                             indices=np.ascontiguousarray(tri, dtype=np.int32))
-    tri_slot = arrays.corner_materials[tri[:, 0]]
+    corner_pos, depth, slots = _corner_layout(arrays)
     surfaces = []
-    for slot in np.unique(tri_slot):
-        # the face corners of the slot's triangles, each once (the triangles index them)
-        corner, index = np.unique(tri[tri_slot == slot], return_inverse=True)
+    for slot, corner, index in slots:
         n = len(corner)
         uv = np.zeros((n, 2), np.float32)
         attr = np.ones((n, 4), np.float32)
-        source, values = st.textures.get(int(slot), (None, None))
-        uvs = texture_export.slot_uvs(st, int(slot))
+        source, values = st.textures.get(slot, (None, None))
+        uvs = texture_export.slot_uvs(st, slot)
         if uvs is not None:
             uv[:] = uvs[1][corner]
         if source is not None and source.texture is None:
             attr[:] = values[corner]
         tng = np.zeros((n, 4), np.float32)
-        mapped = texture_export.shader_normal(st, int(slot))
+        mapped = texture_export.shader_normal(st, slot)
         if mapped is not None:
             tng[:] = mapped[1][corner]
-        surfaces.append((int(slot), _surface_batch(
-            corner_pos[corner], arrays.corner_normals[corner], uv, attr, tng,
-            index.reshape(-1, 3))))
+        surfaces.append((slot, _surface_batch(corner_pos[corner], arrays.corner_normals[corner],
+                                              uv, attr, tng, index)))
     return depth, surfaces
 
 
