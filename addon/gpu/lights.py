@@ -164,8 +164,13 @@ _IDENTITY = np.eye(4)
 
 def placed(st) -> bool:
     """Whether ``st`` draws its source's shared batches: an instance placed from its
-    source's arrays as they are, with no per-corner texture data (UVs, colours, tangents)."""
-    return st.source is not None and not st.textures and not st.normals and not st.inputs[0]
+    source's arrays as they are, with no per-corner texture data (UVs, colours, tangents),
+    by a matrix that keeps its volume (a flattened one's normals are repaired per instance,
+    as sync repairs them: its own batches carry them)."""
+    if st.source is None or st.textures or st.normals or st.inputs[0]:
+        return False
+    A = np.asarray(st.matrix, np.float64)[:3, :3]
+    return abs(np.linalg.det(A)) > 1e-6 * max(float(np.abs(A).max()), 1e-30) ** 3
 
 
 def _corner_layout(arrays):

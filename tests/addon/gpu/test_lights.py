@@ -326,3 +326,11 @@ def test_instances_share_one_batch_per_source_and_draw_as_placed_copies(tmp_path
     assert np.abs(placed[..., :3]).max() > 0.0
     np.testing.assert_allclose(shared[..., :3], placed[..., :3], rtol=1e-4,
                                atol=1e-5 * np.abs(placed[..., :3]).max())
+
+    # a flattened instance (its normals repaired per instance) keeps batches of its own
+    monkeypatch.undo()
+    instancers[2].scale = (1.0, 1.0, 0.0)
+    lights.BATCHES.clear()
+    flat = scenes.render_exr(tmp_path / "flat.exr")
+    assert kinds() == (1, 2, 5)
+    assert np.isfinite(flat).all() and flat[..., :3].min() >= 0.0
