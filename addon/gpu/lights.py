@@ -129,12 +129,12 @@ def _depth_shader():
 def _object_batches(st):
     """(depth batch, [(slot, surface batch)], model matrix) of one object, cached per
     geometry.  An instance placed from its source's arrays as they are, with no per-corner
-    texture data (:func:`placed`), draws its source's shared batches: the depth batch in
+    texture data (:func:`draws_shared`), draws its source's shared batches: the depth batch in
     object space with its world matrix as the model matrix, the surface batches with only
     their positions its own (its world positions, as every other pass draws them, so the
     pass's depth test EQUAL holds) and its source's normals turned by its normal matrix.
     The others' batches are in world space (model: the identity)."""
-    if not placed(st):
+    if not draws_shared(st):
         key = (st.name, st.fingerprint, tuple(sorted((slot, id(values)) for slot, (_, values)
                                                      in st.textures.items())),
                tuple(sorted((slot, id(got[2])) for slot, got in st.normals.items())),
@@ -162,7 +162,7 @@ def _object_batches(st):
 _IDENTITY = np.eye(4)
 
 
-def placed(st) -> bool:
+def draws_shared(st) -> bool:
     """Whether ``st`` draws its source's shared batches: an instance placed from its
     source's arrays as they are, with no per-corner texture data (UVs, colours, tangents),
     by a matrix that keeps its volume (a flattened one's normals are repaired per instance,

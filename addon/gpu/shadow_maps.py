@@ -97,9 +97,10 @@ def distant_atlas(sources, casters, depth_batches, size: int):
             gpu.state.viewport_set(x, y, size, size)
             M = light_matrix(s.direction, centre, radius)
             sh.bind()
-            for batch, model in depth_batches:
-                placed = M if model is None else M @ model
-                sh.uniform_float("viewProjection", mathutils.Matrix(placed.tolist()))
+            light = mathutils.Matrix(M.tolist())
+            for batch, model in depth_batches:      # a placed caster's: light @ its matrix
+                sh.uniform_float("viewProjection", light if model is None
+                                 else mathutils.Matrix((M @ model).tolist()))
                 batch.draw(sh)
             tiles.append((M, (x, y, size), 2.0 * radius, 2.0 * radius / size))
     gpu.state.viewport_set(*saved)
@@ -131,11 +132,15 @@ def cube_atlas(sources, faces, casters, depth_batches, size: int):
     fb = gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=colour)
     saved = gpu.state.viewport_get()
     # the placed casters' world matrices, a row of three texels per caster (PLACED)
-    rows = np.zeros((max(len(depth_batches), 1), 3, 4), np.float32)
-    for i, (_batch, model) in enumerate(depth_batches):
-        if model is not None:
-            rows[i] = np.asarray(model, np.float64)[:3]
-    models = drawing.float_texture(rows)
+    models = None
+    if any(model is not None for _batch, model in depth_batches):
+        rows = np.zeros((len(depth_batches), 3, 4), np.float32)
+        for i, (_batch, model) in enumerate(depth_batches):
+            if model is not None:
+                rows[i] = np.asarray(model, np.float64)[:3]
+        models = drawing.float_texture(rows)
+    variants = {False: shaders.shader("shadow_distance"),
+                True: shaders.shader("shadow_distance", ("PLACED",))}
     out, k = [], 0
     with fb.bind():
         fb.clear(color=(1e30, 1e30, 1e30, 1e30), depth=1.0)
@@ -155,14 +160,18 @@ def cube_atlas(sources, faces, casters, depth_batches, size: int):
                 k += 1
                 origins.append((float(x), float(y)))
                 gpu.state.viewport_set(x, y, size, size)
+                bound = None
                 for k_caster, (batch, model) in enumerate(depth_batches):
-                    sh = shaders.shader("shadow_distance", () if model is None else ("PLACED",))
-                    sh.bind()
-                    sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
-                    sh.uniform_float("lamp", tuple(map(float, s.position)))
+                    sh = variants[model is not None]
+                    if sh is not bound:                  # bound again only when it changes
+                        bound = sh
+                        sh.bind()
+                        sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
+                        sh.uniform_float("lamp", tuple(map(float, s.position)))
+                        if model is not None:
+                            sh.uniform_sampler("modelTex", models)
                     if model is not None:
                         sh.uniform_int("caster", k_caster)
-                        sh.uniform_sampler("modelTex", models)
                     batch.draw(sh)
             out.append((origins, mats))
     gpu.state.viewport_set(*saved)

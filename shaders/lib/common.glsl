@@ -49,22 +49,23 @@ vec2 pixel_shift()
   return fract(vec2(0.7548776662, 0.5698402910) * dot(floor(gl_FragCoord.xy), vec2(1.0, 61.0)));
 }
 
-/* item i's texel in rows of `width` texels (i mod width, i / width), 0 <= i < 2^24: a float
- * division and one exact correction, where an integer division by a value the compiler does
- * not know is a scalar division per lane on a software rasterizer */
-ivec2 texel_in_rows(int i, int width)
+/* (floor(i / n), i - n floor(i / n)) for n > 0 and |i| below 2^24: a float division and one
+ * exact correction (the quotient lies at least 0.5 / n inside its step), where an integer
+ * division by a value the compiler does not know is a scalar division per lane on a
+ * software rasterizer */
+ivec2 floor_div(int i, int n)
 {
-  int y = int(floor((float(i) + 0.5) / float(width)));
-  int x = i - y * width;
-  if (x < 0) {
-    y -= 1;
-    x += width;
+  int q = int(floor((float(i) + 0.5) / float(n)));
+  int r = i - q * n;
+  if (r < 0) {
+    q -= 1;
+    r += n;
   }
-  else if (x >= width) {
-    y += 1;
-    x -= width;
+  else if (r >= n) {
+    q += 1;
+    r -= n;
   }
-  return ivec2(x, y);
+  return ivec2(q, r);
 }
 
 /* texel i of a data texture whose texels run on across rows of ROW_TEXELS */

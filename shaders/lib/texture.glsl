@@ -4,23 +4,13 @@
  * texInfo = (interpolation, extension, source: -1 none / 0 image / 1 attribute, mix mode);
  * texMap0/1 = the Mapping node's 2D rows; mixColor = (constant colour, factor). */
 
-/* i modulo n in [0, n) by a float floor (an integer remainder is a scalar division per lane
- * on a software rasterizer); the quotient of integers below 2^24 rounds to within one of
- * its floor, which the two corrections take back, so the result is exact */
-int tex_mod(int i, int n)
-{
-  int m = i - n * int(floor(float(i) / float(n)));
-  m = m < 0 ? m + n : m;
-  return m >= n ? m - n : m;
-}
-
 int tex_wrap(int i, int n, int ext)
 {
   if (ext == 0) {
-    return tex_mod(i, n);
+    return floor_div(i, n).y;          /* common.glsl: no integer remainder */
   }
   if (ext == 3) {
-    int m = tex_mod(i, 2 * n);
+    int m = floor_div(i, 2 * n).y;
     return m < n ? m : 2 * n - 1 - m;
   }
   return clamp(i, 0, n - 1);

@@ -26,7 +26,7 @@ float table_texel(bool vis, ivec2 origin, int x, int y)
   /* brdfTables: a block at `origin`; visTable: the point's table from texel origin.x */
   if (vis) {
     int w = textureSize(visTable, 0).x;
-    return texelFetch(visTable, texel_in_rows(origin.x + y * visTile + x, w), 0).r;
+    return texelFetch(visTable, floor_div(origin.x + y * visTile + x, w).yx, 0).r;
   }
   return texelFetch(brdfTables, origin + ivec2(x, y), 0).r;
 }
@@ -70,7 +70,7 @@ float clipped_area(vec2 p, float h)
 float table_box(int block, vec2 p, float h)
 {
   /* average of block's function over the square, offset added back */
-  ivec2 origin = texel_in_rows(block, blockCols) * ivec2(brdfRes + 2, brdfRes + 1);
+  ivec2 origin = floor_div(block, blockCols).yx * ivec2(brdfRes + 2, brdfRes + 1);
   float off = texelFetch(brdfTables, origin + ivec2(brdfRes + 1, 0), 0).r;
   return (box(false, origin, brdfRes, p, h) + off * clipped_area(p, h)) / (4.0 * h * h);
 }

@@ -98,8 +98,7 @@ def tiled_pixels(count: int, width: int) -> tuple[np.ndarray, int]:
     pixels (rows of ``width``), and its rows (a multiple of TILE).  Points ``16 b .. 16 b + 15``
     fill the b-th TILE x TILE block, row by row (reference_sums_frag.glsl's point_of): a GPU
     shades a block's pixels together (a warp; llvmpipe a 4x4 block of SIMD lanes), so
-    neighbouring points, which see much the same texels, run the loop over them in step
-    (llvmpipe: the glossy pass 12 % faster than points laid along rows)."""
+    neighbouring points, which see much the same texels, run the loop over them in step."""
     rows = -(-max(count, 1) // width)
     rows = -(-rows // TILE) * TILE
     k = np.arange(count)
