@@ -412,31 +412,68 @@ vec2 shape_point(vec2 u, bool ellipse)
 
 #define POLY 16
 
-/* integral of max(0, n.i) over the solid angle of a planar polygon (convex, vertices in
- * order) seen from p: the polygon clipped to p's horizon (Sutherland-Hodgman), then
- * Lambert's edge formula (1/2) sum acos(a.b) n.(a x b)/|a x b| -- exact */
-float polygon_cosine(vec3 p, vec3 n, vec3 verts[POLY], int count)
+/* vertex k of an area lamp's polygon: the rectangle's corners, or the regular 16-gon of the
+ * ellipse's area (radius scale sqrt(pi / (8 sin(pi / 8)))) */
+vec3 lamp_vertex(vec3 centre, vec3 hx, vec3 hy, bool ellipse, int k)
 {
-  vec3 clipped[POLY + 1];
-  int m = 0;
-  for (int k = 0; k < count; k++) {
-    vec3 a = verts[k] - p, b = verts[k + 1 == count ? 0 : k + 1] - p;
-    float da = dot(a, n), db = dot(b, n);
-    if (da > 0.0) {
-      clipped[m++] = a;
-    }
-    if ((da > 0.0) != (db > 0.0) && m <= POLY) {
-      clipped[m++] = a + (b - a) * (da / (da - db));
-    }
+  float grow = 1.0129870;
+  vec2 c = ellipse ? grow * vec2(cos(2.0 * PI * float(k) / float(POLY)),
+                                 sin(2.0 * PI * float(k) / float(POLY)))
+                   : vec2(k == 1 || k == 2 ? 1.0 : -1.0, k >= 2 ? 1.0 : -1.0);
+  return centre + c.x * hx + c.y * hy;
+}
+
+/* one edge's term of Lambert's formula, unit vectors a to b about n */
+float edge_term(vec3 n, vec3 a, vec3 b)
+{
+  vec3 c = cross(a, b);
+  float l = length(c);
+  return l > 1e-9 ? acos(clamp(dot(a, b), -1.0, 1.0)) * dot(n, c) / l : 0.0;
+}
+
+/* the next vertex v of a clipped polygon: its edge from the one before summed */
+void clipped_vertex(vec3 n, vec3 v, inout bool started, inout vec3 first, inout vec3 prev,
+                    inout float sum)
+{
+  if (started) {
+    sum += edge_term(n, prev, v);
   }
+  else {
+    first = v;
+    started = true;
+  }
+  prev = v;
+}
+
+/* integral of max(0, n.i) over the solid angle of an area lamp's polygon (convex, its
+ * vertices in order) seen from p: the polygon clipped to p's horizon (Sutherland-Hodgman),
+ * then Lambert's edge formula (1/2) sum acos(a.b) n.(a x b)/|a x b| -- exact.  The clipped
+ * vertices are met in order as the edges are walked and each edge's term summed at once:
+ * no array (a GPU keeps a dynamically indexed local array in memory, llvmpipe per lane) */
+float polygon_cosine(vec3 p, vec3 n, vec3 centre, vec3 hx, vec3 hy, bool ellipse)
+{
+  int count = ellipse ? POLY : 4;
+  vec3 a = lamp_vertex(centre, hx, hy, ellipse, 0) - p;
+  float da = dot(a, n);
+  vec3 first = vec3(0.0), prev = vec3(0.0);
+  bool started = false;
   float sum = 0.0;
-  for (int k = 0; k < m; k++) {
-    vec3 a = normalize(clipped[k]), b = normalize(clipped[k + 1 == m ? 0 : k + 1]);
-    vec3 c = cross(a, b);
-    float l = length(c);
-    if (l > 1e-9) {
-      sum += acos(clamp(dot(a, b), -1.0, 1.0)) * dot(n, c) / l;
+  for (int k = 0; k < count; k++) {
+    vec3 b = lamp_vertex(centre, hx, hy, ellipse, k + 1 == count ? 0 : k + 1) - p;
+    float db = dot(b, n);
+    /* the clipped polygon's next vertices: a above the horizon, then where the edge
+     * crosses it */
+    if (da > 0.0) {
+      clipped_vertex(n, normalize(a), started, first, prev, sum);
     }
+    if ((da > 0.0) != (db > 0.0)) {
+      clipped_vertex(n, normalize(a + (b - a) * (da / (da - db))), started, first, prev, sum);
+    }
+    a = b;
+    da = db;
+  }
+  if (started) {
+    sum += edge_term(n, prev, first);
   }
   return 0.5 * abs(sum);
 }
@@ -458,18 +495,8 @@ vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_
   vec2 jitter = fract(shift + vec2(0.5));
   vec3 sum = vec3(0.0);
   if (kd.w > 0.5) {
-    vec3 verts[POLY];
-    int count = ellipse ? POLY : 4;
-    /* the regular 16-gon of the ellipse's area: radius scale sqrt(pi / (8 sin(pi / 8))) */
-    float grow = 1.0129870;
-    for (int k = 0; k < count; k++) {
-      vec2 c = ellipse ? grow * vec2(cos(2.0 * PI * float(k) / float(POLY)),
-                                     sin(2.0 * PI * float(k) / float(POLY)))
-                       : vec2(k == 1 || k == 2 ? 1.0 : -1.0, k >= 2 ? 1.0 : -1.0);
-      verts[k] = centre + c.x * hx + c.y * hy;
-    }
     /* a mapped normal's terminator factor at the lamp's centre */
-    sum += kd.rgb * wd * polygon_cosine(vPos, nd, verts, count) * L *
+    sum += kd.rgb * wd * polygon_cosine(vPos, nd, centre, hx, hy, ellipse) * L *
            (mappedN ? bump_shadowing(smoothN, nd, normalize(centre - vPos)) : 1.0);
   }
   if (!glossy) {
