@@ -128,6 +128,25 @@ vec3 table(int row, float mu)
 bool mappedN = false;
 vec3 smoothN = vec3(0.0, 0.0, 1.0);
 
+/* the slot's glossy lobes (paramTex rows 2 + 3 j .. 4 + 3 j: kind, weight, eta; f0; B), read
+ * once per fragment (read_lobes), not per sample of every light */
+vec4 lobeKind0 = vec4(0.0), lobeKind1 = vec4(0.0);
+vec3 lobeF00 = vec3(0.0), lobeF01 = vec3(0.0), lobeB0 = vec3(0.0), lobeB1 = vec3(0.0);
+
+void read_lobes(int lobes)
+{
+  if (lobes > 0) {
+    lobeKind0 = param(2, 0);
+    lobeF00 = param(3, 0).rgb;
+    lobeB0 = param(4, 0).rgb;
+  }
+  if (lobes > 1) {
+    lobeKind1 = param(5, 0);
+    lobeF01 = param(6, 0).rgb;
+    lobeB1 = param(7, 0).rgb;
+  }
+}
+
 /* glossy lobes' f * cos (Fresnel, NDF, masking, multiscatter), at unit i */
 vec3 glossy_f_cos(vec3 n, vec3 o, vec3 i, float cos_o, float a, int dist, int lobes,
                   float lam_o, vec3 ms0, vec3 ms1)
@@ -143,10 +162,11 @@ vec3 glossy_f_cos(vec3 n, vec3 o, vec3 i, float cos_o, float a, int dist, int lo
                       (4.0 * cos_o * (1.0 + smith_lambda(dist, a, cos_i) + lam_o));
   float oh = clamp(dot(o, h), 0.0, 1.0);
   vec3 f = vec3(0.0);
-  for (int j = 0; j < lobes; j++) {
-    vec4 k0 = param(2 + 3 * j, 0);
-    f += k0.y * (j == 0 ? ms0 : ms1) *
-         lobe_fresnel(int(k0.x), param(3 + 3 * j, 0).rgb, param(4 + 3 * j, 0).rgb, k0.z, oh);
+  if (lobes > 0) {
+    f += lobeKind0.y * ms0 * lobe_fresnel(int(lobeKind0.x), lobeF00, lobeB0, lobeKind0.z, oh);
+  }
+  if (lobes > 1) {
+    f += lobeKind1.y * ms1 * lobe_fresnel(int(lobeKind1.x), lobeF01, lobeB1, lobeKind1.z, oh);
   }
   return f * common_term;
 }
@@ -614,6 +634,7 @@ void main()
   float a0 = a;
   a = max(a, sqrt(length(cross(mdx, mdy)) / 24.0));
   int lobes = int(lobe.z);
+  read_lobes(lobes);
 #ifdef GLOSSY
   bool glossy = lobe.w > 0.5 && lobes > 0;
   bool sharpSlot = param(9, 0).y > 0.5;
