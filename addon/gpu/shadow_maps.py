@@ -160,13 +160,14 @@ def cube_atlas(sources, faces, casters, depth_batches, size: int):
                 k += 1
                 origins.append((float(x), float(y)))
                 gpu.state.viewport_set(x, y, size, size)
+                view = mathutils.Matrix(M.tolist())
                 bound = None
                 for k_caster, (batch, model) in enumerate(depth_batches):
                     sh = variants[model is not None]
                     if sh is not bound:                  # bound again only when it changes
                         bound = sh
                         sh.bind()
-                        sh.uniform_float("viewProjection", mathutils.Matrix(M.tolist()))
+                        sh.uniform_float("viewProjection", view)
                         sh.uniform_float("lamp", tuple(map(float, s.position)))
                         if model is not None:
                             sh.uniform_sampler("modelTex", models)
