@@ -66,7 +66,7 @@ def test_the_seen_points_are_found_once_per_object_and_camera(registered_addon, 
     calls = []
     real = frame_state.core_mesh.seen_points
     monkeypatch.setattr(frame_state.core_mesh, "seen_points",
-                        lambda *a, **k: calls.append(1) or real(*a, **k))
+                        lambda *a, **k: calls.append(real(*a, **k)) or calls[-1])
     state.visible_only = True
     st = state.objects[0]
     for _camera in range(2):
@@ -75,6 +75,4 @@ def test_the_seen_points_are_found_once_per_object_and_camera(registered_addon, 
         twin = frame_state.copy.copy(st)               # a base-colour twin shares its points
         assert state._part([0]).seen_points(twin) is first
         assert not first.flags.writeable
-    assert len(calls) == 2
-    np.testing.assert_array_equal(first, real(st.arrays, st.points, state.camera["clip"],
-                                              st.closed_side, eye, None))
+    assert len(calls) == 2 and first is calls[-1]     # the one set found for this camera

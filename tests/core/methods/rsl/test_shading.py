@@ -155,8 +155,8 @@ def test_glossy_tables_ignore_a_base_colour_that_reaches_no_lobe(mat):
     black = replace(mat, diffuse_albedo=(0.0, 0.0, 0.0))
     a, b = rsl.brdf_tables(mat, 8, 4, 2), rsl.brdf_tables(black, 8, 4, 2)
     assert len(a.glossy) == len(b.glossy) > 0
-    for x, y in zip(a.glossy, b.glossy):
-        np.testing.assert_array_equal(x, y)
+    for x, y in zip(a.glossy, b.glossy):               # two fits: within their rounding
+        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-7 * np.abs(x).max())
     assert rsl.table_material(mat) == rsl.table_material(black)
     metal = materials.principled_material(base_color=(0.9, 0.2, 0.1), metallic=0.5)
     assert rsl.table_material(metal) == metal

@@ -189,9 +189,11 @@ def test_fit_environment_is_in_texture_space():
     a = scene.fit_environment(envmap.WorldLighting(image=img), 8, 2, fit_resolution=16)
     b = scene.fit_environment(envmap.WorldLighting(image=img, strength=3.0, rotation=ROTATION),
                               8, 2, fit_resolution=16)
+    # two runs of the fit: equal within what another BLAS's order of sums could move
     for x, y in zip(a[0][:3], b[0][:3]):
-        np.testing.assert_array_equal(x, y)
-    np.testing.assert_array_equal(a[1].atlas(), b[1].atlas())
+        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-7 * np.abs(x).max())
+    np.testing.assert_allclose(a[1].atlas(), b[1].atlas(), rtol=1e-5,
+                               atol=1e-7 * np.abs(a[1].atlas()).max())
     # an SG environment is fitted closely: the lobe comes back near its axis
     assert float(np.max(a[0][0] @ axes[0])) > 0.99
 
