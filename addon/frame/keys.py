@@ -22,10 +22,12 @@ __all__ = ["CACHES", "Cache", "cache", "held", "per_visibility", "image_key", "e
            "environment_cubemap", "free"]
 
 
-def cache(limit: int, name: str = "") -> Cache:
-    """A new cache of at most ``limit`` entries, listed for :func:`free` (named after the
-    calling module's variable unless ``name`` is given)."""
-    return Cache(limit, name, module=sys._getframe(1).f_globals.get("__name__", ""))
+def cache(limit: int, name: str = "", max_bytes: int | None = None) -> Cache:
+    """A new cache of at most ``limit`` entries (and ``max_bytes`` of arrays when given),
+    listed for :func:`free` (named after the calling module's variable unless ``name`` is
+    given)."""
+    return Cache(limit, name, module=sys._getframe(1).f_globals.get("__name__", ""),
+                 max_bytes=max_bytes)
 
 
 def per_visibility(cache: Cache, key, bits, compute, limit: int | None = None):

@@ -34,12 +34,17 @@ class Cache(MutableMapping):
 
     ``name``: how docs and tests call it (``module.VARIABLE`` by default, found on first
     use of :attr:`name`); ``limit``: the most entries kept; ``gpu``: its values hold GPU
-    objects (freed by ``addon.gpu.drawing.free_gpu_resources`` while a GPU context exists)."""
+    objects (freed by ``addon.gpu.drawing.free_gpu_resources`` while a GPU context exists);
+    ``max_bytes``: the most bytes of arrays its entries may hold together (:func:`nbytes`),
+    the newest entry kept whatever its size."""
 
-    def __init__(self, limit: int, name: str = "", gpu: bool = False, module: str = ""):
+    def __init__(self, limit: int, name: str = "", gpu: bool = False, module: str = "",
+                 max_bytes: int | None = None):
         if int(limit) < 1:
             raise ValueError("a cache keeps at least one entry")
         self.limit = int(limit)
+        self.max_bytes = None if max_bytes is None else int(max_bytes)
+        self._bytes: dict = {}
         self.gpu = bool(gpu)
         self._name = name
         self._module = module or sys._getframe(1).f_globals.get("__name__", "")
@@ -70,12 +75,28 @@ class Cache(MutableMapping):
         with self.lock:
             self._data[key] = value
             self._data.move_to_end(key)
+            if self.max_bytes is not None:
+                self._bytes[key] = nbytes(value)
             while len(self._data) > self.limit:
-                self._data.popitem(last=False)
+                self._drop_oldest()
+            while (self.max_bytes is not None and len(self._data) > 1
+                   and sum(self._bytes.values()) > self.max_bytes):
+                self._drop_oldest()
+
+    def _drop_oldest(self):
+        key, _ = self._data.popitem(last=False)
+        self._bytes.pop(key, None)
+
+    @property
+    def held_bytes(self) -> int:
+        """Bytes of arrays its entries hold (counted only where ``max_bytes`` bounds them)."""
+        with self.lock:
+            return sum(self._bytes.values())
 
     def __delitem__(self, key):
         with self.lock:
             del self._data[key]
+            self._bytes.pop(key, None)
 
     def __contains__(self, key):
         with self.lock:
@@ -98,12 +119,25 @@ class Cache(MutableMapping):
     def clear(self):
         with self.lock:
             self._data.clear()
+            self._bytes.clear()
 
     def trim(self, limit: int):
         """Drop the least recent entries until at most ``limit`` are left."""
         with self.lock:
             while len(self._data) > max(int(limit), 0):
-                self._data.popitem(last=False)
+                self._drop_oldest()
+
+
+def nbytes(value) -> int:
+    """Bytes of the numpy arrays in ``value`` and in the tuples, lists and dicts it holds
+    (what a cache's ``max_bytes`` counts; other objects count nothing)."""
+    if hasattr(value, "nbytes") and hasattr(value, "dtype"):
+        return int(value.nbytes)
+    if isinstance(value, (tuple, list)):
+        return sum(nbytes(v) for v in value)
+    if isinstance(value, dict):
+        return sum(nbytes(v) for v in value.values())
+    return 0
 
 
 def held(cache: Cache, key, refs, compute, limit: int | None = None):

@@ -73,3 +73,19 @@ def test_threads_never_see_a_broken_cache():
     for t in threads:
         t.join()
     assert not errors and len(c) <= 16
+
+
+def test_a_bound_in_bytes_drops_the_least_recent_arrays_and_keeps_the_newest():
+    c = Cache(100, name="test.bytes", max_bytes=3000)
+    kb = lambda: (np.zeros(125), {"meta": 1})              # noqa: E731  1000 bytes an entry
+    for k in "abc":
+        c[k] = kb()
+    assert c.held_bytes == 3000 and len(c) == 3
+    c.get("a")
+    c["d"] = kb()                          # past 3000 bytes: "b", the least recent, goes
+    assert list(c) == ["c", "a", "d"] and c.held_bytes == 3000
+    c["big"] = {"bits": np.zeros(1000)}    # bigger than the bound alone: kept, alone
+    assert list(c) == ["big"] and c.held_bytes == 8000
+    del c["big"]
+    assert c.held_bytes == 0
+    assert core_cache.nbytes(((np.zeros(2), [np.zeros(3, np.float32)]), "x")) == 28
