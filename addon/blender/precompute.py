@@ -29,8 +29,8 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     warnings = []
     scene_export.export_world(scene, warnings)       # validate lighting early
     objects = []
-    # the static occluders in float32 (what Embree holds: the precompute's largest arrays at
-    # scale), and each object's box for the scene's size
+    # the static occluders, indexed in float32 (what Embree holds: the precompute's largest
+    # arrays at scale), and each object's box for the scene's size
     tri_blocks, extents = [], []
     empty = []
     hidden = scene_export.hidden_in_viewport(depsgraph.view_layer, depsgraph)
@@ -50,7 +50,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
                 empty.append(s.name)
             continue
         fixed = core_mesh.repair_normals(arrays)
-        occluders, degenerate = core_mesh.occluder_triangles(arrays)
+        occluders, degenerate = core_mesh.occluder_mesh(arrays)
         if degenerate:
             warnings.append(f"'{s.name}': {degenerate} zero-area face(s) ignored as "
                             "occluders")
@@ -65,24 +65,24 @@ def gather(depsgraph, settings) -> PrecomputeJob:
                     f"Object '{s.name}' is marked Dynamic but scaled to 0 along an axis: its "
                     "shadow field needs a transform that can be inverted (give it a non-zero "
                     "scale, or unmark Dynamic in Object Properties)")
-            job.dynamic, job.own = True, occluders
+            job.dynamic, job.own = True, core_mesh.occluder_triangles(arrays)[0]
         else:
-            tri_blocks.append(occluders.astype(np.float32))
-        extents.append(core_mesh.bounding_box(occluders))
+            tri_blocks.append(occluders)
+        extents.append(core_mesh.bounding_box(occluders.vertices))
         objects.append(job)
     if empty:
         warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
     job_bytes = shared.nbytes()
     if not objects:
         raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")
-    occluders = np.concatenate(tri_blocks) if tri_blocks else np.zeros((0, 3, 3), np.float32)
+    occluders = core_mesh.Occluders.join(tri_blocks)
     del tri_blocks
     diag = core_mesh.bounding_diagonal(np.concatenate(extents))
     offset = float(settings.ray_offset) * max(diag, 1e-6)
     two_sided(objects, occluders, offset, scene.camera)
     # static objects first: each trace group is one run of rows
     objects.sort(key=lambda o: o.dynamic)
-    dynamic.set_reach(scene, [o for o in objects if o.dynamic], occluders)
+    dynamic.set_reach(scene, [o for o in objects if o.dynamic], occluders.vertices)
     method = methods.get(settings.method)
     return PrecomputeJob(int(settings.resolution), offset, objects, occluders, warnings,
                          bounces=scene_export.light_bounces(scene),

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from ..transport import clusters, transfer
 @dataclass
 class ObjectJob:
     name: str
+    #: its world-space arrays (an instance's: core.scene.mesh.PlacedArrays)
     arrays: core_mesh.MeshArrays
     points: core_mesh.ShadingPoints
     fingerprint: str
@@ -59,7 +60,8 @@ class PrecomputeJob:
     resolution: int
     offset: float
     objects: list
-    occluders: np.ndarray
+    #: the static occluders (core.scene.mesh.Occluders, or (T, 3, 3) corners)
+    occluders: object
     warnings: list = field(default_factory=list)
     method: str = "REFERENCE"
     #: scene.prt values of every method's settings at gather time
@@ -98,6 +100,9 @@ class PrecomputeJob:
         nrm = np.concatenate([o.points.normals for o in self.objects])
         total = len(pts)
         starts = np.cumsum([0] + [o.points.count for o in self.objects])
+        # each object's points become views of the rows traced (one copy held, not two)
+        for o, a, b in zip(self.objects, starts[:-1], starts[1:]):
+            o.points = replace(o.points, positions=pts[a:b], normals=nrm[a:b])
         self.progress_done, self.progress_total = 0, total
         self.stage = "tracing"
 
@@ -258,8 +263,9 @@ class PrecomputeJob:
             static = None
             if len(self.occluders):
                 lo, hi = o.reach
-                static = shadow_fields.build_static_field(self.occluders, lo, hi, cube, samples,
-                                                          threads, cancel)
+                static = shadow_fields.build_static_field(
+                    core_mesh.triangle_soup(self.occluders), lo, hi, cube, samples, threads,
+                    cancel)
             data = shadow_fields.DynamicData(
                 field=field, static=static, matrix=o.matrix,
                 rotation=rigid.rotation_part(o.matrix),
@@ -274,14 +280,15 @@ class PrecomputeJob:
 def trace_origins(objects, scene, offset):
     """``(origins, moved)`` of the shading points of ``objects`` (one trace group, in row
     order) against ``scene``: stepped off along the normal, or out of a surface they touch
-    (core.scene.visibility.contact_origins)."""
-    starts = np.cumsum([0] + [o.points.count for o in objects])
-    return visibility.contact_origins(
-        scene, np.concatenate([o.points.positions for o in objects]),
-        np.concatenate([o.points.normals for o in objects]),
-        np.concatenate([o.arrays.triangle_positions for o in objects]),
-        np.concatenate([o.points.point_of_corner[o.arrays.triangles] + s
-                        for o, s in zip(objects, starts[:-1])]), offset)
+    (core.scene.visibility.contact_origins).  One object at a time: a point's origin
+    depends on its own faces only, and the faces' temporaries of a thousand instances at
+    once were the precompute's peak."""
+    got = [visibility.contact_origins(
+        scene, o.points.positions, o.points.normals, o.arrays.triangle_positions,
+        o.points.point_of_corner[o.arrays.triangles], offset) for o in objects]
+    if not got:
+        return np.zeros((0, 3), np.float32), np.zeros(0, bool)
+    return (np.concatenate([g[0] for g in got]), np.concatenate([g[1] for g in got]))
 
 
 class InOrder:

@@ -31,7 +31,7 @@ import numpy as np
 from ..common.cache import Cache
 from ..sphere.directions import Cubemap
 from ..common.parallel import Cancelled, default_threads
-from .mesh import face_interiors
+from .mesh import Occluders, face_interiors
 
 try:
     from embreex import rtcore_scene as _rtcs
@@ -45,16 +45,25 @@ def have_embree() -> bool:
     return _rtcs is not None
 
 
-def build_occluder_scene(triangle_positions: np.ndarray):
-    """An Embree scene of (T, 3, 3) world triangles: every one given, but those with a
-    non-finite corner (Embree cannot hold them).  Which faces cast shadows is the
-    caller's choice -- the precompute leaves out the zero-area faces it warns about
-    (:func:`.mesh.occluder_triangles`); a face of zero area in float32 is never hit."""
+def build_occluder_scene(triangle_positions):
+    """An Embree scene of (T, 3, 3) world triangles, or of core.scene.mesh.Occluders (held
+    indexed): every one given, but those with a non-finite corner (Embree cannot hold
+    them).  Which faces cast shadows is the caller's choice -- the precompute leaves out
+    the zero-area faces it warns about (:func:`.mesh.occluder_triangles`); a face of zero
+    area in float32 is never hit."""
     if _rtcs is None:
         raise RuntimeError("embreex is not installed; it ships as a wheel with the extension")
+    scene = _rtcs.EmbreeScene()
+    if isinstance(triangle_positions, Occluders):
+        vertices = np.ascontiguousarray(triangle_positions.vertices, dtype=np.float32)
+        tri = triangle_positions.triangles
+        tri = np.ascontiguousarray(tri[np.isfinite(vertices).all(axis=1)[tri].all(axis=1)],
+                                   dtype=np.int32)
+        if len(tri):
+            _TriangleMesh(scene, vertices, tri)
+        return scene
     tri = np.ascontiguousarray(triangle_positions, dtype=np.float32).reshape(-1, 3, 3)
     tri = np.ascontiguousarray(tri[np.isfinite(tri).all(axis=(1, 2))])
-    scene = _rtcs.EmbreeScene()
     if len(tri):
         _TriangleMesh(scene, tri)
     return scene

@@ -17,7 +17,7 @@ from prt_relight.core.scene import mesh, visibility
 from prt_relight.core.sphere import directions
 from prt_relight.core.store import layouts
 
-from ..scene.geometry import flat_cube
+from ..scene.geometry import flat_cube, unit
 
 pytestmark = pytest.mark.skipif(not visibility.have_embree(), reason="needs embreex")
 
@@ -112,6 +112,26 @@ def test_trace_origins_step_off_along_the_normal_away_from_contacts():
     assert np.all(np.einsum("ij,ij->i", origins - plain, pts.normals)[~moved] < 1e-6)
     assert np.all(np.linalg.norm(inward, axis=1) > 0.0)     # every point is on an edge
     assert not moved[~bottom].any()
+
+
+def test_trace_origins_one_object_at_a_time_are_those_of_all_at_once():
+    job = _job()
+    box = job.objects[1].arrays           # smooth-shaded: its bottom rim steps under the ground
+    centre = box.positions.mean(axis=0)
+    box.corner_normals = unit(box.positions[box.corner_verts] - centre)
+    job.objects[1] = _object("Box", box)
+    scene = visibility.build_occluder_scene(job.occluders)
+    origins, moved = tracing.trace_origins(job.objects, scene, job.offset)
+    starts = np.cumsum([0] + [o.points.count for o in job.objects])
+    whole = visibility.contact_origins(
+        scene, np.concatenate([o.points.positions for o in job.objects]),
+        np.concatenate([o.points.normals for o in job.objects]),
+        np.concatenate([o.arrays.triangle_positions for o in job.objects]),
+        np.concatenate([o.points.point_of_corner[o.arrays.triangles] + s
+                        for o, s in zip(job.objects, starts[:-1])]), job.offset)
+    assert moved.any()                              # the box's bottom rim touches the ground
+    np.testing.assert_array_equal(origins, whole[0])
+    np.testing.assert_array_equal(moved, whole[1])
 
 
 def test_in_order_writer_takes_chunks_in_any_order():

@@ -330,3 +330,35 @@ def test_degenerate_triangles_dropped_from_scene():
 # mesh
 # --------------------------------------------------------------------------- #
 
+
+
+def test_indexed_occluders_trace_as_the_same_triangles_one_by_one():
+    """core.scene.mesh.Occluders (shared vertices, what the precompute gives Embree) block
+    exactly the rays their corners given one by one block; a triangle with a non-finite
+    vertex is left out as it is from the triangles one by one."""
+    rng = np.random.default_rng(5)
+    vertices = (rng.uniform(-1, 1, size=(60, 3)) * [1.0, 1.0, 0.3] + [0, 0, 0.8]).astype(
+        np.float32)
+    vertices[7] = np.nan
+    triangles = rng.integers(0, 60, size=(80, 3)).astype(np.int32)
+    occ = mesh.Occluders(vertices, triangles)
+    pts = np.column_stack([rng.uniform(-1, 1, 200), rng.uniform(-1, 1, 200), np.zeros(200)])
+    nrm = unit(rng.normal(size=(200, 3)) * [0.3, 0.3, 1.0] + [0, 0, 1.5])
+    cube = directions.cubemap(N)
+    bits = [visibility.trace_visibility(visibility.build_occluder_scene(t), pts, nrm, cube,
+                                        OFFSET) for t in (occ, occ.positions)]
+    vis = visibility.unpack_visibility(bits[0], cube.size)
+    assert vis.any() and not vis.all()
+    np.testing.assert_array_equal(bits[0], bits[1])
+
+
+def test_occluder_mesh_keeps_the_triangles_occluder_triangles_keeps():
+    m = flat_cube()
+    m.positions = m.positions.copy()
+    m.positions[0] = m.positions[1]              # a zero-area face or two
+    soup, ignored = mesh.occluder_triangles(m)
+    occ, ignored_too = mesh.occluder_mesh(m)
+    assert ignored == ignored_too > 0
+    np.testing.assert_array_equal(occ.positions, soup.astype(np.float32))
+    both = mesh.Occluders.join([occ, occ])
+    np.testing.assert_array_equal(both.positions, np.concatenate([occ.positions] * 2))
