@@ -30,8 +30,8 @@ each column over the vertex counts).  Writes ``out/bench/scale.txt`` and ``.json
 Instances (issue 31, ``--instances``): N collection instances of one Suzanne of about
 ``--instance-vertices`` vertices on a ground, each traced in place (addon/blender/surfaces.py),
 one process per count: the precompute's seconds and peak, REFERENCE's F12 and its peak, and
-per instance the seconds, the stored bytes, the transformed copies it holds (positions,
-normals, occluder triangles) against the source's shared arrays; the same table, and the
+per instance the seconds, the stored bytes, the copies it holds (positions, occluders)
+against the source's shared arrays; the same table, and the
 growth per instance.
 """
 
@@ -264,8 +264,10 @@ def child_instances(count: int, args) -> dict:
     found = surfaces.scene_surfaces(bpy.context.evaluated_depsgraph_get())
     shared = surfaces.SharedArrays()
     one = shared.arrays(next(f for f in found if f.instance))
-    copies = (one.positions.nbytes + one.corner_normals.nbytes
-              + core_mesh.occluder_triangles(one)[0].nbytes)
+    occ = core_mesh.occluder_mesh(one)[0]
+    # what an instance holds of its own: its positions and occluders (its corner normals
+    # are placed when read, core.scene.mesh.PlacedArrays)
+    copies = one.positions.nbytes + occ.vertices.nbytes + occ.triangles.nbytes
     out = dict(instances=count, vertices=len(ob.data.vertices), cores=os.cpu_count(),
                shared_bytes=shared.nbytes(), copy_bytes_per_instance=copies)
     tmp = pathlib.Path(args.blend).parent
@@ -295,7 +297,7 @@ def instance_table(results) -> str:
             ("precompute + F12 peak MiB", lambda r: _mib(r["precompute_f12_peak"])),
             ("stored KiB per instance", lambda r: f"{r['stored_bytes_per_instance'] / 1024:.0f}"),
             (".blend KiB per instance", lambda r: f"{r['blend_bytes_per_instance'] / 1024:.0f}"),
-            ("transformed copies KiB per instance",
+            ("copies KiB per instance (positions, occluders)",
              lambda r: f"{r['copy_bytes_per_instance'] / 1024:.0f}"),
             ("shared source arrays KiB", lambda r: f"{r['shared_bytes'] / 1024:.0f}")]
     width = max(len(n) for n, _ in rows)

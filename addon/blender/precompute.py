@@ -56,7 +56,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
                             "occluders")
         elif fixed:
             warnings.append(f"'{s.name}': {fixed} corner normal(s) repaired")
-        points = core_mesh.shading_points(arrays)
+        points = shared.shared_points(s, core_mesh.shading_points(arrays))
         job = ObjectJob(s.name, arrays, points, core_mesh.fingerprint(arrays), matrix=s.matrix)
         if s.owner.prt.dynamic:
             # its shadow field follows the motion M_now M_then^-1: a scale of 0 has no inverse

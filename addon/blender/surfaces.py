@@ -128,6 +128,7 @@ class SharedArrays:
     def __init__(self):
         self.local = {}
         self._fingerprints = {}
+        self._points = {}
 
     @staticmethod
     def _key(surface: Surface):
@@ -143,6 +144,25 @@ class SharedArrays:
         if key not in self.local:
             self.local[key] = scene_export.mesh_arrays(surface.ob, np.eye(4))
         return placed(self.local[key], surface.matrix)
+
+    def shared_points(self, surface: Surface, points):
+        """``points`` (core.scene.mesh.ShadingPoints of an instance) holding the index arrays
+        (corners' points, points' slots) of the first instance of its source where they are
+        equal, as they are unless a turn regroups near-equal normals: one copy per source."""
+        if not surface.instance:
+            return points
+        key = ("points", self._key(surface))
+        first = self._points.get(key)
+        if first is None:
+            for a in (points.point_of_corner, points.materials):
+                a.flags.writeable = False           # shared by instances from here on
+            self._points[key] = points
+            return points
+        if (np.array_equal(first.point_of_corner, points.point_of_corner)
+                and np.array_equal(first.materials, points.materials)):
+            return replace(points, point_of_corner=first.point_of_corner,
+                           materials=first.materials)
+        return points
 
     def source(self, surface: Surface, arrays: MeshArrays):
         """An instance's source as the lights pass shares it (addon/gpu/lights.py): the
@@ -166,9 +186,12 @@ class SharedArrays:
                    for a in self.local.values())
 
 
-def placed(local: MeshArrays, matrix) -> MeshArrays:
-    """``local`` (object space) placed by ``matrix``: new positions and normals, the same
-    index arrays."""
+def placed(local: MeshArrays, matrix) -> core_mesh.PlacedArrays:
+    """``local`` (object space) placed by ``matrix``: new positions, the same index arrays,
+    and corner normals placed (and repaired, as sync and the precompute repair an object's)
+    each time they are read: core.scene.mesh.PlacedArrays."""
     M = np.asarray(matrix, np.float64)
-    pos, nrm = scene_export.transformed(local.positions, local.corner_normals, M)
-    return replace(local, positions=pos, corner_normals=nrm)
+    pos, _ = scene_export.transformed(local.positions, np.zeros((0, 3)), M)
+
+    return core_mesh.PlacedArrays(local, pos, lambda: scene_export.transformed(
+        np.zeros((0, 3)), local.corner_normals, M)[1])

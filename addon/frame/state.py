@@ -326,11 +326,12 @@ class FrameState:
             arrays = shared.arrays(surface)
             if len(arrays.triangles) == 0:
                 continue
-            core_mesh.repair_normals(arrays)
+            if not isinstance(arrays, core_mesh.PlacedArrays):   # those repair as read
+                core_mesh.repair_normals(arrays)
             if orig.prt.back_sides and not surface.hidden:
                 arrays = core_mesh.with_back_sides(arrays)    # as its precompute traced it
             corners = core_mesh.corner_source(arrays) if arrays.two_sided else None
-            points = core_mesh.shading_points(arrays)
+            points = shared.shared_points(surface, core_mesh.shading_points(arrays))
             fingerprint = core_mesh.fingerprint(arrays)
             # textured colour inputs: their mean colour in the material, drawn per pixel
             textured = _per_corner(texture_export.slot_sources(ob, self.warnings), corners)

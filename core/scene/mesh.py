@@ -95,6 +95,31 @@ def occluder_triangles(mesh: MeshArrays) -> tuple[np.ndarray, int]:
     return mesh.triangle_positions[keep], int(mesh.front_triangles - len(keep))
 
 
+class PlacedArrays(MeshArrays):
+    """An instance's arrays: its source's index arrays, its own world positions, and corner
+    normals placed by ``place_normals()`` and repaired (:func:`repair_normals`) each time
+    they are read, not held (the largest array of a placed copy: a thousand instances would
+    hold a thousand of them).  Read them once where they are used more than once."""
+
+    def __init__(self, local: MeshArrays, positions: np.ndarray, place_normals):
+        self.positions = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 3)
+        self.corner_verts, self.triangles = local.corner_verts, local.triangles
+        self.corner_materials = local.corner_materials
+        self.front_triangles, self.front_corners = local.front_triangles, local.front_corners
+        self._place_normals = place_normals
+
+    def _placed(self) -> tuple[np.ndarray, int]:
+        """(the corner normals placed and repaired, how many were repaired)."""
+        normals = self._place_normals()
+        count = repair_normals(MeshArrays(self.positions, self.corner_verts, normals,
+                                          self.triangles, self.corner_materials))
+        return normals, count
+
+    @property
+    def corner_normals(self) -> np.ndarray:
+        return self._placed()[0]
+
+
 @dataclass(eq=False)
 class Occluders:
     """Triangles that cast shadows, indexed: ``vertices`` (V, 3) float32 and ``triangles``
@@ -290,8 +315,10 @@ def repair_normals(mesh: MeshArrays) -> int:
     """Replace zero/NaN corner normals (zero-area faces) in place; return how many.
 
     A bad corner takes the mean of the valid normals of its vertex, or +Z when
-    the vertex has none.
+    the vertex has none.  :class:`PlacedArrays` repair theirs as they are read: how many.
     """
+    if isinstance(mesh, PlacedArrays):
+        return mesh._placed()[1]
     n = mesh.corner_normals
     length = np.linalg.norm(n, axis=1)
     bad = ~np.isfinite(length) | (length < 1e-8)
@@ -343,7 +370,8 @@ def shading_points(mesh: MeshArrays) -> ShadingPoints:
     if count == 0:
         empty = np.zeros((0, 3))
         return ShadingPoints(np.zeros(0, np.int64), empty, empty, np.zeros(0, np.int64))
-    key = point_keys(mesh.corner_normals, mesh.corner_materials)
+    corner_normals = mesh.corner_normals          # read once (PlacedArrays place them)
+    key = point_keys(corner_normals, mesh.corner_materials)
     order = np.lexsort((key, mesh.corner_verts))
     v_sorted, k_sorted = mesh.corner_verts[order], key[order]
     new = np.ones(count, dtype=bool)
@@ -353,7 +381,7 @@ def shading_points(mesh: MeshArrays) -> ShadingPoints:
     inverse[order] = point_sorted
     first = order[new]
     normals = np.zeros((int(point_sorted[-1]) + 1, 3))
-    np.add.at(normals, inverse, mesh.corner_normals)
+    np.add.at(normals, inverse, corner_normals)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.where(length > 1e-12, normals / np.maximum(length, 1e-30), [0.0, 0.0, 1.0])
     return ShadingPoints(

@@ -12,6 +12,7 @@ import pytest
 
 from prt_relight.addon.blender import scene_export, storage, surfaces
 from prt_relight.addon.frame import state as runtime
+from prt_relight.core.scene import mesh as core_mesh
 from prt_relight.bench import scenes
 
 from ...cases.small import save_every_method
@@ -68,6 +69,16 @@ def test_every_kind_of_instance_is_a_surface_placed_as_blender_places_it(kind):
     assert all(np.shares_memory(a.triangles, arrays[0].triangles) for a in arrays)  # shared
     assert not np.allclose(arrays[0].positions, arrays[1].positions)
     assert shared.nbytes() > 0
+    # the instances' shading points: their own positions and normals, the first one's
+    # index arrays where they are equal (as a turn leaves them)
+    points = [shared.shared_points(s, core_mesh.shading_points(a))
+              for s, a in zip(placed, arrays)]
+    assert all(p.point_of_corner is points[0].point_of_corner for p in points)
+    assert all(p.materials is points[0].materials for p in points)
+    assert not points[0].point_of_corner.flags.writeable
+    alone = core_mesh.shading_points(own)
+    np.testing.assert_array_equal(points[0].point_of_corner, alone.point_of_corner)
+    np.testing.assert_allclose(points[0].normals, alone.normals, atol=1e-9)
 
 
 def test_geometry_instanced_without_an_object_and_nested_instances():

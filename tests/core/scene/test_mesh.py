@@ -110,6 +110,38 @@ def test_repair_normals():
     assert mesh.repair_normals(m2) == 0
 
 
+def test_placed_arrays_place_and_repair_their_normals_each_time_they_are_read():
+    """core.scene.mesh.PlacedArrays (an instance's arrays): the index arrays its source's,
+    the corner normals made when read, repaired as repair_normals repairs a held copy, and
+    counted by it; nothing a reader does to a copy it got changes the next one."""
+    local = flat_cube()
+    local.corner_normals[0] = np.nan
+    local.corner_normals[7] = [0.0, 0.0, 3.0]
+    turn = np.array([[0.0, -2.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])   # uneven scale
+    made = []
+
+    def place():
+        made.append(1)
+        return unit(local.corner_normals @ np.linalg.inv(turn))
+    with np.errstate(invalid="ignore"):
+        placed = mesh.PlacedArrays(local, local.positions @ turn.T, place)
+        held = mesh.MeshArrays(placed.positions, local.corner_verts, place(), local.triangles)
+    assert mesh.repair_normals(held) == 1
+    with np.errstate(invalid="ignore"):
+        assert mesh.repair_normals(placed) == 1
+        first = placed.corner_normals
+        first[:] = 0.0
+        np.testing.assert_array_equal(placed.corner_normals, held.corner_normals)
+    assert len(made) == 4
+    assert placed.triangles is local.triangles and placed.corner_verts is local.corner_verts
+    with np.errstate(invalid="ignore"):
+        a, b = mesh.shading_points(placed), mesh.shading_points(held)
+        assert len(made) == 5                          # read once by shading_points
+        np.testing.assert_array_equal(a.point_of_corner, b.point_of_corner)
+        np.testing.assert_array_equal(a.normals, b.normals)
+        assert mesh.fingerprint(placed) == mesh.fingerprint(held)
+
+
 def test_degenerate_triangles():
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [np.nan, 0, 0]], float)
     tris_v = np.array([[0, 1, 2],      # fine
