@@ -11,6 +11,7 @@ import numpy as np
 from gpu_extras.presets import draw_texture_2d
 from mathutils import Matrix
 
+from ...core.scene import mesh as core_mesh
 from ...core.sphere import envmap
 from ...core.common.parallel import Cancelled
 from ...core.pipeline import frame_status
@@ -58,15 +59,28 @@ def _batches(state: FrameState, radiance_per_object):
     """(plain batches, draw callables of textured objects) of per-corner radiance."""
     batches, draws = [], []
     for st, rad in zip(state.objects, radiance_per_object):
-        positions = st.arrays.positions[st.arrays.corner_verts]
         if isinstance(rad, TexturedRadiance):
+            positions = st.arrays.positions[st.arrays.corner_verts]
             draws += drawing.textured_draws(positions, rad, st.arrays.triangles,
                                             st.closed_side, st.textures,
                                             st.arrays.corner_materials)
         else:
-            batches.append(drawing.surface_batch(positions, rad, st.arrays.triangles,
-                                                 st.closed_side))
+            batches.append(_plain_batch(st, rad))
     return batches, draws
+
+
+def _plain_batch(st, radiance):
+    """The surface batch of ``st``'s per-corner ``radiance``: one vertex per shading point
+    where every corner has its point's radiance (the per-vertex methods' radiance: the same
+    positions, triangles and values, a quarter of the vertices on a smooth mesh), else one
+    per corner."""
+    rows = core_mesh.per_point(st.points, radiance)
+    if rows is not None:
+        return drawing.surface_batch(st.points.positions, rows,
+                                     st.points.point_of_corner[st.arrays.triangles],
+                                     st.closed_side)
+    return drawing.surface_batch(st.arrays.positions[st.arrays.corner_verts], radiance,
+                                 st.arrays.triangles, st.closed_side)
 
 
 def _bounce_draws(state: FrameState, eye, view_dir):

@@ -392,6 +392,19 @@ def shading_points(mesh: MeshArrays) -> ShadingPoints:
     )
 
 
+def per_point(points: ShadingPoints, values: np.ndarray) -> np.ndarray | None:
+    """Per-corner ``values`` (C, ...) as one row per shading point when every corner holds
+    its point's (per-vertex radiance does), else None."""
+    values = np.asarray(values)
+    poc = points.point_of_corner
+    if len(values) != len(poc):
+        return None
+    first = np.zeros(points.count, np.int64)
+    first[poc] = np.arange(len(poc))
+    rows = values[first]
+    return rows if np.array_equal(rows[poc], values) else None
+
+
 def fingerprint(mesh: MeshArrays) -> str:
     """Hash of the world-space geometry the precompute depends on."""
     h = hashlib.sha1()

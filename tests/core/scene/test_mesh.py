@@ -142,6 +142,18 @@ def test_placed_arrays_place_and_repair_their_normals_each_time_they_are_read():
         assert mesh.fingerprint(placed) == mesh.fingerprint(held)
 
 
+def test_per_point_rows_of_per_corner_values():
+    m = icosphere(1)                              # smooth: a point's corners are several
+    sp = mesh.shading_points(m)
+    rows = np.arange(sp.count * 3, dtype=np.float32).reshape(-1, 3)
+    got = mesh.per_point(sp, rows[sp.point_of_corner])
+    np.testing.assert_array_equal(got, rows)
+    varied = rows[sp.point_of_corner].copy()
+    varied[np.nonzero(sp.point_of_corner == sp.point_of_corner[0])[0][-1]] += 1.0
+    assert mesh.per_point(sp, varied) is None       # two corners of a point disagree
+    assert mesh.per_point(sp, rows) is None         # not per corner
+
+
 def test_degenerate_triangles():
     pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [np.nan, 0, 0]], float)
     tris_v = np.array([[0, 1, 2],      # fine
