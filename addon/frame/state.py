@@ -31,9 +31,8 @@ from ...core.common.parallel import Cancelled  # noqa: F401  (raised by FrameSta
 #: What the last sync found wrong (shown in the panels; cheap to read in draw()).
 LAST_MESSAGES: list = []
 # Decoded visibility per stored blob (storage.key), the only copy a frame holds: an object
-# keeps its compressed blob and decodes it through here when read, so a scene of many
-# objects (a thousand instances) holds at most 128 decoded at once, and 256 MiB of them
-# (the newest one whatever its size): past that an object's bits are decoded when read
+# keeps its compressed blob and decodes it through here when read, so a thousand instances
+# hold at most 128 decoded at once, and 256 MiB (the newest one whatever its size)
 VIS_CACHE = keys.cache(128, max_bytes=256 * 2**20)
 
 
