@@ -183,9 +183,10 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
     batches, textured = ([], []) if object_draws is not None else _batches(state, radiance)
     s = max(1, int(supersampling))
     background = _background(state)
-    added = (sharp.draws(state, eye, view_dir, background)
-             + lights.draws(state, eye, view_dir, s)) if eye is not None or view_dir is not None \
-        else []
+    seen = eye is not None or view_dir is not None
+    lit, lit_pilot = lights.draws(state, eye, view_dir, s, PILOT_SUPERSAMPLING) if seen \
+        else ([], [])
+    added = (sharp.draws(state, eye, view_dir, background) + lit) if seen else []
     bounced = _bounce_draws(state, eye, view_dir) \
         if object_draws is not None and state.bounce is not None else []
     pilot = None
@@ -194,8 +195,7 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
         # 2×2-supersampled sample (half of one sample per pixel's): a pixel it keeps is smooth
         # by its own measure (three lamps: 0.07 % from the uniform 3×3, 0.06 % with every
         # tap, the frame 20 % faster; docs/measurements.md)
-        pilot = (sharp.draws(state, eye, view_dir, background)
-                 + lights.draws(state, eye, view_dir, PILOT_SUPERSAMPLING) + bounced)
+        pilot = sharp.draws(state, eye, view_dir, background) + lit_pilot + bounced
     return drawing.render_offscreen(batches, background, projection @ view, width, height,
                                     transparent, object_draws=list(object_draws or ()) + textured,
                                     added_draws=added + bounced, supersampling=s,

@@ -340,14 +340,16 @@ def _texture(rgba):
     return drawing.float_texture(np.ascontiguousarray(rgba, dtype=np.float32))
 
 
-def draws(state, eye, view_dir, supersampling: int = 1) -> list:
+def draws(state, eye, view_dir, supersampling: int = 1, pilot: int | None = None):
     """``draw(view_projection)`` callables adding every source to the objects (empty when
     there is none), for a frame of ``supersampling``² samples per pixel.  Renders the
-    sources' shadow maps first (cached)."""
+    sources' shadow maps first (cached).  With ``pilot`` (adaptive anti-aliasing's pilot
+    frame's supersampling): ``(draws, the pilot's draws)``, both drawing the same batches
+    (a thousand instances' batches are made once per frame, not once per list)."""
     sources = list(state.sources) + lamp_sources(state.drawn_lamps)
     casters = [st for st in state.objects if st.status != "unshadowed"]
     if not sources or not state.objects:
-        return []
+        return [] if pilot is None else ([], [])
     # every source is drawn, each with its shadow map unless the plan's budget says not
     plan = shadow_plan(sources)
     distant = [s for s in sources if not s.local]
@@ -392,22 +394,38 @@ def draws(state, eye, view_dir, supersampling: int = 1) -> list:
                 src[k, 8 + 4 * face:12 + 4 * face] = M.T
             src[k, 32:35] = np.asarray(origins, np.float32).reshape(3, 4)
     src_tex = _texture(src)
-    tile_tex = _tile_texture(state, distant + local, supersampling)
     eye4 = ((*map(float, view_dir), 0.0) if view_dir is not None else (*map(float, eye), 1.0))
-    per_frame = frame_features(sources, supersampling)
-    out = []
+    objects = []                    # per object, per slot: (batch, textures, slot features)
     for st in state.objects:
         slots = []
         _depth, surfaces, model = _object_batches(st)
         for slot, batch in surfaces:
             texels = slot_texels(st, slot, eye4)
             source = st.textures.get(slot, (None, None))[0]
-            features = slot_features(texels, source) + per_frame
+            features = slot_features(texels, source)
             if model is not _IDENTITY:           # row 0, texels 21-23 (lights_vert.glsl)
                 texels[0, 21:24] = normal_texels(model)
                 features += ("PLACED",)
             slots.append((batch, _texture(texels), source, _input_texture(st, slot),
                           _normal_texture(st, slot), features))
+        objects.append(slots)
+    textures = (src_tex, shadow_tex, cube_tex)
+    out = _frame_draws(state, sources, objects, textures, supersampling)
+    if pilot is None:
+        return out
+    return out, _frame_draws(state, sources, objects, textures, pilot)
+
+
+def _frame_draws(state, sources, objects, textures, supersampling) -> list:
+    """The draw callables of :func:`draws`' ``objects`` for a frame of ``supersampling``²
+    samples per pixel."""
+    src_tex, shadow_tex, cube_tex = textures
+    tile_tex = _tile_texture(state, sources, supersampling)
+    per_frame = frame_features(sources, supersampling)
+    out = []
+    for object_slots in objects:
+        slots = [(batch, params, source, rough, bump, features + per_frame)
+                 for batch, params, source, rough, bump, features in object_slots]
 
         def draw(view_projection, slots=slots):
             for batch, params, source, rough, bump, features in slots:
