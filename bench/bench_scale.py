@@ -308,7 +308,9 @@ def instance_table(results) -> str:
         def slope(key, scale=1.0):
             return np.polyfit(x, np.array([r[key] for r in results], float) * scale, 1)
 
-        lines += ["", "growth per instance (least-squares slope over the counts), and at 1000:"]
+        lines += ["", "growth per instance (least-squares slope over the counts), and at 1000 if it "
+                  "went on so (an upper bound for the peak below ~100 instances: the decoded "
+                  "visibility's cache fills up to 256 MiB; run --instances 1000 to measure)"]
         for name, key, unit, scale in (("precompute", "precompute_s", "s", 1.0),
                                        ("precompute + F12 peak", "precompute_f12_peak",
                                         "MiB", 2 ** -20)):
