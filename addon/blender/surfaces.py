@@ -192,6 +192,5 @@ def placed(local: MeshArrays, matrix) -> core_mesh.PlacedArrays:
     each time they are read: core.scene.mesh.PlacedArrays."""
     M = np.asarray(matrix, np.float64)
     pos, _ = scene_export.transformed(local.positions, np.zeros((0, 3)), M)
-
     return core_mesh.PlacedArrays(local, pos, lambda: scene_export.transformed(
         np.zeros((0, 3)), local.corner_normals, M)[1])

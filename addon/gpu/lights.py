@@ -340,16 +340,16 @@ def _texture(rgba):
     return drawing.float_texture(np.ascontiguousarray(rgba, dtype=np.float32))
 
 
-def draws(state, eye, view_dir, supersampling: int = 1, pilot: int | None = None):
-    """``draw(view_projection)`` callables adding every source to the objects (empty when
-    there is none), for a frame of ``supersampling``² samples per pixel.  Renders the
-    sources' shadow maps first (cached).  With ``pilot`` (adaptive anti-aliasing's pilot
-    frame's supersampling): ``(draws, the pilot's draws)``, both drawing the same batches
-    (a thousand instances' batches are made once per frame, not once per list)."""
+def draws(state, eye, view_dir, supersampling: int, pilot: int) -> tuple[list, list]:
+    """``(draws, pilot's draws)``: ``draw(view_projection)`` callables adding every source to
+    the objects (empty when there is none), for a frame of ``supersampling``² samples per
+    pixel and for adaptive anti-aliasing's pilot frame of ``pilot``², both drawing the same
+    batches (a thousand instances' batches are made once per frame).  Renders the sources'
+    shadow maps first (cached)."""
     sources = list(state.sources) + lamp_sources(state.drawn_lamps)
     casters = [st for st in state.objects if st.status != "unshadowed"]
     if not sources or not state.objects:
-        return [] if pilot is None else ([], [])
+        return [], []
     # every source is drawn, each with its shadow map unless the plan's budget says not
     plan = shadow_plan(sources)
     distant = [s for s in sources if not s.local]
@@ -410,15 +410,14 @@ def draws(state, eye, view_dir, supersampling: int = 1, pilot: int | None = None
                           _normal_texture(st, slot), features))
         objects.append(slots)
     textures = (src_tex, shadow_tex, cube_tex)
-    out = _frame_draws(state, sources, objects, textures, supersampling)
-    if pilot is None:
-        return out
-    return out, _frame_draws(state, sources, objects, textures, pilot)
+    ordered = distant + local                   # as srcTex holds them
+    return (_frame_draws(state, ordered, objects, textures, supersampling),
+            _frame_draws(state, ordered, objects, textures, pilot))
 
 
 def _frame_draws(state, sources, objects, textures, supersampling) -> list:
     """The draw callables of :func:`draws`' ``objects`` for a frame of ``supersampling``²
-    samples per pixel."""
+    samples per pixel (``sources`` in srcTex's order: the light tiles index them)."""
     src_tex, shadow_tex, cube_tex = textures
     tile_tex = _tile_texture(state, sources, supersampling)
     per_frame = frame_features(sources, supersampling)

@@ -300,6 +300,36 @@ def test_every_lamp_is_drawn_with_its_shadow_past_the_old_cap_of_eight(tmp_path,
         and "and 5 more" in named[0], runtime.LAST_MESSAGES
 
 
+def test_light_tiles_draw_the_frame_every_light_loop_draws(tmp_path, monkeypatch):
+    """Ten narrow spots and a sun exported among them (the pass holds the distant sources
+    first): the frame drawn through the light tiles is the frame drawn without them, so
+    each tile's list names the lights in the pass's own order."""
+    scenes.reset()
+    black_world()
+    ground = scenes.add_ground(size=8.0, cuts=8)
+    ground.data.materials.append(scenes.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
+                                                      Color=(0.8, 0.8, 0.8, 1.0)))
+    for k in range(10):
+        if k == 5:
+            sun_lamp(1.0, 0.05, tilt=0.3)
+        local_lamp("SPOT", 300.0 + 40.0 * k, (-3.0 + 0.65 * k, 0.4 * (k % 3) - 0.4, 2.0),
+                   radius=0.05, size=0.5)
+    cam = scenes.add_camera(location=(0.0, 0.0, 3.0), rotation=(0.0, 0.0, 0.0), resolution=None)
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 7.5
+    scenes.set_resolution(48, 48)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 1
+    bpy.ops.prt.precompute()
+    from prt_relight.addon.gpu import light_tiles
+    tiled = scenes.render_exr(tmp_path / "tiled.exr")[..., :3]
+    monkeypatch.setattr(light_tiles, "TILED_FROM", 1000)
+    every = scenes.render_exr(tmp_path / "every.exr")[..., :3]
+    lit = every.max(-1) > 1.5 * every.min()              # the spots' pools on the sun's light
+    assert 0.05 < lit.mean() < 0.8
+    np.testing.assert_allclose(tiled, every, rtol=1e-4, atol=1e-6)
+
+
 def test_instances_share_one_batch_per_source_and_draw_as_placed_copies(tmp_path, monkeypatch):
     """A herd of three collection instances (one turned and scaled unevenly) under a sun
     lamp and a point lamp: the lights pass keeps one set of their source's batches (the
