@@ -19,6 +19,19 @@ from ...cases.lights import area_lamp, black_world, local_lamp, plate_over_groun
 pytestmark = pytest.mark.usefixtures("registered_addon")
 
 
+def _top_view(height, scale, width, rows):
+    """An orthographic camera ``height`` over the origin looking down, ``scale`` wide, a frame
+    of ``width`` × ``rows`` pixels at one sample per pixel; the scene."""
+    cam = scenes.add_camera(location=(0.0, 0.0, height), rotation=(0.0, 0.0, 0.0),
+                            resolution=None)
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = scale
+    scenes.set_resolution(width, rows)
+    scene = bpy.context.scene
+    scene.prt.supersampling = 1
+    return scene
+
+
 def _edge_profile(frame, scale, width):
     """The ground's radiance along x through the middle row, and the x of each column."""
     row = frame.shape[0] // 2
@@ -37,14 +50,9 @@ def test_penumbra_of_a_straight_edge_matches_the_disc_it_comes_from(tmp_path, an
     plate_over_ground(1.0)
     sun_lamp(3.0, math.radians(angle_deg))
     # between the plate and the ground, looking down: the plate is behind the camera
-    cam = scenes.add_camera(location=(0.0, 0.0, 0.5), rotation=(0.0, 0.0, 0.0), resolution=None)
-    cam.data.type = "ORTHO"
     rho = math.tan(math.radians(angle_deg / 2.0))
-    cam.data.ortho_scale = scale = 8.0 * rho
-    width = 128
-    scenes.set_resolution(width, 8)
-    scene = bpy.context.scene
-    scene.prt.supersampling = 1
+    scale, width = 8.0 * rho, 128
+    scene = _top_view(0.5, scale, width, 8)
     scene.render.filter_size = 0.0
     bpy.ops.prt.precompute()
     frame = scenes.render_exr(tmp_path / "edge.exr")
@@ -68,12 +76,7 @@ def test_a_point_like_sun_casts_a_sharp_shadow_without_acne(tmp_path):
     black_world()
     plate_over_ground(1.0)
     sun_lamp(3.0, 0.0)
-    cam = scenes.add_camera(location=(0.0, 0.0, 0.5), rotation=(0.0, 0.0, 0.0), resolution=None)
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 2.0
-    scenes.set_resolution(64, 8)
-    scene = bpy.context.scene
-    scene.prt.supersampling = 1
+    scene = _top_view(0.5, 2.0, 64, 8)
     scene.render.filter_size = 0.0
     bpy.ops.prt.precompute()
     frame = scenes.render_exr(tmp_path / "sharp.exr")
@@ -116,13 +119,8 @@ def test_point_and_spot_lamps_light_every_method_per_pixel(tmp_path, method):
     ground.data.materials.append(scenes.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
                                                   Color=(0.8, 0.8, 0.8, 1.0)))
     lamp = local_lamp("POINT", 500.0, (0.0, 0.0, 2.0), radius=0.01)
-    cam = scenes.add_camera(location=(0.0, 0.0, 1.0), rotation=(0.0, 0.0, 0.0), resolution=None)
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 6.0
-    scenes.set_resolution(30, 30)
-    scene = bpy.context.scene
+    scene = _top_view(1.0, 6.0, 30, 30)
     scene.prt.method = method
-    scene.prt.supersampling = 1
     scene.render.filter_size = 0.0
     bpy.ops.prt.precompute()
     frame = scenes.render_exr(tmp_path / "point.exr")[::-1]          # row 0 at y = -3
@@ -181,12 +179,7 @@ def test_area_lamp_lights_a_lambert_plane_as_its_area_integral(tmp_path, shape, 
     tilt, height = (0.5, 1.5) if placement == "above" else (1.3, 0.15)
     lamp = area_lamp(400.0, (0.3, -0.2, height), 1.2, 0.6, shape=shape,
                       rotation=(tilt, 0.0, 0.3))
-    cam = scenes.add_camera(location=(0.0, 0.0, 1.0), rotation=(0.0, 0.0, 0.0), resolution=None)
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 6.0
-    scenes.set_resolution(24, 24)
-    scene = bpy.context.scene
-    scene.prt.supersampling = 1
+    scene = _top_view(1.0, 6.0, 24, 24)
     scene.render.filter_size = 0.0
     bpy.ops.prt.precompute()
     frame = scenes.render_exr(tmp_path / "area.exr")[::-1]
@@ -263,12 +256,7 @@ def test_every_lamp_is_drawn_with_its_shadow_past_the_old_cap_of_eight(tmp_path,
         local_lamp("POINT", 100.0 + 10.0 * k, tuple(p), radius=0.01).name = f"Lamp{k:02d}"
     plate = lamps[-1] - (0.0, 0.0, 1.0)
     bpy.ops.mesh.primitive_plane_add(size=0.6, location=tuple(plate))
-    cam = scenes.add_camera(location=(0.0, 0.0, 1.5), rotation=(0.0, 0.0, 0.0), resolution=None)
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 6.0
-    scenes.set_resolution(32, 32)
-    scene = bpy.context.scene
-    scene.prt.supersampling = 1
+    scene = _top_view(1.5, 6.0, 32, 32)
     scene.render.filter_size = 0.0
     bpy.ops.prt.precompute()
     xs = (np.arange(32) + 0.5) / 32 * 6.0 - 3.0
@@ -314,12 +302,7 @@ def test_light_tiles_draw_the_frame_every_light_loop_draws(tmp_path, monkeypatch
             sun_lamp(1.0, 0.05, tilt=0.3)
         local_lamp("SPOT", 300.0 + 40.0 * k, (-3.0 + 0.65 * k, 0.4 * (k % 3) - 0.4, 2.0),
                    radius=0.05, size=0.5)
-    cam = scenes.add_camera(location=(0.0, 0.0, 3.0), rotation=(0.0, 0.0, 0.0), resolution=None)
-    cam.data.type = "ORTHO"
-    cam.data.ortho_scale = 7.5
-    scenes.set_resolution(48, 48)
-    scene = bpy.context.scene
-    scene.prt.supersampling = 1
+    scene = _top_view(3.0, 7.5, 48, 48)
     bpy.ops.prt.precompute()
     from prt_relight.addon.gpu import light_tiles
     tiled = scenes.render_exr(tmp_path / "tiled.exr")[..., :3]
