@@ -151,7 +151,7 @@ class SharedArrays:
         equal, as they are unless a turn regroups near-equal normals: one copy per source."""
         if not surface.instance:
             return points
-        key = ("points", self._key(surface))
+        key = self._key(surface)
         first = self._points.get(key)
         if first is None:
             for a in (points.point_of_corner, points.materials):
