@@ -106,8 +106,9 @@ def _peak() -> int:
 
 
 def add_suzanne(vertices=None, subsurf=None, height=1.6):
-    """Suzanne cut to about ``vertices`` (each face cut k x k, smoothed) or with a
-    Subdivision Surface modifier of ``subsurf`` levels, standing on the ground."""
+    """Suzanne cut to ``vertices`` (each face cut k x k, smoothed, then single cuts to make
+    up the count) or with a Subdivision Surface modifier of ``subsurf`` levels, standing
+    on the ground."""
     import bmesh
     import bpy
     if subsurf is not None:
@@ -121,6 +122,14 @@ def add_suzanne(vertices=None, subsurf=None, height=1.6):
     if k > 1:
         bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=k - 1, smooth=1.0,
                                   use_grid_fill=True)
+    # the k x k cuts land near the request; one more cut on evenly spaced edges makes up
+    # the rest, so "5k vertices" has at least 5k
+    short = vertices - len(bm.verts)
+    if 0 < short <= len(bm.edges):
+        edges = bm.edges[:]
+        step = len(edges) / short
+        bmesh.ops.subdivide_edges(bm, edges=[edges[int(i * step)] for i in range(short)],
+                                  cuts=1, smooth=1.0)
     bm.to_mesh(ob.data)
     bm.free()
     ob.rotation_euler = (math.radians(-20.0), 0.0, 0.0)
