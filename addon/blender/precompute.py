@@ -20,6 +20,7 @@ from ...core.scene import mesh as core_mesh, sides, visibility
 from ..frame import dynamic
 from .. import methods
 from . import attributes, scene_export, storage, surfaces
+from ...core.pipeline import frame_status
 from ...core.pipeline.tracing import ObjectJob, PrecomputeJob
 
 
@@ -41,6 +42,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     found = surfaces.scene_surfaces(depsgraph)
     # an instancer whose own geometry is empty (points that geometry nodes instance on)
     instancers = {s.owner.instancer.name for s in found if s.instance}
+    notes = []                         # (message, group): one line per instanced source
     for s in found:
         arrays = shared.arrays(s)
         if not np.isfinite(arrays.positions).all():
@@ -51,13 +53,15 @@ def gather(depsgraph, settings) -> PrecomputeJob:
             continue
         fixed = core_mesh.repair_normals(arrays)
         occluders, degenerate = core_mesh.occluder_mesh(arrays)
+        group = surfaces.note_group(s)
         if degenerate:
-            warnings.append(f"'{s.name}': {degenerate} zero-area face(s) ignored as "
-                            "occluders")
+            notes.append((f"'{s.name}': {degenerate} zero-area face(s) ignored as occluders",
+                          group))
         elif fixed:
-            warnings.append(f"'{s.name}': {fixed} corner normal(s) repaired")
+            notes.append((f"'{s.name}': {fixed} corner normal(s) repaired", group))
         points = shared.shared_points(s, core_mesh.shading_points(arrays))
-        job = ObjectJob(s.name, arrays, points, core_mesh.fingerprint(arrays), matrix=s.matrix)
+        job = ObjectJob(s.name, arrays, points, core_mesh.fingerprint(arrays), matrix=s.matrix,
+                        group=group)
         if s.owner.prt.dynamic:
             # its shadow field follows the motion M_now M_then^-1: a scale of 0 has no inverse
             if np.linalg.matrix_rank(s.matrix[:3, :3]) < 3:
@@ -70,6 +74,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
             tri_blocks.append(occluders)
         extents.append(core_mesh.bounding_box(occluders.vertices))
         objects.append(job)
+    warnings += frame_status.grouped_notes(notes)
     if empty:
         warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
     job_bytes = shared.nbytes()

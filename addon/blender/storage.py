@@ -319,12 +319,6 @@ def owner(name: str):
     return None if ob is None else InstanceRecord(ob, key)
 
 
-def instancer_of(name: str) -> str | None:
-    """The instancer's name when ``name`` is an instance's, else None."""
-    got = owner(name)
-    return got.instancer.name if isinstance(got, InstanceRecord) else None
-
-
 def instance_records(instancer) -> list:
     """The :class:`InstanceRecord` of every instance ``instancer`` stores."""
     groups = instancer.get(INSTANCES)

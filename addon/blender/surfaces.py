@@ -45,6 +45,13 @@ class Surface:
         return bool(self.owner.hide_render)
 
 
+def note_group(surface: Surface) -> str | None:
+    """What ``surface``'s notes are grouped under (core.pipeline.frame_status.grouped_notes):
+    an instance's source, the object or geometry its instances show (a scatter made of a
+    thousand instancers is one source); None for an object."""
+    return surface.ob.name if surface.instance else None
+
+
 class GeometrySource:
     """Geometry instanced without an object (geometry nodes' Instance on Points of a mesh):
     the evaluated mesh its instances share, standing in for an evaluated object where the

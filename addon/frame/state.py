@@ -318,7 +318,7 @@ class FrameState:
         run = scene.prt.precompute_id
         listed = found + (shown_only or [])
         shared = surfaces.SharedArrays()
-        coarse = []                    # (tessellation note, instancer or None)
+        coarse = []                    # (tessellation note, surfaces.note_group)
         for i, surface in enumerate(listed):
             self.tick(i / len(listed))          # F12's progress; ESC stops here
             ob, orig = surface.ob, surface.owner
@@ -371,8 +371,7 @@ class FrameState:
             if not unreadable:
                 notes.add(surface.name, status, status == "missing" and storage.legacy(orig))
             if data.coarse_warning and status == "ok":
-                coarse.append((data.coarse_warning,
-                               orig.instancer.name if surface.instance else None))
+                coarse.append((data.coarse_warning, surfaces.note_group(surface)))
             st = ObjectState(surface.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
             st.matrix = surface.matrix

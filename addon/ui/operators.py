@@ -49,8 +49,7 @@ def _finish(context, op, job):
 
 
 def _finished(context, op, job):
-    coarse = [(o.coarse_warning, storage.instancer_of(o.name))
-              for o in job.objects if o.coarse_warning]
+    coarse = [(o.coarse_warning, o.group) for o in job.objects if o.coarse_warning]
     for w in job.warnings + frame_status.grouped_notes(coarse):
         op.report({"WARNING"}, w)
     t = job.timings

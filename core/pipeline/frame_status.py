@@ -84,9 +84,9 @@ class SyncNotes:
 
 def grouped_notes(notes) -> list[str]:
     """Per-surface notes ``(message, group)`` as the panels show them: an object's
-    (``group`` None) as it is, the notes of one instancer's instances (``group`` its name)
-    as one line that counts them and quotes the first, so a scatter of a thousand
-    instances gives one line, not a thousand."""
+    (``group`` None) as it is, the notes of the instances of one source (``group`` its
+    name) as one line that counts them and quotes the first, so a scatter of a thousand
+    instances gives one line, not a thousand, however many instancers place them."""
     out, groups = [], {}
     for message, group in notes:
         if group is None:

@@ -30,6 +30,9 @@ class ObjectJob:
     #: the visibility as stored (storage.visibility_blob), made in run()
     blob: bytes | None = None
     coarse_warning: str = ""
+    #: what its notes are grouped under: an instance's source, None for an object
+    #: (core.pipeline.frame_status.grouped_notes)
+    group: str | None = None
     #: the traced bits, kept when the job's method derives from them
     kept: np.ndarray | None = field(default=None, repr=False)
     #: a dynamic object (shadow fields): its own triangles, the box it reaches over the

@@ -155,6 +155,19 @@ def test_save_reload_keeps_every_instance_data_for_every_method(stored_herd, tmp
     np.testing.assert_allclose(scenes.render_exr(tmp_path / "b.exr"), before, atol=1e-6)
 
 
+def test_notes_of_a_scatter_of_instancers_are_one_line_per_source(stored_herd):
+    """Three instancers of one animal (how an artist scatters with Alt+D) whose instances
+    each carry a tessellation note: the panels and the log get one line naming the source
+    and counting them, not a line per instancer."""
+    bpy.ops.wm.open_mainfile(filepath=str(stored_herd))
+    for i in range(3):
+        for r in storage.instance_records(bpy.data.objects[f"Herd {i}"]):
+            r.prt.coarse_warning = f"'{r.name}' is too coarse for its shadows"
+    lines = [w for w in _sync().warnings if "too coarse" in w]
+    assert len(lines) == 1, lines
+    assert lines[0].startswith("3 instances of 'Animal' have notes"), lines
+
+
 def test_duplicated_instancer_carries_its_instances_data(stored_herd):
     bpy.ops.wm.open_mainfile(filepath=str(stored_herd))
     ob = bpy.data.objects["Herd 2"]

@@ -89,14 +89,14 @@ def test_one_note_about_stale_shadows_the_most_pressing(stale, earlier, removed,
             assert out[0].endswith(": Grid")
 
 
-def test_grouped_notes_give_one_line_per_instancer():
-    notes = [("'Cube' is too coarse", None), ("'Herd#0' is too coarse", "Herd"),
-             ("'Herd#1' is too coarse", "Herd"), ("'Pen#3' is too coarse", "Pen")]
+def test_grouped_notes_give_one_line_per_instanced_source():
+    notes = [("'Cube' is too coarse", None), ("'Herd#0' is too coarse", "Cow"),
+             ("'Pen#1' is too coarse", "Cow"), ("'Pen#3' is too coarse", "Pig")]
     got = frame_status.grouped_notes(notes)
     assert got[0] == "'Cube' is too coarse" and "'Pen#3' is too coarse" in got
-    herd = [m for m in got if "Herd" in m]
-    assert len(got) == 3 and len(herd) == 1
-    assert herd[0].startswith("2 instances of 'Herd'") and "'Herd#0'" in herd[0]
+    cows = [m for m in got if "Cow" in m]
+    assert len(got) == 3 and len(cows) == 1
+    assert cows[0].startswith("2 instances of 'Cow'") and "'Herd#0'" in cows[0]
     assert frame_status.grouped_notes([]) == []
 
 
