@@ -58,6 +58,7 @@ def _background(state: FrameState):
 def _batches(state: FrameState, radiance_per_object):
     """(plain batches, draw callables of textured objects) of per-corner radiance."""
     batches, draws = [], []
+    shared = {}
     for st, rad in zip(state.objects, radiance_per_object):
         if isinstance(rad, TexturedRadiance):
             positions = st.arrays.positions[st.arrays.corner_verts]
@@ -65,19 +66,23 @@ def _batches(state: FrameState, radiance_per_object):
                                             st.closed_side, st.textures,
                                             st.arrays.corner_materials)
         else:
-            batches.append(_plain_batch(st, rad))
+            batches.append(_plain_batch(st, rad, shared))
     return batches, draws
 
 
-def _plain_batch(st, radiance):
+def _plain_batch(st, radiance, shared):
     """The surface batch of ``st``'s per-corner ``radiance``: one vertex per shading point
     where every corner has its point's radiance (the per-vertex methods' radiance: the same
     positions, triangles and values, a quarter of the vertices on a smooth mesh), else one
-    per corner."""
+    per corner.  ``shared``: the frame's index buffers per pair of index arrays (instances
+    share their source's: one buffer, not one per instance)."""
     rows = core_mesh.per_point(st.points, radiance)
     if rows is not None:
-        return drawing.surface_batch(st.points.positions, rows,
-                                     st.points.point_of_corner[st.arrays.triangles],
+        poc, tri = st.points.point_of_corner, st.arrays.triangles
+        key = (id(poc), id(tri))
+        if key not in shared:        # the arrays held with it: their ids stay theirs
+            shared[key] = (poc, tri, drawing.index_buffer(poc[tri]))
+        return drawing.surface_batch(st.points.positions, rows, shared[key][2],
                                      st.closed_side)
     return drawing.surface_batch(st.arrays.positions[st.arrays.corner_verts], radiance,
                                  st.arrays.triangles, st.closed_side)

@@ -235,22 +235,37 @@ def float_texture(rgba: np.ndarray):
     return gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
 
 
-def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles: np.ndarray,
+def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles,
                   closed_side: int = 0):
-    """Batch of one object's corners: positions (C, 3), radiance (C, 3), triangles (T, 3).
-    ``closed_side`` (core.scene.mesh.closed_side) rides in the radiance's alpha: the shader
-    draws a closed mesh's inner side black."""
+    """Batch of one object's corners: positions (C, 3), radiance (C, 3), triangles (T, 3)
+    or a GPUIndexBuf of them (:func:`index_buffer`).  ``closed_side``
+    (core.scene.mesh.closed_side) rides in the radiance's alpha: the shader draws a closed
+    mesh's inner side black."""
     return _corner_batch(surface_shader(), positions, radiance, triangles, closed_side)
+
+
+def index_buffer(triangles: np.ndarray):
+    """A GPUIndexBuf of ``triangles`` (T, 3), for batches that share one
+    (:func:`surface_batch`: instances of one source)."""
+    return gpu.types.GPUIndexBuf(type="TRIS",
+                                 seq=np.ascontiguousarray(triangles, dtype=np.int32))
 
 
 def _corner_batch(shader, positions, values, triangles, closed_side):
     rgba = np.empty((len(values), 4), dtype=np.float32)
     rgba[:, :3] = values
     rgba[:, 3] = float(closed_side)
-    return batch_for_shader(shader, "TRIS",
-                            {"pos": np.ascontiguousarray(positions, dtype=np.float32),
-                             "radiance": rgba},
-                            indices=np.ascontiguousarray(triangles, dtype=np.int32))
+    columns = {"pos": np.ascontiguousarray(positions, dtype=np.float32), "radiance": rgba}
+    if not isinstance(triangles, gpu.types.GPUIndexBuf):
+        return batch_for_shader(shader, "TRIS", columns,
+                                indices=np.ascontiguousarray(triangles, dtype=np.int32))
+    fmt = gpu.types.GPUVertFormat()
+    for name, data in columns.items():
+        fmt.attr_add(id=name, comp_type="F32", len=data.shape[1], fetch_mode="FLOAT")
+    vbo = gpu.types.GPUVertBuf(fmt, len(rgba))
+    for name, data in columns.items():
+        vbo.attr_fill(name, data)
+    return gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=triangles)
 
 
 def _quad_batch():

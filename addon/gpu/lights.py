@@ -146,11 +146,11 @@ def _object_batches(st):
 
     def own():
         import gpu
-        corner_pos = st.arrays.positions[st.arrays.corner_verts].astype(np.float32)
+        positions = st.arrays.positions
         out = []
-        for slot, corner, vbo, ibo in shared:
+        for slot, vertex, vbo, ibo in shared:
             batch = gpu.types.GPUBatch(type="TRIS", buf=_vertex_buffer((("pos",
-                                                                         corner_pos[corner]),)),
+                                                                         positions[vertex]),)),
                                        elem=ibo)
             batch.vertbuf_add(vbo)
             out.append((slot, batch))
@@ -192,19 +192,29 @@ def _corner_layout(arrays):
 
 def _source_batches(st):
     """An instance's source's shared batches: (depth batch in object space, per slot (slot,
-    its corners, their vertex buffer of normals and constant texture data, index buffer))."""
+    the vertex of each of its shading points, their vertex buffer of normals and constant
+    texture data, index buffer)).  One vertex per shading point (the corners of one vertex
+    with one normal are one point): an instance's own buffer of positions is a quarter of
+    one per corner on a smooth mesh."""
     # the source's normals repaired as sync repairs each instance's (a copy: the arrays are
     # the instances')
     arrays = replace(st.source[1], corner_normals=st.source[1].corner_normals.copy())
     core_mesh.repair_normals(arrays)
-    _pos, depth, slots = _corner_layout(arrays)
+    depth = _corner_layout(arrays)[1]
+    points = core_mesh.shading_points(arrays)
+    first = np.zeros(points.count, np.int64)
+    first[points.point_of_corner] = np.arange(len(points.point_of_corner))
+    vertex_of_point = arrays.corner_verts[first]
+    tri = points.point_of_corner[arrays.triangles]
+    tri_slot = points.materials[tri[:, 0]]
     out = []
-    for slot, corner, index in slots:
-        n = len(corner)
-        vbo = _vertex_buffer((("nrm", arrays.corner_normals[corner]),
+    for slot in np.unique(tri_slot):
+        point, index = np.unique(tri[tri_slot == slot], return_inverse=True)
+        n = len(point)
+        vbo = _vertex_buffer((("nrm", points.normals[point]),
                               ("uv", np.zeros((n, 2))), ("attr", np.ones((n, 4))),
                               ("tng", np.zeros((n, 4)))))
-        out.append((slot, corner, vbo, _index_buffer(index)))
+        out.append((int(slot), vertex_of_point[point], vbo, _index_buffer(index.reshape(-1, 3))))
     return depth, out
 
 
