@@ -317,10 +317,11 @@ def test_instances_share_one_batch_per_source_and_draw_as_placed_copies(tmp_path
     """A herd of three collection instances (one turned and scaled unevenly) under a sun
     lamp and a point lamp: the lights pass keeps one set of their source's batches (the
     depth batch placed by each instance's world matrix in the shadow maps, the normals
-    turned by its normal matrix), each instance only its positions, and the frame is the
-    frame of per-instance world-space batches."""
+    turned by its normal matrix), each instance only its positions; the surface pass draws
+    every instance with its source's one index buffer; and the frame is the frame of
+    per-instance world-space batches and index arrays."""
     from prt_relight.addon.blender import surfaces
-    from prt_relight.addon.gpu import lights
+    from prt_relight.addon.gpu import drawing, lights
     instancers = scenes.instanced_herd("COLLECTION", count=3, size=(48, 36))
     instancers[1].scale = (1.3, 0.8, 1.1)
     sun_lamp(3.0, math.radians(2.0), tilt=0.5)
@@ -334,8 +335,13 @@ def test_instances_share_one_batch_per_source_and_draw_as_placed_copies(tmp_path
         return (sum(1 for k in keys if k[0] == "source"),
                 sum(1 for k in keys if k[-1] == "placed"), len(keys))
     lights.BATCHES.clear()
+    made, index_buffer = [], drawing.index_buffer
+    monkeypatch.setattr(drawing, "index_buffer", lambda tri: made.append(1) or index_buffer(tri))
     shared = scenes.render_exr(tmp_path / "shared.exr")
     assert kinds() == (1, 3, 5)              # the source's, three instances', the ground's
+    assert len(made) == 2                    # the surface pass's: the source's, the ground's
+    # each instance its own index array, as before instances shared them
+    monkeypatch.setattr(drawing, "index_buffer", lambda tri: tri)
 
     monkeypatch.setattr(surfaces.SharedArrays, "source", lambda self, surface, arrays: None)
     lights.BATCHES.clear()
