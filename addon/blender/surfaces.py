@@ -194,10 +194,11 @@ class SharedArrays:
 
 
 def placed(local: MeshArrays, matrix) -> core_mesh.PlacedArrays:
-    """``local`` (object space) placed by ``matrix``: new positions, the same index arrays,
-    and corner normals placed (and repaired, as sync and the precompute repair an object's)
-    each time they are read: core.scene.mesh.PlacedArrays."""
+    """``local`` (object space) placed by ``matrix``: the same index arrays, and positions
+    and corner normals placed (the normals repaired, as sync and the precompute repair an
+    object's) each time they are read: core.scene.mesh.PlacedArrays."""
     M = np.asarray(matrix, np.float64)
-    pos, _ = scene_export.transformed(local.positions, np.zeros((0, 3)), M)
-    return core_mesh.PlacedArrays(local, pos, lambda: scene_export.transformed(
-        np.zeros((0, 3)), local.corner_normals, M)[1])
+    none = np.zeros((0, 3))
+    return core_mesh.PlacedArrays(
+        local, lambda: scene_export.transformed(local.positions, none, M)[0],
+        lambda: scene_export.transformed(none, local.corner_normals, M)[1])

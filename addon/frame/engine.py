@@ -174,7 +174,7 @@ PILOT_SUPERSAMPLING = 2
 def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, width: int,
                 height: int, transparent: bool, supersampling: int = 1,
                 object_draws=None, filter_width: float = 0.0, eye=None,
-                view_dir=None, adaptive: float = 0.0) -> np.ndarray:
+                view_dir=None, adaptive: float = 0.0, release: bool = False) -> np.ndarray:
     """Draw per-corner ``radiance`` (or a per-pixel method's ``object_draws``) offscreen:
     linear RGBA (height, width, 4), bottom row first.
 
@@ -184,8 +184,12 @@ def draw_pixels(state: FrameState, radiance, view: Matrix, projection: Matrix, w
     ``eye`` / ``view_dir`` (as :func:`_eye` gives them) let the per-pixel sharp lobes
     (:mod:`.sharp`) be added; without either they are not drawn.  ``adaptive`` > 0: only the
     pixels a one-sample pilot frame finds differing from a neighbour by that contrast get
-    every sample (drawing.render_offscreen; the scene's Adaptive Threshold)."""
+    every sample (drawing.render_offscreen; the scene's Adaptive Threshold).  ``release``:
+    the ``radiance`` list is emptied once the batches hold its values (an F12 frame's
+    largest arrays then do not live through the per-pixel passes)."""
     batches, textured = ([], []) if object_draws is not None else _batches(state, radiance)
+    if release and radiance is not None:
+        radiance.clear()
     s = max(1, int(supersampling))
     background = _background(state)
     seen = eye is not None or view_dir is not None
@@ -226,7 +230,7 @@ def render_pixels(state: FrameState, view: Matrix, projection: Matrix, width: in
     state.tick(0.85)
     pixels = draw_pixels(state, radiance, view, projection, width, height, transparent,
                          supersampling, object_draws=object_draws, filter_width=filter_width,
-                         eye=eye, view_dir=view_dir, adaptive=adaptive)
+                         eye=eye, view_dir=view_dir, adaptive=adaptive, release=True)
     state.tick(1.0)
     return pixels
 

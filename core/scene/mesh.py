@@ -96,17 +96,21 @@ def occluder_triangles(mesh: MeshArrays) -> tuple[np.ndarray, int]:
 
 
 class PlacedArrays(MeshArrays):
-    """An instance's arrays: its source's index arrays, its own world positions, and corner
-    normals placed by ``place_normals()`` and repaired (:func:`repair_normals`) each time
-    they are read, not held (the largest array of a placed copy: a thousand instances would
-    hold a thousand of them).  Read them once where they are used more than once."""
+    """An instance's arrays: its source's index arrays, and its world positions and corner
+    normals placed by ``place_positions()`` and ``place_normals()`` (the normals repaired:
+    :func:`repair_normals`) each time they are read, not held (a thousand instances of a
+    5k-vertex mesh would hold 0.3 GB of them through a frame).  Read them once where they
+    are used more than once."""
 
-    def __init__(self, local: MeshArrays, positions: np.ndarray, place_normals):
-        self.positions = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 3)
+    def __init__(self, local: MeshArrays, place_positions, place_normals):
         self.corner_verts, self.triangles = local.corner_verts, local.triangles
         self.corner_materials = local.corner_materials
         self.front_triangles, self.front_corners = local.front_triangles, local.front_corners
-        self._place_normals = place_normals
+        self._place_positions, self._place_normals = place_positions, place_normals
+
+    @property
+    def positions(self) -> np.ndarray:
+        return np.ascontiguousarray(self._place_positions(), dtype=np.float64).reshape(-1, 3)
 
     def _placed(self) -> tuple[np.ndarray, int]:
         """(the corner normals placed and repaired, how many were repaired)."""

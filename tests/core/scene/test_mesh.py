@@ -112,8 +112,9 @@ def test_repair_normals():
 
 def test_placed_arrays_place_and_repair_their_normals_each_time_they_are_read():
     """core.scene.mesh.PlacedArrays (an instance's arrays): the index arrays its source's,
-    the corner normals made when read, repaired as repair_normals repairs a held copy, and
-    counted by it; nothing a reader does to a copy it got changes the next one."""
+    the positions and corner normals made when read (the normals repaired as repair_normals
+    repairs a held copy, and counted by it); nothing a reader does to a copy it got changes
+    the next one."""
     local = flat_cube()
     local.corner_normals[0] = np.nan
     local.corner_normals[7] = [0.0, 0.0, 3.0]
@@ -124,8 +125,11 @@ def test_placed_arrays_place_and_repair_their_normals_each_time_they_are_read():
         made.append(1)
         return unit(local.corner_normals @ np.linalg.inv(turn))
     with np.errstate(invalid="ignore"):
-        placed = mesh.PlacedArrays(local, local.positions @ turn.T, place)
+        placed = mesh.PlacedArrays(local, lambda: local.positions @ turn.T, place)
         held = mesh.MeshArrays(placed.positions, local.corner_verts, place(), local.triangles)
+    got = placed.positions
+    got[:] = 0.0
+    np.testing.assert_allclose(placed.positions, held.positions, atol=1e-12)
     assert mesh.repair_normals(held) == 1
     with np.errstate(invalid="ignore"):
         assert mesh.repair_normals(placed) == 1
