@@ -27,10 +27,10 @@ seconds and peak.  A method whose F12 would pass the memory budget at the next s
 then a table over the sizes and the growth per 100k vertices (least-squares slope of
 each column over the vertex counts).  Writes ``out/bench/scale.txt`` and ``.json``.
 
-Instances (issue 31, ``--instances``): N collection instances of one Suzanne of about
+Instances (issue 31, ``--instances``): N collection instances of one Suzanne of
 ``--instance-vertices`` vertices on a ground, each traced in place (addon/blender/surfaces.py),
 one process per count: the precompute's seconds and peak, REFERENCE's F12 and its peak, and
-per instance the seconds, the stored bytes, the copies it holds (positions, occluders)
+per instance the seconds, the stored bytes, the copies it holds (its occluders)
 against the source's shared arrays; the same table, and the
 growth per instance.
 """
@@ -58,7 +58,7 @@ METHODS = ["REFERENCE", "SH", "WAVELET", "RSL", "BLOCKS", "SSDF_SG", "AUTO"]
 def parse_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--vertices", type=int, nargs="*", default=[25000, 100000, 250000, 500000],
-                   help="Suzanne's vertex counts (about: Suzanne's faces cut k x k)")
+                   help="Suzanne's vertex counts (faces cut k x k, single cuts make up the rest)")
     p.add_argument("--subsurf", type=int, nargs="*", default=[],
                    help="also Suzanne with these Subdivision Surface levels (4: 126k, 5: 504k)")
     p.add_argument("--methods", nargs="*", default=METHODS, help="F12 per method")
@@ -73,7 +73,7 @@ def parse_args(argv=None):
     p.add_argument("--instances", type=int, nargs="*", default=[16, 64],
                    help="also N collection instances of one mesh (issue 31's target: 1000)")
     p.add_argument("--instance-vertices", type=int, default=5000,
-                   help="vertices of the instanced mesh (about)")
+                   help="vertices of the instanced mesh")
     p.add_argument("--out-file", type=pathlib.Path, default=scenes.ROOT / "out/bench/scale.txt")
     p.add_argument("--child", default=None, help=argparse.SUPPRESS)
     p.add_argument("--blend", default=None, help=argparse.SUPPRESS)
@@ -243,7 +243,7 @@ def child(spec: str, args) -> dict:
 
 
 def child_instances(count: int, args) -> dict:
-    """``count`` collection instances of one Suzanne of about ``args.instance_vertices``
+    """``count`` collection instances of one Suzanne of ``args.instance_vertices``
     vertices, turned at random on a grid 1.2 m apart on a ground: the precompute and
     REFERENCE's F12, their times and peaks, and the bytes per instance."""
     import bpy
@@ -274,9 +274,9 @@ def child_instances(count: int, args) -> dict:
     shared = surfaces.SharedArrays()
     one = shared.arrays(next(f for f in found if f.instance))
     occ = core_mesh.occluder_mesh(one)[0]
-    # what an instance holds of its own: its positions and occluders (its corner normals
-    # are placed when read, core.scene.mesh.PlacedArrays)
-    copies = one.positions.nbytes + occ.vertices.nbytes + occ.triangles.nbytes
+    # what an instance holds of its own in the precompute: its occluders (its positions and
+    # corner normals are placed when read, core.scene.mesh.PlacedArrays)
+    copies = occ.vertices.nbytes + occ.triangles.nbytes
     out = dict(instances=count, vertices=len(ob.data.vertices), cores=os.cpu_count(),
                shared_bytes=shared.nbytes(), copy_bytes_per_instance=copies)
     tmp = pathlib.Path(args.blend).parent
@@ -306,7 +306,7 @@ def instance_table(results) -> str:
             ("precompute + F12 peak MiB", lambda r: _mib(r["precompute_f12_peak"])),
             ("stored KiB per instance", lambda r: f"{r['stored_bytes_per_instance'] / 1024:.0f}"),
             (".blend KiB per instance", lambda r: f"{r['blend_bytes_per_instance'] / 1024:.0f}"),
-            ("copies KiB per instance (positions, occluders)",
+            ("copies KiB per instance (occluders)",
              lambda r: f"{r['copy_bytes_per_instance'] / 1024:.0f}"),
             ("shared source arrays KiB", lambda r: f"{r['shared_bytes'] / 1024:.0f}")]
     width = max(len(n) for n, _ in rows)
