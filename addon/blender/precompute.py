@@ -37,7 +37,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     hidden = scene_export.hidden_in_viewport(depsgraph.view_layer, depsgraph)
     if hidden:
         warnings.append("Hidden in the viewport but shown in renders, so not traced (their "
-                        "shadows are missing; unhide them to precompute): " + ", ".join(hidden))
+                        "shadows are missing; unhide them to precompute): " + frame_status.listing(hidden))
     shared = surfaces.SharedArrays()
     found = surfaces.scene_surfaces(depsgraph)
     # an instancer whose own geometry is empty (points that geometry nodes instance on)
@@ -76,7 +76,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
         objects.append(job)
     warnings += frame_status.grouped_notes(notes)
     if empty:
-        warnings.append("Skipped mesh(es) without faces: " + ", ".join(empty))
+        warnings.append("Skipped mesh(es) without faces: " + frame_status.listing(empty))
     job_bytes = shared.nbytes()
     if not objects:
         raise scene_export.ExportError("Nothing to precompute: no visible mesh object has faces")

@@ -21,6 +21,7 @@ from ...core.scene import mesh as core_mesh, visibility
 from ...core.shading import brdf
 from ...core.shading.materials import slot_material
 from ...core.sphere import directions
+from ...core.pipeline import frame_status
 from ...core.store import layouts
 from ...core.transport import bounce as core_bounce
 from ..blender import storage
@@ -94,7 +95,7 @@ class FrameBounce:
             counts.add(data["clusters"])
         if missing:
             state.note("Precomputed without bounced light (press Precompute for the Light "
-                       "Paths' bounces): " + ", ".join(sorted(missing)))
+                       "Paths' bounces): " + frame_status.listing(sorted(missing)))
         if not receivers or len(counts) != 1:
             return None
         return cls(receivers, counts.pop(), bounces, tuple(blob_keys))

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...core.sphere import sources as core_lights
+from ...core.pipeline import frame_status
 from . import keys
 
 #: below this angular radius (rad) a source is point-like: its power at its centre
@@ -220,8 +221,7 @@ class ShadowPlan:
 
 
 def _names(sources) -> str:
-    names = [s.name for s in sources]
-    return ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+    return frame_status.listing(s.name for s in sources)
 
 
 def shadow_plan(sources) -> ShadowPlan:

@@ -38,6 +38,18 @@ def world_only(updates) -> bool:
                                  for kind, of_world in updates)
 
 
+#: how many names a note lists before it counts the rest (a scatter of a thousand
+#: instances is one readable line, not seven kilobytes of names)
+LISTED = 8
+
+
+def listing(names) -> str:
+    """``names`` joined for a note: the first :data:`LISTED` and how many more."""
+    names = list(names)
+    shown = ", ".join(names[:LISTED])
+    return shown if len(names) <= LISTED else f"{shown} and {len(names) - LISTED} more"
+
+
 @dataclass
 class SyncNotes:
     """Object names per kind of note, gathered while a frame state is synced."""
@@ -62,20 +74,23 @@ class SyncNotes:
         objects of the newest precompute than it had (shadows of removed objects stay)."""
         out = []
         if self.missing:
-            out.append("Not precomputed (drawn without shadows): " + ", ".join(self.missing))
+            out.append("Not precomputed (drawn without shadows): " + listing(self.missing))
         if self.older:
             out.append("Stored by an earlier prt_relight, which this version does not read "
-                       "(drawn without shadows, press Precompute): " + ", ".join(self.older))
-        out += [w + " (drawn without shadows)" for w in self.unreadable]
+                       "(drawn without shadows, press Precompute): " + listing(self.older))
+        out += [w + " (drawn without shadows)" for w in self.unreadable[:LISTED]]
+        if len(self.unreadable) > LISTED:
+            out.append(f"{len(self.unreadable) - LISTED} more objects cannot be read (drawn "
+                       "without shadows, precompute again)")
         if self.unshadowed:
             out.append("Hidden from renders (drawn without shadows, cast none): "
-                       + ", ".join(self.unshadowed))
+                       + listing(self.unshadowed))
         if self.stale:
             out.append("Changed since precompute (stale, press Precompute): "
-                       + ", ".join(self.stale))
+                       + listing(self.stale))
         elif self.earlier:
             out.append("Precomputed in an earlier run than the others (their shadows on each "
-                       "other may be stale, press Precompute): " + ", ".join(self.earlier))
+                       "other may be stale, press Precompute): " + listing(self.earlier))
         elif removed_since:
             out.append("Objects were removed or hidden from renders since the precompute: "
                        "their shadows are stale, press Precompute")

@@ -107,6 +107,7 @@ from __future__ import annotations
 import numpy as np
 
 from ....core.methods.auto import choice as auto_choice
+from ....core.pipeline import frame_status
 from ...gpu import drawing
 from ...frame import state as runtime
 from ...frame.keys import cache, env_key, held
@@ -303,7 +304,8 @@ class AutoShading(Shading):
         got = _SCENE_CACHE.get(scene_key)
         if got is None:
             out = assign(state, measured, target)
-            note = ("AUTO: " + ", ".join(f"{c['object']} → {c['choice']}" for c in out)
+            note = ("AUTO: " + frame_status.listing(f"{c['object']} → {c['choice']}"
+                                                    for c in out)
                     if out else None)
             got = (out, [(c["method"], c["setting"], c["value"]) for c in out], note)
             _SCENE_CACHE.clear()
@@ -366,7 +368,7 @@ class AutoShading(Shading):
         if assignment is not None:
             STORED_STATUS[:] = [text, ""]
             LAST_CHOICES[:] = got
-            return assignment, ["AUTO (stored choice): " + ", ".join(
+            return assignment, ["AUTO (stored choice): " + frame_status.listing(
                 f"{c['object']} → {c['choice']}" for c in got)], False
         STORED_STATUS[:] = [text, got]
         with state.span(0.0, 0.9):          # a live choice is most of such a frame

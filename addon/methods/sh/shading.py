@@ -8,6 +8,7 @@ from ....core.shading import materials
 from ....core.sphere import directions
 from ....core.methods.reference import shading as reference
 from ....core.methods.sh import harmonics as sh
+from ....core.pipeline import frame_status
 from ...frame import keys
 from ..contract import Shading
 
@@ -50,6 +51,6 @@ class SHShading(Shading):
             out.append(radiance[pts.point_of_corner].astype(np.float32))
         if glossy:
             state.note("SH draws diffuse transfer only; the glossy part of these materials is "
-                       "left out: " + ", ".join(sorted(set(glossy))))
+                       "left out: " + frame_status.listing(sorted(set(glossy))))
         return out
 

@@ -32,6 +32,7 @@ import numpy as np
 from ....core.sphere import directions
 from ....core.methods.ssdf_sg import ssdf, shading as ssdf_sg
 from ....core.methods.ssdf_sg import scene as scene
+from ....core.pipeline import frame_status
 from ...blender import storage
 from ...blender.texture_export import shader_inputs
 from ...frame import keys
@@ -224,12 +225,12 @@ class SSDFSGShading(Shading):
                 faded.append(f"'{st.name}' {field.occlusion_kept:.0%} ({field.terms} terms)")
         if derived_now:
             state.note("SSDF_SG: SSDFs computed at draw time (precompute with SSDF_SG to "
-                       "store them): " + ", ".join(derived_now))
+                       "store them): " + frame_status.listing(derived_now))
         if LAST_TERMS:
             state.note("SSDF_SG PCA: " + "; ".join(LAST_TERMS))
         if faded:
-            state.note("SSDF_SG: the PCA keeps only " + ", ".join(faded) + " of the blocked "
-                       "directions: shadows of small occluders (a low sun's) fade; Min Occlusion "
+            state.note("SSDF_SG: the PCA keeps only " + frame_status.listing(faded) + " of the "
+                       "blocked directions: shadows of small occluders (a low sun's) fade; Min Occlusion "
                        "Kept (or a smaller SSDF Error Budget) takes more terms (slower), then "
                        "precompute")
 

@@ -47,6 +47,20 @@ def test_no_note_no_message():
     assert ok.messages() == []
 
 
+def test_a_scatter_of_a_thousand_is_a_line_that_names_some_and_counts_the_rest():
+    notes = SyncNotes(unreadable=[f"'I{i}#0': damaged" for i in range(1000)])
+    for i in range(1000):
+        notes.add(f"I{i}#0", "missing")
+    out = notes.messages()
+    assert out[0].startswith("Not precomputed (drawn without shadows): I0#0, I1#0")
+    assert out[0].endswith(f"I{frame_status.LISTED - 1}#0 and {1000 - frame_status.LISTED} more")
+    damaged = [m for m in out if "damaged" in m]
+    assert len(damaged) == frame_status.LISTED
+    assert f"{1000 - frame_status.LISTED} more objects cannot be read" in out[-1]
+    assert len(out) == frame_status.LISTED + 2 and max(map(len, out)) < 200
+    assert frame_status.listing(["a", "b"]) == "a, b"
+
+
 def test_messages_name_their_objects_most_pressing_first():
     notes = SyncNotes(unreadable=["'Cube': the stored data is damaged"])
     notes.add("Grid", "missing")
