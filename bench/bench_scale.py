@@ -116,7 +116,7 @@ def add_suzanne(vertices=None, subsurf=None, height=1.6):
     bpy.ops.mesh.primitive_monkey_add()
     ob = bpy.context.active_object
     ob.name = "Suzanne"
-    k = max(1, round(math.sqrt(vertices / 485.0)))
+    k = max(1, math.floor(math.sqrt(vertices / 485.0)))   # the cuts stay under the count
     bm = bmesh.new()
     bm.from_mesh(ob.data)
     if k > 1:

@@ -54,7 +54,8 @@ def occlusion_test(objs):
     key = tuple(st.fingerprint for st in objs)
     scene = keys.held(_OCCLUDERS, key, (), lambda: visibility.build_occluder_scene(
         np.concatenate([core_mesh.occluder_triangles(st.arrays)[0] for st in objs])))
-    diag = core_mesh.bounding_diagonal(np.concatenate([st.arrays.positions for st in objs]))
+    box = core_mesh.bounds([st.arrays for st in objs])
+    diag = float(np.linalg.norm(box[1] - box[0])) if len(box) else 0.0
     step = 1e-4 * max(diag, 1e-6)
 
     def occluded(origins, dirs, dists):

@@ -467,8 +467,9 @@ def _tile_texture(state, sources, supersampling):
     if "LIGHT_TILES" not in frame_features(sources, supersampling):
         white = drawing.white_texture()
         return lambda view_projection: white
-    allp = np.concatenate([st.arrays.positions for st in state.objects])
-    boxes = light_tiles.influence_boxes(sources, allp.min(axis=0), allp.max(axis=0))
+    box = core_mesh.bounds([st.arrays for st in state.objects])
+    lo, hi = box if len(box) else (np.zeros(3), np.zeros(3))
+    boxes = light_tiles.influence_boxes(sources, lo, hi)
     made = {}
 
     def tiles(view_projection):

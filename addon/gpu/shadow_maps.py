@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core.scene import mesh as core_mesh
 from ..frame.sources import CUBE_AXES, atlas_grid
 from . import drawing, shaders
 
@@ -66,16 +67,15 @@ def distant_atlas(sources, casters, depth_batches, size: int):
     a batch in world space).  Cached per geometry and directions."""
     import gpu
     import mathutils
-    positions = [st.arrays.positions for st in casters]
-    allp = np.concatenate(positions) if positions else np.zeros((1, 3))
-    lo, hi = allp.min(axis=0), allp.max(axis=0)
-    centre = 0.5 * (lo + hi)
-    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6) * 1.01
     key = (tuple(st.fingerprint for st in casters), size,
            tuple(np.round(s.direction, 7).tobytes() for s in sources))
     got = _SHADOWS.get(key)
     if got is not None:
         return got
+    box = core_mesh.bounds([st.arrays for st in casters])
+    lo, hi = box if len(box) else (np.zeros(3), np.zeros(3))
+    centre = 0.5 * (lo + hi)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6) * 1.01
     cols, rows = atlas_grid(len(sources), size)
     width, height = size * cols, size * rows
     tex = _SHADOW_TARGET.get((width, height))

@@ -107,6 +107,7 @@ class PlacedArrays(MeshArrays):
         self.corner_materials = local.corner_materials
         self.front_triangles, self.front_corners = local.front_triangles, local.front_corners
         self._place_positions, self._place_normals = place_positions, place_normals
+        self._vertices = len(local.positions)
 
     @property
     def positions(self) -> np.ndarray:
@@ -115,8 +116,9 @@ class PlacedArrays(MeshArrays):
     def _placed(self) -> tuple[np.ndarray, int]:
         """(the corner normals placed and repaired, how many were repaired)."""
         normals = self._place_normals()
-        count = repair_normals(MeshArrays(self.positions, self.corner_verts, normals,
-                                          self.triangles, self.corner_materials))
+        # the repair reads the vertex count, not the positions: none placed for it
+        count = repair_normals(MeshArrays(np.zeros((self._vertices, 3)), self.corner_verts,
+                                          normals, self.triangles, self.corner_materials))
         return normals, count
 
     @property
@@ -308,6 +310,14 @@ def bounding_box(positions: np.ndarray) -> np.ndarray:
     if len(p) == 0:
         return np.zeros((0, 3))
     return np.array([p.min(axis=0), p.max(axis=0)])
+
+
+def bounds(meshes) -> np.ndarray:
+    """:func:`bounding_box` of every mesh's positions together, each mesh's read once and
+    not concatenated (an instance's are placed when read: a thousand would be a copy of
+    the scene per frame)."""
+    boxes = [bounding_box(m.positions) for m in meshes]
+    return bounding_box(np.concatenate(boxes)) if boxes else np.zeros((0, 3))
 
 
 def bounding_diagonal(positions: np.ndarray) -> float:

@@ -146,6 +146,16 @@ def test_placed_arrays_place_and_repair_their_normals_each_time_they_are_read():
         assert len(mesh.fingerprint(placed)) == 40        # it reads the placed normals
 
 
+def test_bounds_of_several_meshes_are_the_box_of_their_positions_together():
+    a, b = flat_cube(), icosphere(1)
+    b.positions = b.positions * 3.0 + [5.0, -1.0, 2.0]
+    b.positions[0] = np.nan                        # left out, as bounding_box leaves it
+    got = mesh.bounds([a, b])
+    both = np.concatenate([a.positions, b.positions[1:]])
+    np.testing.assert_allclose(got, [both.min(axis=0), both.max(axis=0)])
+    assert mesh.bounds([]).shape == (0, 3)
+
+
 def test_per_point_rows_of_per_corner_values():
     m = icosphere(1)                              # smooth: a point's corners are several
     sp = mesh.shading_points(m)
