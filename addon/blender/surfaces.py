@@ -199,6 +199,12 @@ def placed(local: MeshArrays, matrix) -> core_mesh.PlacedArrays:
     object's) each time they are read: core.scene.mesh.PlacedArrays."""
     M = np.asarray(matrix, np.float64)
     none = np.zeros((0, 3))
+
+    def positions():
+        # element by element, not a BLAS product (whose kernels may split rows differently
+        # from one call to the next): every read gives the same bits, as the passes' depth
+        # test EQUAL needs of positions drawn from two reads
+        p = local.positions
+        return p[:, :1] * M[:3, 0] + p[:, 1:2] * M[:3, 1] + p[:, 2:3] * M[:3, 2] + M[:3, 3]
     return core_mesh.PlacedArrays(
-        local, lambda: scene_export.transformed(local.positions, none, M)[0],
-        lambda: scene_export.transformed(none, local.corner_normals, M)[1])
+        local, positions, lambda: scene_export.transformed(none, local.corner_normals, M)[1])
