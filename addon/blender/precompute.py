@@ -37,7 +37,8 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     hidden = scene_export.hidden_in_viewport(depsgraph.view_layer, depsgraph)
     if hidden:
         warnings.append("Hidden in the viewport but shown in renders, so not traced (their "
-                        "shadows are missing; unhide them to precompute): " + frame_status.listing(hidden))
+                        "shadows are missing; unhide them to precompute): "
+                        + frame_status.listing(hidden))
     shared = surfaces.SharedArrays()
     found = surfaces.scene_surfaces(depsgraph)
     # an instancer whose own geometry is empty (points that geometry nodes instance on)

@@ -54,8 +54,7 @@ def occlusion_test(objs):
     key = tuple(st.fingerprint for st in objs)
     scene = keys.held(_OCCLUDERS, key, (), lambda: visibility.build_occluder_scene(
         np.concatenate([core_mesh.occluder_triangles(st.arrays)[0] for st in objs])))
-    box = core_mesh.bounds([st.arrays for st in objs])
-    diag = float(np.linalg.norm(box[1] - box[0])) if len(box) else 0.0
+    diag = core_mesh.bounding_diagonal(core_mesh.bounds([st.arrays for st in objs]))
     step = 1e-4 * max(diag, 1e-6)
 
     def occluded(origins, dirs, dists):

@@ -247,25 +247,41 @@ def surface_batch(positions: np.ndarray, radiance: np.ndarray, triangles,
 def index_buffer(triangles: np.ndarray):
     """A GPUIndexBuf of ``triangles`` (T, 3), for batches that share one
     (:func:`surface_batch`: instances of one source)."""
+    return _index(triangles)
+
+
+def _index(triangles):
     return gpu.types.GPUIndexBuf(type="TRIS",
                                  seq=np.ascontiguousarray(triangles, dtype=np.int32))
+
+
+# vertex formats per attribute names and lengths (vertex_buffer)
+_FORMATS = gpu_cache({}, limit=16, name="vertex formats")
+
+
+def vertex_buffer(columns):
+    """A GPUVertBuf of float attributes ``columns`` ((name, (N, n) values), ...), its format
+    made once per names and lengths."""
+    columns = [(name, np.ascontiguousarray(data, dtype=np.float32)) for name, data in columns]
+    layout = tuple((name, data.shape[1]) for name, data in columns)
+    fmt = _FORMATS.get(layout)
+    if fmt is None:
+        fmt = _FORMATS[layout] = gpu.types.GPUVertFormat()
+        for name, n in layout:
+            fmt.attr_add(id=name, comp_type="F32", len=n, fetch_mode="FLOAT")
+    vbo = gpu.types.GPUVertBuf(fmt, len(columns[0][1]))
+    for name, data in columns:
+        vbo.attr_fill(name, data)
+    return vbo
 
 
 def _corner_batch(shader, positions, values, triangles, closed_side):
     rgba = np.empty((len(values), 4), dtype=np.float32)
     rgba[:, :3] = values
     rgba[:, 3] = float(closed_side)
-    columns = {"pos": np.ascontiguousarray(positions, dtype=np.float32), "radiance": rgba}
-    if not isinstance(triangles, gpu.types.GPUIndexBuf):
-        return batch_for_shader(shader, "TRIS", columns,
-                                indices=np.ascontiguousarray(triangles, dtype=np.int32))
-    fmt = gpu.types.GPUVertFormat()
-    for name, data in columns.items():
-        fmt.attr_add(id=name, comp_type="F32", len=data.shape[1], fetch_mode="FLOAT")
-    vbo = gpu.types.GPUVertBuf(fmt, len(rgba))
-    for name, data in columns.items():
-        vbo.attr_fill(name, data)
-    return gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=triangles)
+    elem = triangles if isinstance(triangles, gpu.types.GPUIndexBuf) else _index(triangles)
+    return gpu.types.GPUBatch(type="TRIS", buf=vertex_buffer((("pos", positions),
+                                                              ("radiance", rgba))), elem=elem)
 
 
 def _quad_batch():

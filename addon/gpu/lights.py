@@ -28,7 +28,6 @@ from ..frame.sources import lamp_sources, shadow_plan
 #: view-cosine nodes of the per-material tables (lights_frag.glsl table)
 TABLE_NODES = 32
 
-_GPU = drawing.gpu_cache({})
 BATCHES = drawing.gpu_cache({})
 #: texels per source in srcTex (lights_frag.glsl's layout)
 SOURCE_TEXELS = 36
@@ -87,41 +86,22 @@ def frame_features(sources, supersampling: int = 1) -> tuple:
     return tuple(out)
 
 
-def _vertex_buffer(columns):
-    """A vertex buffer of the pass's attributes ``columns`` ((name, (C, n) values), in the
-    order of :data:`_LAYOUT`), one format per set of names."""
-    import gpu
-    names = tuple(name for name, _ in columns)
-    fmt = _GPU.get(("format", names))
-    if fmt is None:
-        fmt = _GPU[("format", names)] = gpu.types.GPUVertFormat()
-        for ident in names:
-            fmt.attr_add(id=ident, comp_type="F32", len=_LAYOUT[ident], fetch_mode="FLOAT")
-    vbo = gpu.types.GPUVertBuf(fmt, len(columns[0][1]))
-    for ident, data in columns:
-        vbo.attr_fill(ident, np.ascontiguousarray(data, dtype=np.float32))
-    return vbo
-
-
-#: the pass's per-corner attributes and their lengths (lights_vert.glsl)
-_LAYOUT = {"pos": 3, "nrm": 3, "uv": 2, "attr": 4, "tng": 4}
-
-
-def _index_buffer(triangles):
-    import gpu
-    return gpu.types.GPUIndexBuf(type="TRIS", seq=np.ascontiguousarray(triangles, np.int32))
-
-
 def _surface_batch(pos, nrm, uv, attr, tng, triangles):
     """A batch of the pass's vertex layout (any feature set's shader draws it): per face
     corner its values, ``triangles`` (T, 3) indexing them."""
     import gpu
-    vbo = _vertex_buffer((("pos", pos), ("nrm", nrm), ("uv", uv), ("attr", attr), ("tng", tng)))
+    vbo = drawing.vertex_buffer((("pos", pos), ("nrm", nrm), ("uv", uv), ("attr", attr), ("tng", tng)))
     return gpu.types.GPUBatch(type="TRIS", buf=vbo, elem=_index_buffer(triangles))
 
 
 def _depth_shader():
     return shaders.shader("shadow_depth")
+
+
+def _index_buffer(triangles):
+    """The pass's own index buffers (the surface pass's shared ones: drawing.index_buffer)."""
+    import gpu
+    return gpu.types.GPUIndexBuf(type="TRIS", seq=np.ascontiguousarray(triangles, np.int32))
 
 
 # --------------------------------------------------------------------------- geometry
@@ -149,7 +129,7 @@ def _object_batches(st):
         positions = st.arrays.positions
         out = []
         for slot, vertex, vbo, ibo in shared:
-            batch = gpu.types.GPUBatch(type="TRIS", buf=_vertex_buffer((("pos",
+            batch = gpu.types.GPUBatch(type="TRIS", buf=drawing.vertex_buffer((("pos",
                                                                          positions[vertex]),)),
                                        elem=ibo)
             batch.vertbuf_add(vbo)
@@ -202,16 +182,14 @@ def _source_batches(st):
     core_mesh.repair_normals(arrays)
     depth = _corner_layout(arrays)[1]
     points = core_mesh.shading_points(arrays)
-    first = np.zeros(points.count, np.int64)
-    first[points.point_of_corner] = np.arange(len(points.point_of_corner))
-    vertex_of_point = arrays.corner_verts[first]
+    vertex_of_point = arrays.corner_verts[core_mesh.point_corners(points)]
     tri = points.point_of_corner[arrays.triangles]
     tri_slot = points.materials[tri[:, 0]]
     out = []
     for slot in np.unique(tri_slot):
         point, index = np.unique(tri[tri_slot == slot], return_inverse=True)
         n = len(point)
-        vbo = _vertex_buffer((("nrm", points.normals[point]),
+        vbo = drawing.vertex_buffer((("nrm", points.normals[point]),
                               ("uv", np.zeros((n, 2))), ("attr", np.ones((n, 4))),
                               ("tng", np.zeros((n, 4)))))
         out.append((int(slot), vertex_of_point[point], vbo, _index_buffer(index.reshape(-1, 3))))

@@ -406,6 +406,14 @@ def shading_points(mesh: MeshArrays) -> ShadingPoints:
     )
 
 
+def point_corners(points: ShadingPoints) -> np.ndarray:
+    """(P,) one face corner of each shading point."""
+    poc = points.point_of_corner
+    corner = np.zeros(points.count, np.int64)
+    corner[poc] = np.arange(len(poc))
+    return corner
+
+
 def per_point(points: ShadingPoints, values: np.ndarray) -> np.ndarray | None:
     """Per-corner ``values`` (C, ...) as one row per shading point when every corner holds
     its point's (per-vertex radiance does), else None."""
@@ -413,9 +421,7 @@ def per_point(points: ShadingPoints, values: np.ndarray) -> np.ndarray | None:
     poc = points.point_of_corner
     if len(values) != len(poc):
         return None
-    first = np.zeros(points.count, np.int64)
-    first[poc] = np.arange(len(poc))
-    rows = values[first]
+    rows = values[point_corners(points)]
     return rows if np.array_equal(rows[poc], values) else None
 
 
