@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...core.shading import brdf as core_brdf
+from ...core.shading import brdf as core_brdf, microfacet
 from ...core.shading.materials import Material
 from ...core.scene import mesh as core_mesh
 from ...core.scene import textures
@@ -57,6 +57,8 @@ def slot_features(params: np.ndarray, albedo_source) -> tuple:
         out.append("NORMAL_MAP")
     if albedo_source is not None:
         out.append("ALBEDO_TEX")
+    # each roughness node's lobes (rows 4k + 4; row 0 without a textured Roughness)
+    out += microfacet.lobe_signature((*p[1, 1:3], p[2, 0], p[5, 0]) for p in params[::4])
     return tuple(out)
 
 

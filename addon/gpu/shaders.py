@@ -53,6 +53,10 @@ _COMMON = ("lib/constants.glsl", "lib/common.glsl")
 SG_LIBRARY = _COMMON + ("lib/microfacet.glsl", "lib/sg.glsl")
 _SSDF_SG_LIBS = SG_LIBRARY + ("lib/texture.glsl", "methods/ssdf_sg_lib.glsl")
 
+#: a draw's shared lobe signature compiled in (core.shading.microfacet.lobe_signature)
+_LOBE_SIGNATURE = (("LOBE_DIST", ("0", "1")), ("LOBE_COUNT", ("0", "1", "2")),
+                   ("LOBE_KIND0", ("0", "1", "2", "3")), ("LOBE_KIND1", ("2", "3")))
+
 _SSDF_SG = Spec(
     vertex=("methods/ssdf_sg_vert.glsl",),
     fragment=_SSDF_SG_LIBS + ("methods/ssdf_sg_frag.glsl",),
@@ -111,7 +115,7 @@ SPECS: dict[str, Spec] = {
         # what a draw lacks is left out of its shader, not branched around
         switches=("GLOSSY", "ROUGH_TEX", "NORMAL_MAP", "ALBEDO_TEX", "PLACED", "LOCAL_LAMPS",
                   "AREA_LAMPS", "LIGHT_TILES"),
-        values=(("PCF_TAPS", ("12", "4")), ("LOBE_TAPS", ("4", "2")))),
+        values=(("PCF_TAPS", ("12", "4")), ("LOBE_TAPS", ("4", "2"))) + _LOBE_SIGNATURE),
     # a sun-like source's shadow map: depth only
     "shadow_depth": Spec(
         vertex=("passes/shadow_depth_vert.glsl",), fragment=("passes/shadow_depth_frag.glsl",),
@@ -180,7 +184,7 @@ SPECS: dict[str, Spec] = {
         samplers=tuple(("FLOAT_2D", n) for n in ("pointData", "visTex", "envData", "matData")),
         vertex_inputs=(("VEC2", "ndc"),),
         # the diffuse sum (no material) instead of the glossy one
-        switches=("IRRADIANCE",)),
+        switches=("IRRADIANCE",), values=_LOBE_SIGNATURE),
     # RSL's per-vertex pass: one texel per shading point (methods/rsl/shading.py)
     "rsl_vertex": Spec(
         vertex=("passes/fullscreen_vert.glsl",),

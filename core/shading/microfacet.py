@@ -202,3 +202,26 @@ def dielectric_s(cos_i, eta: float) -> np.ndarray:
     F -= dt(F0)
     F *= dt(1.0 / (1.0 - F0))
     return np.clip(F, 0.0, 1.0, out=F)
+
+
+def lobe_signature(entries) -> tuple[str, ...]:
+    """The shader defines of the lobe signature a draw's materials share (shaders/lib/
+    microfacet.glsl: ``LOBE_DIST``, ``LOBE_COUNT``, ``LOBE_KIND0``, ``LOBE_KIND1``), so that
+    a draw compiles only its own Fresnel kinds and distribution in.  ``entries``: per
+    material drawn, (distribution 0 Beckmann / 1 GGX, lobe count, the first lobe's
+    ``core.shading.brdf.sharp_lobes`` kind, the second's); a value the materials do not share is left to
+    be read at run time.  The distribution and a lobe's kind count only where a material has
+    that lobe."""
+    rows = [tuple(int(round(float(v))) for v in e) for e in entries]
+
+    def shared(values):
+        values = set(values)
+        return values.pop() if len(values) == 1 else None
+    out = []
+    for name, value in (("LOBE_DIST", shared(d for d, n, _k0, _k1 in rows if n >= 1)),
+                        ("LOBE_COUNT", shared(n for _d, n, _k0, _k1 in rows)),
+                        ("LOBE_KIND0", shared(k0 for _d, n, k0, _k1 in rows if n >= 1)),
+                        ("LOBE_KIND1", shared(k1 for _d, n, _k0, k1 in rows if n >= 2))):
+        if value is not None:
+            out.append(f"{name} {value}")
+    return tuple(out)

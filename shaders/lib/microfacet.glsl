@@ -5,6 +5,32 @@
 
 /* ---------------------------------------------------------------- microfacet terms */
 
+/* A draw whose points all share a lobe signature has it compiled in (the add-on's
+ * core.shading.microfacet.lobe_signature defines): LOBE_DIST (0 Beckmann / 1 GGX), LOBE_COUNT, and
+ * each lobe's Fresnel kind LOBE_KIND0 / LOBE_KIND1 (lobe_fresnel).  llvmpipe runs every side
+ * of a branch under a mask, a GPU keeps every side's registers; without a define the value
+ * read at run time is used, the same arithmetic either way. */
+#ifdef LOBE_DIST
+#define SIG_DIST(d) LOBE_DIST
+#else
+#define SIG_DIST(d) (d)
+#endif
+#ifdef LOBE_COUNT
+#define SIG_COUNT(n) LOBE_COUNT
+#else
+#define SIG_COUNT(n) (n)
+#endif
+#ifdef LOBE_KIND0
+#define SIG_KIND0(k) LOBE_KIND0
+#else
+#define SIG_KIND0(k) (k)
+#endif
+#ifdef LOBE_KIND1
+#define SIG_KIND1(k) LOBE_KIND1
+#else
+#define SIG_KIND1(k) (k)
+#endif
+
 float ndf(int dist, float a, float c)
 {
   float c2 = c * c;

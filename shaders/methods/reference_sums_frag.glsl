@@ -61,7 +61,7 @@ void main()
   vec3 w1 = texelFetch(pointData, q + ivec2(0, 3 * rows), 0).rgb;
   int m = int(nm.w + 0.5);
   vec4 head = texelFetch(matData, ivec2(0, m), 0);
-  int lobes = int(head.z + 0.5);
+  int lobes = SIG_COUNT(int(head.z + 0.5));
   if (lobes == 0) {
     fragColor = vec4(0.0);
     return;
@@ -69,7 +69,7 @@ void main()
   vec3 o = vc.xyz;
   float cos_o = vc.w;
   float a = head.x;
-  int dist = int(head.y + 0.5);
+  int dist = SIG_DIST(int(head.y + 0.5));
   float lam_o = smith_lambda(dist, a, cos_o);
   vec4 k0 = texelFetch(matData, ivec2(1, m), 0);
   vec3 f00 = texelFetch(matData, ivec2(2, m), 0).rgb;
@@ -107,9 +107,9 @@ void main()
         float lobe = ndf(dist, a, cos_h) /
                      (4.0 * cos_o * (1.0 + smith_lambda(dist, a, cos_i) + lam_o));
         float h_i = sqrt(clamp(0.5 * (1.0 + dot_io), 0.0, 1.0));
-        vec3 f = w0 * lobe_fresnel(int(k0.x + 0.5), f00, B0, k0.y, h_i);
+        vec3 f = w0 * lobe_fresnel(SIG_KIND0(int(k0.x + 0.5)), f00, B0, k0.y, h_i);
         if (lobes > 1) {
-          f += w1 * lobe_fresnel(int(k1.x + 0.5), f01, B1, k1.y, h_i);
+          f += w1 * lobe_fresnel(SIG_KIND1(int(k1.x + 0.5)), f01, B1, k1.y, h_i);
         }
         sum += lobe * f * Ldw;
 #endif

@@ -163,10 +163,10 @@ vec3 glossy_f_cos(vec3 n, vec3 o, vec3 i, float cos_o, float a, int dist, int lo
   float oh = clamp(dot(o, h), 0.0, 1.0);
   vec3 f = vec3(0.0);
   if (lobes > 0) {
-    f += lobeKind0.y * ms0 * lobe_fresnel(int(lobeKind0.x), lobeF00, lobeB0, lobeKind0.z, oh);
+    f += lobeKind0.y * ms0 * lobe_fresnel(SIG_KIND0(int(lobeKind0.x)), lobeF00, lobeB0, lobeKind0.z, oh);
   }
   if (lobes > 1) {
-    f += lobeKind1.y * ms1 * lobe_fresnel(int(lobeKind1.x), lobeF01, lobeB1, lobeKind1.z, oh);
+    f += lobeKind1.y * ms1 * lobe_fresnel(SIG_KIND1(int(lobeKind1.x)), lobeF01, lobeB1, lobeKind1.z, oh);
   }
   return f * common_term;
 }
@@ -626,14 +626,14 @@ void main()
 #endif
   vec4 lobe = param(1, 0);
   float a = texAlpha > 0.0 ? texAlpha : max(lobe.x, MICROFACET_ALPHA_MIN);
-  int dist = int(lobe.y);
+  int dist = SIG_DIST(int(lobe.y));
   /* where the samples sample the lobe (area lamps, discs wider than the footprint, mapped
    * normals) it is widened to the footprint's variance (a box's |dx x dy| / 12 per axis
    * against the lobe's 2 alpha^2), so a shape's edge is the pixel's share of it; a0 the
    * slot's own */
   float a0 = a;
   a = max(a, sqrt(length(cross(mdx, mdy)) / 24.0));
-  int lobes = int(lobe.z);
+  int lobes = SIG_COUNT(int(lobe.z));
   read_lobes(lobes);
 #ifdef GLOSSY
   bool glossy = lobe.w > 0.5 && lobes > 0;

@@ -61,6 +61,31 @@ def test_glsl_glossy_sums_equal_numpy(registered_addon):
 
 
 @pytest.mark.slow
+def test_glsl_glossy_sums_with_a_signature_compiled_in_equal_numpy(registered_addon):
+    """A pass over one material compiles its distribution, lobe count and Fresnel kinds in
+    (core.shading.microfacet.lobe_signature): each kind and distribution alone, as numpy sums it."""
+    from prt_relight.addon.methods.reference import gpu as method
+    from prt_relight.addon.frame.engine import in_render
+    gpu_context()
+    pos, nrm, bits = occluded_grid(6)
+    lighting = envmap.WorldLighting(image=sky_with_sun(),
+                                    rotation=envmap.euler_xyz_matrix(0.3, 0.1, 1.7)
+                                    ).to_cubemap(32)
+    eye = np.array([-2.0, -3.0, 2.5])
+    views = reference.view_directions(pos, eye)
+    point_mat = np.zeros(len(nrm), np.int64)
+    for k, mat in enumerate(MATERIALS[1:]):
+        st = SimpleNamespace(name=f"one {k}", bits=bits)
+        got = in_render(bpy.context.scene, lambda _d: method.specular_radiance(
+            st, nrm, point_mat, [mat], CUBE, lighting, views, ("one", k)))
+        want = reference.specular_radiance(bits, pos, nrm, eye, CUBE, lighting, mat,
+                                           view_dirs=views)
+        assert np.abs(want).max() > 0.0, k
+        np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-4 * np.abs(want).max(),
+                                   err_msg=str(k))
+
+
+@pytest.mark.slow
 def test_glsl_irradiance_equals_numpy(registered_addon):
     from prt_relight.addon.frame.engine import in_render
     from prt_relight.addon.methods.reference import gpu as method

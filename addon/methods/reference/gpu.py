@@ -11,7 +11,7 @@ import hashlib
 
 import numpy as np
 
-from ....core.shading import brdf as core_brdf
+from ....core.shading import brdf as core_brdf, microfacet
 from ....core.shading.materials import slot_material
 from ...frame import keys
 from ...gpu import drawing, shaders, visibility
@@ -127,7 +127,10 @@ def _pass(st, pts, cube, lighting, mats=None):
     if mats is not None:
         textures += (("matData", _texture(mats)),)
         ints += (("rows", rows),)
-    shader = shaders.shader("reference_sums", () if mats is not None else ("IRRADIANCE",))
+    shader = shaders.shader("reference_sums", ("IRRADIANCE",) if mats is None else
+                            microfacet.lobe_signature(
+                                mats[m, 0, 1:3].tolist() + [mats[m, 1, 0], mats[m, 4, 0]]
+                                for m in np.unique(pts[0, :, 3].astype(np.int64))))
     chunk = max(TILE, CHUNK_ROWS - CHUNK_ROWS % TILE)     # whole blocks per draw
     out = np.concatenate([
         drawing.texel_pass(shader, WIDTH, min(rows - first, chunk),

@@ -6,7 +6,7 @@ dtype given.  No bpy."""
 import numpy as np
 import pytest
 
-from prt_relight.core.shading import brdf
+from prt_relight.core.shading import brdf, microfacet
 
 from .quadrature import DISTS, hemisphere_grid, view_at
 
@@ -83,3 +83,29 @@ def test_lambda_of_t2_is_smith_lambda_in_the_dtype_given():
     a = 1.0 / np.sqrt(0.5)
     assert microfacet.lambda_of_t2("BECKMANN", np.array([0.5]))[0] == pytest.approx(
         (1 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a))
+
+
+def test_lobe_signature_defines_only_what_every_material_shares():
+    """The shaders compile a draw's shared distribution, lobe count and Fresnel kinds in;
+    what differs between its materials stays a run-time value."""
+    metal = (1.0, 2.0, brdf.SHARP_F82, brdf.SHARP_DIELECTRIC)    # GGX, a metal and a dielectric
+    plastic = (1.0, 1.0, brdf.SHARP_DIELECTRIC, 0.0)
+    diffuse = (0.0, 0.0, 0.0, 0.0)                                # no lobe: its kinds are not read
+    assert microfacet.lobe_signature([plastic, plastic]) == (
+        "LOBE_DIST 1", "LOBE_COUNT 1", f"LOBE_KIND0 {brdf.SHARP_DIELECTRIC}")
+    assert microfacet.lobe_signature([metal]) == (
+        "LOBE_DIST 1", "LOBE_COUNT 2", f"LOBE_KIND0 {brdf.SHARP_F82}",
+        f"LOBE_KIND1 {brdf.SHARP_DIELECTRIC}")
+    # a diffuse-only material: the count differs, the glossy ones' distribution and kind do not
+    assert microfacet.lobe_signature([plastic, diffuse]) == (
+        "LOBE_DIST 1", f"LOBE_KIND0 {brdf.SHARP_DIELECTRIC}")
+    # a metal beside a plastic: the first lobe's kind differs, the second is the metal's alone
+    assert microfacet.lobe_signature([metal, plastic]) == (
+        "LOBE_DIST 1", f"LOBE_KIND1 {brdf.SHARP_DIELECTRIC}")
+    beckmann = (0.0, 1.0, brdf.SHARP_SCHLICK, 0.0)
+    assert microfacet.lobe_signature([beckmann, plastic]) == ("LOBE_COUNT 1",)
+    assert microfacet.lobe_signature([diffuse]) == ("LOBE_COUNT 0",)
+    assert microfacet.lobe_signature([]) == ()
+    # the values the add-on reads from float32 texel rows
+    rows = np.array([plastic], np.float32)
+    assert microfacet.lobe_signature(rows) == microfacet.lobe_signature([plastic])
