@@ -80,6 +80,7 @@ CONSTANTS = (
     ("BLOCKER_TAPS", "addon.gpu.lights:BLOCKER_TAPS", "int"),
     ("FILTER_TAPS", "addon.gpu.lights:FILTER_TAPS", "int"),
     ("LOBE_SAMPLES", "addon.gpu.lights:LOBE_SAMPLES", "int"),
+    ("COUNT_TEXEL", "addon.gpu.lights:COUNT_TEXEL", "int"),
     ("MAX_TERMS", "addon.methods.rsl.shading:MAX_TERMS", "int"),
 )
 

@@ -6,8 +6,8 @@ the scene, clipped to the scene's box; an area lamp the scene's box unless all o
 behind the lamp; a point lamp or a distant source the whole scene.  The box's corners are
 projected by the frame's view-projection; the tiles its screen rectangle meets list the
 light (a box reaching behind the camera: every tile).  ``lights_frag.glsl`` (LIGHT_TILES)
-reads the list from a float texture: per tile a texel (count, -, -, -) and the light
-indices four per texel, a row of tiles per texture row, the last row's first texel (origin
+reads the list from a float texture: per tile a texel (its lights of each group: distant,
+point and spot, area; lights.py's srcTex order) and the light indices four per texel, a row of tiles per texture row, the last row's first texel (origin
 x, y of the viewport, tile size, texels per tile)."""
 
 from __future__ import annotations
@@ -86,8 +86,9 @@ def screen_rects(boxes, view_projection, width, height) -> np.ndarray:
     return out
 
 
-def tile_table(rects, width, height, origin=(0, 0)) -> np.ndarray:
-    """The LIGHT_TILES texture (rows, texels, 4) float32 of the lights' pixel ``rects``."""
+def tile_table(rects, width, height, groups, origin=(0, 0)) -> np.ndarray:
+    """The LIGHT_TILES texture (rows, texels, 4) float32 of the lights' pixel ``rects``,
+    whose ``groups`` (counts: distant, point and spot, area) follow one another."""
     n = len(rects)
     tile = TILE
     while True:
@@ -102,7 +103,9 @@ def tile_table(rects, width, height, origin=(0, 0)) -> np.ndarray:
             break
         tile *= 2
     table = np.full((ty + 1, tx, stride * 4), -1.0, np.float32)
-    table[:ty, :, 0] = counts
+    ends = np.cumsum(groups)
+    for g in range(3):                      # each group's lights in the tile
+        table[:ty, :, g] = member[..., ends[g] - groups[g]:ends[g]].sum(-1)
     # each tile's members first, in the pass's order (a stable sort of "not a member")
     order = np.argsort(~member, axis=-1, kind="stable")[..., :(stride - 1) * 4]
     order = np.where(np.arange(order.shape[-1]) < counts[..., None], order, -1)

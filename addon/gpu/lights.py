@@ -31,6 +31,8 @@ TABLE_NODES = 32
 BATCHES = drawing.gpu_cache({})
 #: texels per source in srcTex (lights_frag.glsl's layout)
 SOURCE_TEXELS = 36
+#: srcTex row 0's texel of the light groups' counts (distant, point and spot, area)
+COUNT_TEXEL = 35
 
 
 # --------------------------------------------------------------------------- shaders
@@ -354,6 +356,13 @@ def draws(state, eye, view_dir, supersampling: int, pilot: int) -> tuple[list, l
         if any(any(f) for f in plan.faces) else (drawing.white_texture(), [])
     src = np.zeros((len(sources), SOURCE_TEXELS, 4), np.float32)
     in_world = len(state.sources)           # the World's sources come first, all distant
+    # srcTex's rows by group (lights_frag.glsl loops over each with its own code): the
+    # distant sources, then the point and spot lamps, then the area lamps
+    rows = [j for j, s in enumerate(local) if s.area is None]
+    rows += [j for j, s in enumerate(local) if s.area is not None]
+    groups = (len(distant), sum(s.area is None for s in local),
+              sum(s.area is not None for s in local))
+    src[0, COUNT_TEXEL, :3] = groups
     for k, s in enumerate(distant):
         src[k, 0] = (*s.direction, s.radius)
         src[k, 1] = (*s.radiance, 1.0 if s.point_like else 0.0)
@@ -363,8 +372,8 @@ def draws(state, eye, view_dir, supersampling: int, pilot: int) -> tuple[list, l
             src[k, 2:6] = M.T                   # columns of the matrix (GLSL mat4 order)
             src[k, 6] = (*tile, depth_range)
             src[k, 7] = (texel, *(M[0, :3] / np.linalg.norm(M[0, :3])))   # the map's x axis
-    for j, s in enumerate(local):
-        k = len(distant) + j
+    for row, j in enumerate(rows):
+        s, k = local[j], len(distant) + row
         src[k, 0] = (*s.position, s.radius)
         src[k, 1] = (*s.radiance, 2.0 if s.spot is None else 3.0)
         if s.area is not None:
@@ -400,16 +409,17 @@ def draws(state, eye, view_dir, supersampling: int, pilot: int) -> tuple[list, l
                           _normal_texture(st, slot), features))
         objects.append(slots)
     textures = (src_tex, shadow_tex, cube_tex)
-    ordered = distant + local                   # as srcTex holds them
-    return (_frame_draws(state, ordered, objects, textures, supersampling),
-            _frame_draws(state, ordered, objects, textures, pilot))
+    ordered = distant + [local[j] for j in rows]          # as srcTex holds them
+    return (_frame_draws(state, ordered, groups, objects, textures, supersampling),
+            _frame_draws(state, ordered, groups, objects, textures, pilot))
 
 
-def _frame_draws(state, sources, objects, textures, supersampling) -> list:
+def _frame_draws(state, sources, groups, objects, textures, supersampling) -> list:
     """The draw callables of :func:`draws`' ``objects`` for a frame of ``supersampling``²
-    samples per pixel (``sources`` in srcTex's order: the light tiles index them)."""
+    samples per pixel (``sources`` in srcTex's order, ``groups`` its light groups' counts:
+    the light tiles index them)."""
     src_tex, shadow_tex, cube_tex = textures
-    tile_tex = _tile_texture(state, sources, supersampling)
+    tile_tex = _tile_texture(state, sources, groups, supersampling)
     per_frame = frame_features(sources, supersampling)
     out = []
     for object_slots in objects:
@@ -441,7 +451,7 @@ def _frame_draws(state, sources, objects, textures, supersampling) -> list:
     return out
 
 
-def _tile_texture(state, sources, supersampling):
+def _tile_texture(state, sources, groups, supersampling):
     """``tiles(view_projection)``: the LIGHT_TILES texture of the frame's view (made once per
     view and viewport, shared by every object's draw); a white texture with few lights."""
     if "LIGHT_TILES" not in frame_features(sources, supersampling):
@@ -460,6 +470,6 @@ def _tile_texture(state, sources, supersampling):
         if key not in made:
             made.clear()
             rects = light_tiles.screen_rects(boxes, M, w, h)
-            made[key] = _texture(light_tiles.tile_table(rects, w, h, origin=(x, y)))
+            made[key] = _texture(light_tiles.tile_table(rects, w, h, groups, origin=(x, y)))
         return made[key]
     return tiles

@@ -45,4 +45,5 @@ const int TABLE_NODES = 32;  /* addon.gpu.lights.TABLE_NODES */
 const int BLOCKER_TAPS = 16;  /* addon.gpu.lights.BLOCKER_TAPS */
 const int FILTER_TAPS = 24;  /* addon.gpu.lights.FILTER_TAPS */
 const int LOBE_SAMPLES = 8;  /* addon.gpu.lights.LOBE_SAMPLES */
+const int COUNT_TEXEL = 35;  /* addon.gpu.lights.COUNT_TEXEL */
 const int MAX_TERMS = 8;  /* addon.methods.rsl.shading.MAX_TERMS */

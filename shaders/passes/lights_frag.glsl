@@ -38,7 +38,9 @@
  * axis, cos of its half angle), 3 (spot smoothstep width), 6 (-, -, cubeTex face size; 0:
  * no shadow map), 8..31 the six faces' world-to-clip columns, 32..34 the faces' tile
  * origins in cubeTex (x, y of faces 2k and 2k + 1; x < 0 a face not drawn).  Every
- * source is drawn (no cap): the loop runs over srcTex's rows.  An area lamp (kind 4 a
+ * source is drawn (no cap): the rows hold the distant sources, then the point and spot
+ * lamps, then the area lamps, and row 0's COUNT_TEXEL how many of each (main loops over
+ * each group with its own code, light_term).  An area lamp (kind 4 a
  * rectangle, 5 an ellipse): 0 (centre, radius of a disc of its area), 1 (radiance), 2 (the
  * way it faces), 4, 5 (its half axes), and its cube shadow map as a local lamp's.
  *
@@ -570,6 +572,160 @@ vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_
 
 /* ---------------------------------------------------------------- main */
 
+/* ---------------------------------------------------------------- one light */
+
+/* the light groups in srcTex's order (addon/gpu/lights.py draws): the distant sources, the
+ * point and spot lamps, the area lamps.  Each of main's loops passes its group as a literal,
+ * so it compiles its own kind's code only: llvmpipe would run every kind's code under a
+ * mask for every light, a GPU keep every kind's registers. */
+#define DISTANT_GROUP 0
+#define LOCAL_GROUP 1
+#define AREA_GROUP 2
+
+/* light s's share of the fragment's radiance (main's shading state passed in) */
+vec3 light_term(int group, int s, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_o, vec4 kd,
+                vec3 wd, float a, float a0, int dist, int lobes, bool glossy, bool sharpSlot,
+                bool mapped, float lam_o, vec3 ms0, vec3 ms1, float reach2, vec3 spec_w,
+                vec3 tx, vec3 ty, vec2 shift)
+{
+  vec4 s0 = source(s, 0);
+  vec4 s1 = source(s, 1);
+  vec3 c = s0.xyz;
+  float r = s0.w;
+  float kind = s1.w;      /* 0 disc, 1 point-like direction, 2 point, 3 spot, 4/5 area */
+  float inv_dist = 0.0;   /* a local lamp: 1 / its distance (footprint_share) */
+  /* the highlight's spread per axis (lobe 2 alpha^2, disc r^2 / 4; a point-like or
+   * local source's none): narrower than the samples, it is drawn through the footprint */
+  float sr2 = highlight_spread2(a0, kind > 0.5 ? 0.0 : r);
+  /* a slot whose lobes the sharp pass draws reflects a compact source of the World here
+   * only where it is drawn through the footprint (the sharp pass leaves its pixels out
+   * there, sharp_lobe_frag.glsl; elsewhere it reads them, the source's true shape) */
+  bool glossyHere = glossy && (!sharpSlot || kind > 1.5 || source(s, 8).x < 0.5 ||
+                               sr2 < reach2);
+#ifdef AREA_LAMPS
+  if (group == AREA_GROUP) {        /* an area lamp: a rectangle (4) or an ellipse (5) */
+    if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
+      return vec3(0.0);                           /* behind its emitting side */
+    }
+    /* the whole lamp below the shading normals' horizons adds nothing: no shadow taps
+     * (its corners, an ellipse's 16-gon reaching 1.013 of its half axes) */
+    vec3 w0 = s0.xyz - vPos, hx = 1.02 * source(s, 4).xyz, hy = 1.02 * source(s, 5).xyz;
+    if ((kd.w < 0.5 || dot(nd, w0) + abs(dot(nd, hx)) + abs(dot(nd, hy)) <= 0.0) &&
+        (!glossyHere || dot(n, w0) + abs(dot(n, hx)) + abs(dot(n, hy)) <= 0.0)) {
+      return vec3(0.0);
+    }
+    float Va = local_visibility(s, vPos, ng, s0.xyz, s0.w, shift);
+    return Va > 0.0 ? Va * area_lamp(s, kind > 4.5, n, nd, ng, o, cos_o, kd, wd, a, dist,
+                                     lobes, glossyHere, lam_o, ms0, ms1, tx, ty, shift)
+                    : vec3(0.0);
+  }
+#endif
+#ifdef LOCAL_LAMPS
+  if (group == LOCAL_GROUP) {       /* a local lamp: the sphere seen from here */
+    vec3 to_lamp = s0.xyz - vPos;
+    float d2 = max(dot(to_lamp, to_lamp), 1e-12);
+    inv_dist = inversesqrt(d2);
+    c = to_lamp * inversesqrt(d2);
+    float e = 1.0 / (4.0 * PI * d2);              /* Cycles: Phi / (4 pi d^2) at normal */
+    if (kind > 2.5) {                             /* spot cone (core.sg.lighting) */
+      vec4 spot = source(s, 2);
+      float smooth_w = source(s, 3).x;
+      float t = dot(-c, spot.xyz);
+      e *= smooth_w > 0.0 ? smoothstep(0.0, 1.0, (t - spot.w) / smooth_w)
+                          : (t > spot.w ? 1.0 : 0.0);
+    }
+    if (e <= 0.0) {
+      return vec3(0.0);
+    }
+    r = asin(min(s0.w * inversesqrt(d2), 0.999));
+    kind = r < 1e-4 ? 1.0 : 0.0;
+    s1.rgb *= kind > 0.5 ? e : e / (PI * sin(r) * sin(r));
+  }
+#endif
+  float below = -sin(r);
+  if (dot(ng, c) < below) {
+    return vec3(0.0);                             /* the whole disc is below the plane */
+  }
+  /* or below the shading normals' horizons (the diffuse term's, the glossy lobes'): it adds
+   * nothing there, and its shadow taps are the pass's largest cost */
+  if ((kd.w < 0.5 || dot(nd, c) < below) && (!glossyHere || dot(n, c) < below)) {
+    return vec3(0.0);
+  }
+  float V = group == LOCAL_GROUP ? local_visibility(s, vPos, ng, s0.xyz, s0.w, shift)
+                                 : visibility(s, vPos, ng, r, shift);
+  if (V <= 0.0) {
+    return vec3(0.0);
+  }
+  vec3 sum = vec3(0.0);
+  bool through = glossyHere && sr2 < reach2;
+  vec3 glossy_through = through && dot(n, c) > 0.0 &&
+                        !(mappedN && dot(smoothN, c) * dot(smoothN, n) < 0.0)
+                        ? spec_w * footprint_share(c, sr2, inv_dist) : vec3(0.0);
+  if (kind > 0.5) {                               /* point-like: its irradiance */
+    if (dot(ng, c) > 0.0) {
+      sum = (kd.rgb * wd * max(dot(nd, c), 0.0) * (mapped ? bump_shadowing(smoothN, nd, c) : 1.0) +
+             (through ? glossy_through :
+              glossyHere ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
+                     : vec3(0.0))) * s1.rgb;
+    }
+  }
+  else {
+    float cos_r = cos(r);
+    float omega = 2.0 * PI * (1.0 - cos_r);
+    vec3 L = s1.rgb;
+    /* Lambert: the cap's exact cosine integral while above both horizons */
+    float nc = dot(nd, c);
+    float sr = sin(r);
+    bool clear = nc >= sr && dot(ng, c) >= sr;
+    if (kd.w > 0.5 && clear) {
+      /* a mapped normal's terminator factor at the disc's centre */
+      sum += kd.rgb * wd * (PI * sr * sr * nc) * L *
+             (mapped ? bump_shadowing(smoothN, nd, c) : 1.0);
+    }
+    /* a disc small against the lobe and clear of both horizons: the lobe at its centre */
+    bool lobeSampled = glossyHere && !through && !(clear && r < SMALL_SOURCE * a);
+    if (through) {
+      sum += glossy_through * (omega * L);
+    }
+    else if (glossyHere && !lobeSampled) {
+      sum += glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1) * (omega * L);
+    }
+    for (int l = 0; l < (lobeSampled || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
+      vec2 u = fract(vec2((float(l) + 0.5) / float(NL), radical_inverse(l)) + shift);
+      vec3 i = cone_sample(c, cos_r, u);
+      if (dot(ng, i) <= 0.0) {
+        continue;
+      }
+      vec3 f = vec3(0.0);
+      if (kd.w > 0.5 && !clear) {
+        f += kd.rgb * wd * max(dot(nd, i), 0.0) * (omega / float(NL)) *
+             (mapped ? bump_shadowing(smoothN, nd, i) : 1.0);
+      }
+      if (lobeSampled) {
+        float pl = 1.0 / omega;
+        float pb = ndf_pdf(n, o, i, a, dist);
+        f += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) /
+             (float(NL) * pl + float(NB) * pb);
+      }
+      sum += f * L;
+    }
+    if (lobeSampled) {
+      for (int b = 0; b < NB; b++) {
+        vec3 i;
+        if (!ndf_direction(b, n, o, a, dist, tx, ty, shift, i) ||
+            dot(i, c) < cos_r || dot(ng, i) <= 0.0) {
+          continue;                               /* misses the disc */
+        }
+        float pb = ndf_pdf(n, o, i, a, dist);
+        sum += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L /
+               (float(NL) / omega + float(NB) * pb);
+      }
+    }
+  }
+  return V * sum;
+}
+
+
 void main()
 {
   float texAlpha = textured_alpha();
@@ -656,172 +812,38 @@ void main()
   tangent_frame(n, tx, ty);
   vec2 shift = pixel_shift();
   vec3 color = vec3(0.0);
+  /* the lights of each group this pixel loops over, in srcTex's order: with LIGHT_TILES
+   * those that can reach its screen tile (addon/gpu/light_tiles.py: per tile a texel (each
+   * group's count) and the indices four a texel; the last row's first texel the viewport's
+   * origin, the tile size and the texels per tile), else all (srcTex row 0's COUNT_TEXEL) */
 #ifdef LIGHT_TILES
-  /* many lights: only those that can reach this pixel's screen tile (addon/gpu/light_tiles.py:
-   * per tile a texel (count) and the indices four a texel; the last row's first texel the
-   * viewport's origin, the tile size and the texels per tile) */
   ivec2 tiles = textureSize(tileTex, 0);
   vec4 tinfo = texelFetch(tileTex, ivec2(0, tiles.y - 1), 0);
   int stride = int(tinfo.w);
   ivec2 cell = clamp(ivec2((gl_FragCoord.xy - tinfo.xy) / tinfo.z), ivec2(0),
                      ivec2(tiles.x / stride - 1, tiles.y - 2));
   int base = cell.x * stride;
-  int lightCount = int(texelFetch(tileTex, ivec2(base, cell.y), 0).x);
-  vec4 four = vec4(0.0);
+  ivec3 counts = ivec3(texelFetch(tileTex, ivec2(base, cell.y), 0).xyz + 0.5);
+#define LIGHT(k) int(texelFetch(tileTex, ivec2(base + 1 + (k) / 4, cell.y), 0)[(k) % 4])
 #else
-  int lightCount = sourceCount;
+  ivec3 counts = ivec3(source(0, COUNT_TEXEL).xyz + 0.5);
+#define LIGHT(k) (k)
 #endif
-  for (int k = 0; k < lightCount; k++) {
-#ifdef LIGHT_TILES
-    if (k % 4 == 0) {
-      four = texelFetch(tileTex, ivec2(base + 1 + k / 4, cell.y), 0);
-    }
-    int s = int(four[k % 4]);
-#else
-    int s = k;
-#endif
-    vec4 s0 = source(s, 0);
-    vec4 s1 = source(s, 1);
-    vec3 c = s0.xyz;
-    float r = s0.w;
-    float kind = s1.w;      /* 0 disc, 1 point-like direction, 2 point, 3 spot, 4/5 area */
-    float inv_dist = 0.0;   /* a local lamp: 1 / its distance (footprint_share) */
-    /* the highlight's spread per axis (lobe 2 alpha^2, disc r^2 / 4; a point-like or
-     * local source's none): narrower than the samples, it is drawn through the footprint */
-    float sr2 = highlight_spread2(a0, kind > 0.5 ? 0.0 : r);
-    /* a slot whose lobes the sharp pass draws reflects a compact source of the World here
-     * only where it is drawn through the footprint (the sharp pass leaves its pixels out
-     * there, sharp_lobe_frag.glsl; elsewhere it reads them, the source's true shape) */
-    bool glossyHere = glossy && (!sharpSlot || kind > 1.5 || source(s, 8).x < 0.5 ||
-                                 sr2 < reach2);
-#ifdef AREA_LAMPS
-    if (kind > 3.5) {                 /* an area lamp: a rectangle (4) or an ellipse (5) */
-      if (dot(vPos - s0.xyz, source(s, 2).xyz) <= 0.0) {
-        continue;                                   /* behind its emitting side */
-      }
-      /* the whole lamp below the shading normals' horizons adds nothing: no shadow taps
-       * (its corners, an ellipse's 16-gon reaching 1.013 of its half axes) */
-      vec3 w0 = s0.xyz - vPos, hx = 1.02 * source(s, 4).xyz, hy = 1.02 * source(s, 5).xyz;
-      if ((kd.w < 0.5 || dot(nd, w0) + abs(dot(nd, hx)) + abs(dot(nd, hy)) <= 0.0) &&
-          (!glossyHere || dot(n, w0) + abs(dot(n, hx)) + abs(dot(n, hy)) <= 0.0)) {
-        continue;
-      }
-      float Va = local_visibility(s, vPos, ng, s0.xyz, s0.w, shift);
-      if (Va > 0.0) {
-        color += Va * area_lamp(s, kind > 4.5, n, nd, ng, o, cos_o, kd, wd, a, dist, lobes,
-                                glossyHere,
-                                lam_o, ms0, ms1, tx, ty, shift);
-      }
-      continue;
-    }
-#endif
-#ifdef LOCAL_LAMPS
-    if (kind > 1.5) {                 /* a local lamp: the sphere seen from here */
-      vec3 to_lamp = s0.xyz - vPos;
-      float d2 = max(dot(to_lamp, to_lamp), 1e-12);
-      inv_dist = inversesqrt(d2);
-      c = to_lamp * inversesqrt(d2);
-      float e = 1.0 / (4.0 * PI * d2);              /* Cycles: Phi / (4 pi d^2) at normal */
-      if (kind > 2.5) {                             /* spot cone (core.sg.lighting) */
-        vec4 spot = source(s, 2);
-        float smooth_w = source(s, 3).x;
-        float t = dot(-c, spot.xyz);
-        e *= smooth_w > 0.0 ? smoothstep(0.0, 1.0, (t - spot.w) / smooth_w)
-                            : (t > spot.w ? 1.0 : 0.0);
-      }
-      if (e <= 0.0) {
-        continue;
-      }
-      r = asin(min(s0.w * inversesqrt(d2), 0.999));
-      kind = r < 1e-4 ? 1.0 : 0.0;
-      s1.rgb *= kind > 0.5 ? e : e / (PI * sin(r) * sin(r));
-    }
-#endif
-    float below = -sin(r);
-    if (dot(ng, c) < below) {
-      continue;                                     /* the whole disc is below the plane */
-    }
-    /* or below the shading normals' horizons (the diffuse term's, the glossy lobes'): it adds
-     * nothing there, and its shadow taps are the pass's largest cost */
-    if ((kd.w < 0.5 || dot(nd, c) < below) && (!glossyHere || dot(n, c) < below)) {
-      continue;
-    }
-#ifdef LOCAL_LAMPS
-    float V = s1.w > 1.5 ? local_visibility(s, vPos, ng, s0.xyz, s0.w, shift)
-                         : visibility(s, vPos, ng, r, shift);
-#else
-    float V = visibility(s, vPos, ng, r, shift);
-#endif
-    if (V <= 0.0) {
-      continue;
-    }
-    vec3 sum = vec3(0.0);
-    bool through = glossyHere && sr2 < reach2;
-    vec3 glossy_through = through && dot(n, c) > 0.0 &&
-                          !(mappedN && dot(smoothN, c) * dot(smoothN, n) < 0.0)
-                          ? spec_w * footprint_share(c, sr2, inv_dist) : vec3(0.0);
-    if (kind > 0.5) {                               /* point-like: its irradiance */
-      if (dot(ng, c) > 0.0) {
-        sum = (kd.rgb * wd * max(dot(nd, c), 0.0) * (mapped ? bump_shadowing(smoothN, nd, c) : 1.0) +
-               (through ? glossy_through :
-                glossyHere ? glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1)
-                       : vec3(0.0))) * s1.rgb;
-      }
-    }
-    else {
-      float cos_r = cos(r);
-      float omega = 2.0 * PI * (1.0 - cos_r);
-      vec3 L = s1.rgb;
-      /* Lambert: the cap's exact cosine integral while above both horizons */
-      float nc = dot(nd, c);
-      float sr = sin(r);
-      bool clear = nc >= sr && dot(ng, c) >= sr;
-      if (kd.w > 0.5 && clear) {
-        /* a mapped normal's terminator factor at the disc's centre */
-        sum += kd.rgb * wd * (PI * sr * sr * nc) * L *
-               (mapped ? bump_shadowing(smoothN, nd, c) : 1.0);
-      }
-      /* a disc small against the lobe and clear of both horizons: the lobe at its centre */
-      bool lobeSampled = glossyHere && !through && !(clear && r < SMALL_SOURCE * a);
-      if (through) {
-        sum += glossy_through * (omega * L);
-      }
-      else if (glossyHere && !lobeSampled) {
-        sum += glossy_f_cos(n, o, c, cos_o, a, dist, lobes, lam_o, ms0, ms1) * (omega * L);
-      }
-      for (int l = 0; l < (lobeSampled || (kd.w > 0.5 && !clear) ? NL : 0); l++) {
-        vec2 u = fract(vec2((float(l) + 0.5) / float(NL), radical_inverse(l)) + shift);
-        vec3 i = cone_sample(c, cos_r, u);
-        if (dot(ng, i) <= 0.0) {
-          continue;
-        }
-        vec3 f = vec3(0.0);
-        if (kd.w > 0.5 && !clear) {
-          f += kd.rgb * wd * max(dot(nd, i), 0.0) * (omega / float(NL)) *
-               (mapped ? bump_shadowing(smoothN, nd, i) : 1.0);
-        }
-        if (lobeSampled) {
-          float pl = 1.0 / omega;
-          float pb = ndf_pdf(n, o, i, a, dist);
-          f += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) /
-               (float(NL) * pl + float(NB) * pb);
-        }
-        sum += f * L;
-      }
-      if (lobeSampled) {
-        for (int b = 0; b < NB; b++) {
-          vec3 i;
-          if (!ndf_direction(b, n, o, a, dist, tx, ty, shift, i) ||
-              dot(i, c) < cos_r || dot(ng, i) <= 0.0) {
-            continue;                               /* misses the disc */
-          }
-          float pb = ndf_pdf(n, o, i, a, dist);
-          sum += glossy_f_cos(n, o, i, cos_o, a, dist, lobes, lam_o, ms0, ms1) * L /
-                 (float(NL) / omega + float(NB) * pb);
-        }
-      }
-    }
-    color += V * sum;
+  for (int k = 0; k < counts.x; k++) {
+    color += light_term(DISTANT_GROUP, LIGHT(k), n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
+                         mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
   }
+#ifdef LOCAL_LAMPS
+  for (int k = counts.x; k < counts.x + counts.y; k++) {
+    color += light_term(LOCAL_GROUP, LIGHT(k), n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
+                         mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
+  }
+#endif
+#ifdef AREA_LAMPS
+  for (int k = counts.x + counts.y; k < counts.x + counts.y + counts.z; k++) {
+    color += light_term(AREA_GROUP, LIGHT(k), n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
+                         mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
+  }
+#endif
   fragColor = vec4(max(color, vec3(0.0)), 0.0);
 }

@@ -50,23 +50,27 @@ def _perspective(eye, target, fov=1.0, aspect=4 / 3, near=0.1, far=100.0):
 def test_every_point_a_light_reaches_is_in_a_tile_that_lists_it():
     """40 spots of random cones, area lamps and a point lamp over a 10 m room seen in
     perspective: a point of the room inside a spot's cone (or in front of an area lamp)
-    projects into a tile whose list holds the light, and the lists are shorter than all."""
+    projects into a tile whose list holds the light, and the lists are shorter than all.
+    The lights come in the pass's groups (point and spot lamps, then area lamps): each
+    tile counts its lights per group, listed in that order."""
     rng = np.random.default_rng(7)
     lo, hi = np.array([-5.0, -5.0, 0.0]), np.array([5.0, 5.0, 2.0])
     lamps = [Lamp("SPOT", position=(*rng.uniform(-5, 5, 2), 3.0),
                   direction=(*rng.normal(0, 0.4, 2), -1.0), spot_size=rng.uniform(0.2, 2.5))
              for _ in range(40)]
-    lamps += [Lamp("AREA", position=(0.0, 0.0, 2.5), direction=(0.3, 0.0, -1.0),
+    lamps += [Lamp("POINT", position=(1.0, 1.0, 2.5)),
+              Lamp("AREA", position=(0.0, 0.0, 2.5), direction=(0.3, 0.0, -1.0),
                    half_x=(0.5, 0, 0), half_y=(0, 0.5, 0)),
               Lamp("AREA", position=(0.0, 0.0, 3.0), direction=(0.0, 0.0, 1.0),
-                   half_x=(0.5, 0, 0), half_y=(0, 0.5, 0)),
-              Lamp("POINT", position=(1.0, 1.0, 2.5))]
+                   half_x=(0.5, 0, 0), half_y=(0, 0.5, 0))]
     drawn = sources.lamp_sources(lamps)
     boxes = light_tiles.influence_boxes(drawn, lo, hi)
-    assert boxes[-3] is None and np.any(boxes[-2][0] > boxes[-2][1])   # the upward one: nothing
+    assert boxes[-3] is None and boxes[-2] is None
+    assert np.any(boxes[-1][0] > boxes[-1][1])                     # the upward one: nothing
     M = _perspective(np.array([0.0, -9.0, 5.0]), (0.0, 0.0, 0.5))
     w, h = 160, 120
-    table = light_tiles.tile_table(light_tiles.screen_rects(boxes, M, w, h), w, h)
+    groups = (0, 41, 2)
+    table = light_tiles.tile_table(light_tiles.screen_rects(boxes, M, w, h), w, h, groups)
     x0, y0, tile, stride = table[-1, 0]
     tile, stride = int(tile), int(stride)
     for k, s in enumerate(drawn):
@@ -82,8 +86,14 @@ def test_every_point_a_light_reaches_is_in_a_tile_that_lists_it():
         px = ((ndc[seen] + 1.0) * 0.5 * (w, h)).astype(int)
         for x, y in px:
             cell = table[y // tile, (x // tile) * stride:(x // tile + 1) * stride]
-            count = int(cell[0, 0])
-            assert k in cell[1:].reshape(-1)[:count].astype(int), (k, x, y)
-    # the lists are shorter than all the lights where spots are apart
-    counts = table[:-1, ::stride, 0]
+            count = cell[0, :3].astype(int)
+            listed = cell[1:].reshape(-1)[:count.sum()].astype(int)
+            assert k in listed, (k, x, y)
+            # each group's lights in its own run: the local lamps first, the areas after
+            assert count[0] == 0 and np.all(listed[:count[1]] < 41), (x, y)
+            assert np.all(listed[count[1]:] >= 41), (x, y)
+    # the lists are shorter than all the lights where spots are apart; the downward area
+    # lamp reaches every tile, the upward one none
+    counts = table[:-1, ::stride, :3].sum(-1)
     assert counts.mean() < 0.8 * len(drawn)
+    assert np.all(table[:-1, ::stride, 2] == 1)
