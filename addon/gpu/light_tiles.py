@@ -7,8 +7,9 @@ behind the lamp; a point lamp or a distant source the whole scene.  The box's co
 projected by the frame's view-projection; the tiles its screen rectangle meets list the
 light (a box reaching behind the camera: every tile).  ``lights_frag.glsl`` (LIGHT_TILES)
 reads the list from a float texture: per tile a texel (its lights of each group: distant,
-point and spot, area; lights.py's srcTex order) and the light indices four per texel, a row of tiles per texture row, the last row's first texel (origin
-x, y of the viewport, tile size, texels per tile)."""
+point and spot, area; lights.py's srcTex order) and the light indices four per texel, a
+row of tiles per texture row, the last row's first texel (origin x, y of the viewport, tile
+size, texels per tile)."""
 
 from __future__ import annotations
 
@@ -90,6 +91,7 @@ def tile_table(rects, width, height, groups, origin=(0, 0)) -> np.ndarray:
     """The LIGHT_TILES texture (rows, texels, 4) float32 of the lights' pixel ``rects``,
     whose ``groups`` (counts: distant, point and spot, area) follow one another."""
     n = len(rects)
+    assert sum(groups) == n, (groups, n)
     tile = TILE
     while True:
         tx, ty = -(-width // tile), -(-height // tile)

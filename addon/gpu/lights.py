@@ -59,8 +59,9 @@ def slot_features(params: np.ndarray, albedo_source) -> tuple:
         out.append("NORMAL_MAP")
     if albedo_source is not None:
         out.append("ALBEDO_TEX")
-    # each roughness node's lobes (rows 4k + 4; row 0 without a textured Roughness)
-    out += microfacet.lobe_signature((*p[1, 1:3], p[2, 0], p[5, 0]) for p in params[::4])
+    # the lobes of each roughness node the pass mixes (rows 4k + 4), else of row 0
+    rows = params[4::4] if "ROUGH_TEX" in out else params[:1]
+    out += microfacet.lobe_signature((*p[1, 1:3], p[2, 0], p[5, 0]) for p in rows)
     return tuple(out)
 
 

@@ -147,7 +147,7 @@ SPECS: dict[str, Spec] = {
                   ("flat", "VEC3", "vTriN0"), ("flat", "VEC3", "vTriN1"),
                   ("flat", "VEC3", "vTriN2")),
         # a slot's textured Roughness and normal or bump map, left out of draws without
-        switches=("ROUGH_TEX", "NORMAL_MAP")),
+        switches=("ROUGH_TEX", "NORMAL_MAP"), values=_LOBE_SIGNATURE),
     # SSDF_SG's per-pixel pass (methods/ssdf_sg/gpu.py) ...
     "ssdf_sg": _SSDF_SG,
     # ... and its variant for flat triangles: eq. 39 from the pair table
@@ -200,10 +200,10 @@ SPECS: dict[str, Spec] = {
 
 # --------------------------------------------------------------------------- building
 
-#: every built shader per (spec name, defines): a frame uses a few dozen at most (the lights
-#: pass's feature sets per slot and frame).  addon/gpu/drawing.gpu_cache's kind of cache, made
-#: here (drawing imports this module)
-_SHADERS = Cache(64, gpu=True)
+#: every built shader per (spec name, defines): a frame uses a few dozen (the lights pass's
+#: feature sets and lobe signatures per slot, for its pilot and its samples).
+#: addon/gpu/drawing.gpu_cache's kind of cache, made here (drawing imports this module)
+_SHADERS = Cache(128, gpu=True)
 
 
 def source(spec: Spec, stage: str) -> str:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.shading import brdf as core_brdf
+from ...core.shading import brdf as core_brdf, microfacet
 from ...core.sphere import envmap
 from ...core.scene import textures
 from . import drawing, shaders, visibility
@@ -206,6 +206,14 @@ def parameters(material, eye4, env_size, levels, strength, cube_n, stride, rough
     return _texture(p)
 
 
+def lobe_signature(material) -> tuple:
+    """The slot's lobes compiled into its shader (core.shading.microfacet.lobe_signature):
+    the distribution, count and kinds :func:`parameters` writes in row 0."""
+    kinds = [kind for kind, *_ in core_brdf.sharp_lobes(material)[:2]]
+    dist = 0 if material.lobe_distribution == "BECKMANN" else 1
+    return microfacet.lobe_signature([(dist, len(kinds), *(kinds + [0, 0])[:2])])
+
+
 def draws(state, eye, view_dir, background) -> list:
     """``draw(view_projection)`` callables adding the sharp lobes of every object that has
     them (empty when none has).  ``background``: (texture, rotation, strength) of the
@@ -230,7 +238,8 @@ def draws(state, eye, view_dir, background) -> list:
             rough = texture_export.shader_inputs(st, slot).get("Roughness")
             mapped = texture_export.shader_normal(st, slot)
             features = (("ROUGH_TEX",) if rough is not None else ()) + \
-                (("NORMAL_MAP",) if mapped is not None else ())
+                (("NORMAL_MAP",) if mapped is not None else ()) + \
+                lobe_signature(st.materials[slot])
             textures_ = [drawing.albedo_texture(got[0].source.texture.pixels)
                          if got is not None else drawing.white_texture()
                          for got in (rough, mapped)]

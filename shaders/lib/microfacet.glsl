@@ -5,11 +5,8 @@
 
 /* ---------------------------------------------------------------- microfacet terms */
 
-/* A draw whose points all share a lobe signature has it compiled in (the add-on's
- * core.shading.microfacet.lobe_signature defines): LOBE_DIST (0 Beckmann / 1 GGX), LOBE_COUNT, and
- * each lobe's Fresnel kind LOBE_KIND0 / LOBE_KIND1 (lobe_fresnel).  llvmpipe runs every side
- * of a branch under a mask, a GPU keeps every side's registers; without a define the value
- * read at run time is used, the same arithmetic either way. */
+/* what a draw's materials share is compiled in (core.shading.microfacet.lobe_signature), else
+ * read at run time: llvmpipe runs every side of a branch under a mask */
 #ifdef LOBE_DIST
 #define SIG_DIST(d) LOBE_DIST
 #else

@@ -165,10 +165,12 @@ vec3 glossy_f_cos(vec3 n, vec3 o, vec3 i, float cos_o, float a, int dist, int lo
   float oh = clamp(dot(o, h), 0.0, 1.0);
   vec3 f = vec3(0.0);
   if (lobes > 0) {
-    f += lobeKind0.y * ms0 * lobe_fresnel(SIG_KIND0(int(lobeKind0.x)), lobeF00, lobeB0, lobeKind0.z, oh);
+    f += lobeKind0.y * ms0 * lobe_fresnel(SIG_KIND0(int(lobeKind0.x + 0.5)), lobeF00, lobeB0,
+                                          lobeKind0.z, oh);
   }
   if (lobes > 1) {
-    f += lobeKind1.y * ms1 * lobe_fresnel(SIG_KIND1(int(lobeKind1.x)), lobeF01, lobeB1, lobeKind1.z, oh);
+    f += lobeKind1.y * ms1 * lobe_fresnel(SIG_KIND1(int(lobeKind1.x + 0.5)), lobeF01, lobeB1,
+                                          lobeKind1.z, oh);
   }
   return f * common_term;
 }
@@ -570,14 +572,11 @@ vec3 area_lamp(int s, bool ellipse, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_
   return sum;
 }
 
-/* ---------------------------------------------------------------- main */
-
 /* ---------------------------------------------------------------- one light */
 
-/* the light groups in srcTex's order (addon/gpu/lights.py draws): the distant sources, the
- * point and spot lamps, the area lamps.  Each of main's loops passes its group as a literal,
- * so it compiles its own kind's code only: llvmpipe would run every kind's code under a
- * mask for every light, a GPU keep every kind's registers. */
+/* the light groups in srcTex's order (addon/gpu/lights.py draws): distant sources, point and
+ * spot lamps, area lamps.  main passes the group as a literal, so each loop compiles its own
+ * kind's code only (llvmpipe would run every kind's under a mask, a GPU keeps its registers) */
 #define DISTANT_GROUP 0
 #define LOCAL_GROUP 1
 #define AREA_GROUP 2
@@ -726,6 +725,8 @@ vec3 light_term(int group, int s, vec3 n, vec3 nd, vec3 ng, vec3 o, float cos_o,
 }
 
 
+/* ---------------------------------------------------------------- main */
+
 void main()
 {
   float texAlpha = textured_alpha();
@@ -782,14 +783,14 @@ void main()
 #endif
   vec4 lobe = param(1, 0);
   float a = texAlpha > 0.0 ? texAlpha : max(lobe.x, MICROFACET_ALPHA_MIN);
-  int dist = SIG_DIST(int(lobe.y));
+  int dist = SIG_DIST(int(lobe.y + 0.5));       /* + 0.5: a mix of the roughness nodes' rows */
   /* where the samples sample the lobe (area lamps, discs wider than the footprint, mapped
    * normals) it is widened to the footprint's variance (a box's |dx x dy| / 12 per axis
    * against the lobe's 2 alpha^2), so a shape's edge is the pixel's share of it; a0 the
    * slot's own */
   float a0 = a;
   a = max(a, sqrt(length(cross(mdx, mdy)) / 24.0));
-  int lobes = SIG_COUNT(int(lobe.z));
+  int lobes = SIG_COUNT(int(lobe.z + 0.5));
   read_lobes(lobes);
 #ifdef GLOSSY
   bool glossy = lobe.w > 0.5 && lobes > 0;
@@ -830,19 +831,22 @@ void main()
 #define LIGHT(k) (k)
 #endif
   for (int k = 0; k < counts.x; k++) {
-    color += light_term(DISTANT_GROUP, LIGHT(k), n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
-                         mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
+    color += light_term(DISTANT_GROUP, LIGHT(k),
+                        n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
+                        mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
   }
 #ifdef LOCAL_LAMPS
   for (int k = counts.x; k < counts.x + counts.y; k++) {
-    color += light_term(LOCAL_GROUP, LIGHT(k), n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
-                         mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
+    color += light_term(LOCAL_GROUP, LIGHT(k),
+                        n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
+                        mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
   }
 #endif
 #ifdef AREA_LAMPS
   for (int k = counts.x + counts.y; k < counts.x + counts.y + counts.z; k++) {
-    color += light_term(AREA_GROUP, LIGHT(k), n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
-                         mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
+    color += light_term(AREA_GROUP, LIGHT(k),
+                        n, nd, ng, o, cos_o, kd, wd, a, a0, dist, lobes, glossy, sharpSlot,
+                        mapped, lam_o, ms0, ms1, reach2, spec_w, tx, ty, shift);
   }
 #endif
   fragColor = vec4(max(color, vec3(0.0)), 0.0);

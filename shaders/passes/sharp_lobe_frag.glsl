@@ -263,8 +263,8 @@ void main()
   vec4 lobe = param(1);
   float rough = pixel_roughness();
   float a = rough * rough;
-  int dist = int(lobe.y);
-  int lobes = int(lobe.z);
+  int dist = SIG_DIST(int(lobe.y + 0.5));
+  int lobes = SIG_COUNT(int(lobe.z + 0.5));
   /* The (sub)pixel's mirror directions span the parallelogram dx, dy (ray differentials),
    * which Cycles integrates the pixel over.  The lobe already blurs over its own width
    * (std sqrt(2) alpha per axis in reflected directions); what it leaves of the box's
@@ -353,7 +353,8 @@ void main()
     for (int j = 0; j < min(lobes, 2); j++) {
       vec4 k0 = param(4 + 3 * j);
       f += k0.y * ms[j] *
-           lobe_fresnel(int(k0.x), param(5 + 3 * j).rgb, param(6 + 3 * j).rgb, k0.z, oh);
+           lobe_fresnel(j == 0 ? SIG_KIND0(int(k0.x + 0.5)) : SIG_KIND1(int(k0.x + 0.5)),
+                        param(5 + 3 * j).rgb, param(6 + 3 * j).rgb, k0.z, oh);
     }
     color += f * light * (g2 * oh / (cos_o * nh));
   }

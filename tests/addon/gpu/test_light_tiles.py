@@ -48,16 +48,17 @@ def _perspective(eye, target, fov=1.0, aspect=4 / 3, near=0.1, far=100.0):
 
 
 def test_every_point_a_light_reaches_is_in_a_tile_that_lists_it():
-    """40 spots of random cones, area lamps and a point lamp over a 10 m room seen in
+    """A sun, 40 spots of random cones, a point lamp and area lamps over a 10 m room seen in
     perspective: a point of the room inside a spot's cone (or in front of an area lamp)
     projects into a tile whose list holds the light, and the lists are shorter than all.
-    The lights come in the pass's groups (point and spot lamps, then area lamps): each
-    tile counts its lights per group, listed in that order."""
+    The lights come in the pass's groups (the sun, the point and spot lamps, the area
+    lamps): each tile counts its lights per group, listed in that order."""
     rng = np.random.default_rng(7)
     lo, hi = np.array([-5.0, -5.0, 0.0]), np.array([5.0, 5.0, 2.0])
     lamps = [Lamp("SPOT", position=(*rng.uniform(-5, 5, 2), 3.0),
                   direction=(*rng.normal(0, 0.4, 2), -1.0), spot_size=rng.uniform(0.2, 2.5))
              for _ in range(40)]
+    lamps = [Lamp("SUN", direction=(0.2, 0.1, -1.0))] + lamps
     lamps += [Lamp("POINT", position=(1.0, 1.0, 2.5)),
               Lamp("AREA", position=(0.0, 0.0, 2.5), direction=(0.3, 0.0, -1.0),
                    half_x=(0.5, 0, 0), half_y=(0, 0.5, 0)),
@@ -69,7 +70,7 @@ def test_every_point_a_light_reaches_is_in_a_tile_that_lists_it():
     assert np.any(boxes[-1][0] > boxes[-1][1])                     # the upward one: nothing
     M = _perspective(np.array([0.0, -9.0, 5.0]), (0.0, 0.0, 0.5))
     w, h = 160, 120
-    groups = (0, 41, 2)
+    groups = (1, 41, 2)
     table = light_tiles.tile_table(light_tiles.screen_rects(boxes, M, w, h), w, h, groups)
     x0, y0, tile, stride = table[-1, 0]
     tile, stride = int(tile), int(stride)
@@ -89,9 +90,10 @@ def test_every_point_a_light_reaches_is_in_a_tile_that_lists_it():
             count = cell[0, :3].astype(int)
             listed = cell[1:].reshape(-1)[:count.sum()].astype(int)
             assert k in listed, (k, x, y)
-            # each group's lights in its own run: the local lamps first, the areas after
-            assert count[0] == 0 and np.all(listed[:count[1]] < 41), (x, y)
-            assert np.all(listed[count[1]:] >= 41), (x, y)
+            # each group's lights in its own run: the sun, the local lamps, the areas
+            assert count[0] == 1 and listed[0] == 0, (x, y)
+            assert np.all((listed[1:1 + count[1]] >= 1) & (listed[1:1 + count[1]] < 42))
+            assert np.all(listed[1 + count[1]:] >= 42), (x, y)
     # the lists are shorter than all the lights where spots are apart; the downward area
     # lamp reaches every tile, the upward one none
     counts = table[:-1, ::stride, :3].sum(-1)

@@ -289,14 +289,17 @@ def test_every_lamp_is_drawn_with_its_shadow_past_the_old_cap_of_eight(tmp_path,
 
 
 def test_light_tiles_draw_the_frame_every_light_loop_draws(tmp_path, monkeypatch):
-    """Ten narrow spots and a sun exported among them (the pass holds the distant sources
-    first): the frame drawn through the light tiles is the frame drawn without them, so
-    each tile's list names the lights in the pass's own order."""
+    """An area lamp, ten narrow spots with a sun exported among them, and a point lamp (the
+    pass holds the distant sources first, then the point and spot lamps, then the area
+    lamps): the frame drawn through the light tiles is the frame drawn without them, so each
+    tile's list names the lights of each group in the pass's own order."""
     scenes.reset()
     black_world()
     ground = scenes.add_ground(size=8.0, cuts=8)
     ground.data.materials.append(scenes.bsdf_material("Lambert", "ShaderNodeBsdfDiffuse",
                                                       Color=(0.8, 0.8, 0.8, 1.0)))
+    area_lamp(60.0, (2.5, 2.5, 1.5), 1.0, rotation=(0.4, 0.0, 0.0))
+    local_lamp("POINT", 80.0, (-2.5, 2.5, 1.5), radius=0.05)
     for k in range(10):
         if k == 5:
             sun_lamp(1.0, 0.05, tilt=0.3)
@@ -358,3 +361,26 @@ def test_instances_share_one_batch_per_source_and_draw_as_placed_copies(tmp_path
     flat = scenes.render_exr(tmp_path / "flat.exr")
     assert kinds() == (1, 2, 5)
     assert np.isfinite(flat).all() and flat[..., :3].min() >= 0.0
+
+
+def test_a_slot_compiles_in_the_lobes_of_the_roughness_nodes_it_mixes():
+    """slot_features: a textured Roughness mixes node rows 4k + 4 (lights_frag.glsl param), so
+    their shared lobes are compiled in; a node whose lobe count differs leaves the count to
+    the run time, and without a textured Roughness row 0 alone decides."""
+    from prt_relight.addon.gpu import lights
+    nodes = 3
+    params = np.zeros((4 + 4 * nodes, 32, 4), np.float32)
+    params[0, 1] = (0.25, 0.0, 2.0, 1.0)            # row 0: Beckmann, two lobes (not read)
+    params[0, 11, 0] = nodes
+    for k in range(nodes):
+        params[4 + 4 * k, 1] = (0.1 + 0.2 * k, 1.0, 1.0, 1.0)    # GGX, one dielectric lobe
+        params[4 + 4 * k, 2, 0] = 2.0
+    got = lights.slot_features(params, None)
+    assert "ROUGH_TEX" in got and "GLOSSY" in got
+    assert {"LOBE_DIST 1", "LOBE_COUNT 1", "LOBE_KIND0 2"} <= set(got)
+    params[8, 1, 2] = 0.0                            # one node without a lobe
+    got = lights.slot_features(params, None)
+    assert "LOBE_COUNT 1" not in got and "LOBE_DIST 1" in got
+    params[0, 11, 0] = 0.0                           # no textured Roughness: row 0's lobes
+    assert {"LOBE_DIST 0", "LOBE_COUNT 2"} <= set(lights.slot_features(params, None))
+

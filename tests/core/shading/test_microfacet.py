@@ -70,7 +70,6 @@ def test_smith_lambda_values():
 def test_lambda_of_t2_is_smith_lambda_in_the_dtype_given():
     """One Lambda for REFERENCE (float64) and BLOCKS' float32 evaluator: the same values,
     float32 in stays float32; Beckmann is 0 below t2 = 0.39 (a > 1.6)."""
-    from prt_relight.core.shading import microfacet
     c = np.linspace(0.05, 1.0, 40)
     for dist, alpha in (("GGX", 0.3), ("BECKMANN", 0.3), ("BECKMANN", 0.05)):
         t2 = alpha ** 2 * (1.0 / (c * c) - 1.0)
