@@ -359,10 +359,9 @@ def draws(state, eye, view_dir, supersampling: int, pilot: int) -> tuple[list, l
     in_world = len(state.sources)           # the World's sources come first, all distant
     # srcTex's rows by group (lights_frag.glsl loops over each with its own code): the
     # distant sources, then the point and spot lamps, then the area lamps
-    rows = [j for j, s in enumerate(local) if s.area is None]
-    rows += [j for j, s in enumerate(local) if s.area is not None]
-    groups = (len(distant), sum(s.area is None for s in local),
-              sum(s.area is not None for s in local))
+    lamps = [j for j, s in enumerate(local) if s.area is None]
+    areas = [j for j, s in enumerate(local) if s.area is not None]
+    rows, groups = lamps + areas, (len(distant), len(lamps), len(areas))
     src[0, COUNT_TEXEL, :3] = groups
     for k, s in enumerate(distant):
         src[k, 0] = (*s.direction, s.radius)
