@@ -72,6 +72,8 @@ def parse_args(argv=None):
                         "(default: 70 %% of the memory available now)")
     p.add_argument("--instances", type=int, nargs="*", default=[16, 64],
                    help="also N collection instances of one mesh (issue 31's target: 1000)")
+    p.add_argument("--instance-bounces", type=int, default=0,
+                   help="diffuse bounces of the instances' scene (0: direct light)")
     p.add_argument("--instance-vertices", type=int, default=5000,
                    help="vertices of the instanced mesh")
     p.add_argument("--out-file", type=pathlib.Path, default=scenes.ROOT / "out/bench/scale.txt")
@@ -247,7 +249,7 @@ def child_instances(count: int, args) -> dict:
     vertices, turned at random on a grid 1.2 m apart on a ground: the precompute and
     REFERENCE's F12, their times and peaks, and the bytes per instance."""
     import bpy
-    scenes.reset()
+    scenes.reset(bounces=args.instance_bounces)
     from prt_relight.addon.blender import storage, surfaces
     from prt_relight.core.scene import mesh as core_mesh
     scenes.add_world(args.hdri)
@@ -560,7 +562,8 @@ def main(argv=None):
             got = _run([sys.executable, __file__, "--child", f"instances={count}",
                         "--blend", str(pathlib.Path(tmp) / "instances.blend"),
                         "--hdri", args.hdri, "--size", str(args.size),
-                        "--instance-vertices", str(args.instance_vertices)])
+                        "--instance-vertices", str(args.instance_vertices),
+                        "--instance-bounces", str(args.instance_bounces)])
         if "failed" in got:
             raise SystemExit(f"instances={count} failed (exit {got['failed']})")
         placed.append(got)

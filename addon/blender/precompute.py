@@ -92,6 +92,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
     method = methods.get(settings.method)
     return PrecomputeJob(int(settings.resolution), offset, objects, occluders, warnings,
                          bounces=scene_export.light_bounces(scene),
+                         bounce_rows_mib=settings.bounce_rows_budget,
                          method=settings.method, settings={
                              name: getattr(settings, name)
                              for name in methods.scene_properties()},

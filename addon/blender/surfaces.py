@@ -176,11 +176,20 @@ class SharedArrays:
         core.scene.mesh.fingerprint of its object-space arrays and those arrays, when
         ``arrays`` (what sync made of :meth:`arrays`) still index its corners (not re-sided);
         None for an object."""
+        got = self.local_source(surface)
+        if got is None or not np.may_share_memory(got[1].triangles, arrays.triangles):
+            return None
+        return got
+
+    def local_source(self, surface: Surface):
+        """``(fingerprint, object-space arrays)`` of an instance's source, whatever sides
+        the frame gives the instance (its shadow-casting triangles are the same: the bounce's
+        shadow rays test it there, core.scene.placed_occluders); None for an object."""
         if not surface.instance:
             return None
         key = self._key(surface)
         local = self.local.get(key)
-        if local is None or not np.may_share_memory(local.triangles, arrays.triangles):
+        if local is None:
             return None
         if key not in self._fingerprints:
             self._fingerprints[key] = core_mesh.fingerprint(local)

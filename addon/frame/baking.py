@@ -66,17 +66,26 @@ def turned(state: FrameState, angle: float) -> FrameState:
 
 
 def _lamp_light(state):
-    """(lamps, occlusion test or None) of a state's lamps (shadow rays against its objects)."""
+    """``(lamps, leaving)``: a state's lamps, and ``leaving(st)``, the occlusion test of the
+    shadow rays that leave its object ``st`` (against its objects; None without one)."""
     lamps = list(state.lamps) + list(state.drawn_lamps)
     casters = [st for st in state.objects if st.status != "unshadowed"]
-    return lamps, (bounce.occlusion_test(casters) if lamps and casters else None)
+    test = bounce.occlusion_test(casters) if lamps and casters else None
+    index = {id(c): j for j, c in enumerate(casters)}
+
+    def leaving(st):
+        if test is None:
+            return None
+        k = index.get(id(st), -1)
+        return lambda o, d, t, rows: test(o, d, t, np.full(len(o), k))
+    return lamps, leaving
 
 
 def point_irradiance(state: FrameState) -> list:
     """Per object (P, 3) irradiance at its shading points (module docstring)."""
     cube = directions.cubemap(state.resolution)
     env = keys.environment_cubemap(state.full_world, state.resolution)
-    lamps, occluded = _lamp_light(state)
+    lamps, leaving = _lamp_light(state)
     bounced = state.bounce.irradiance(state) if state.bounce is not None \
         else [None] * len(state.objects)
     out = []
@@ -84,7 +93,8 @@ def point_irradiance(state: FrameState) -> list:
         pts = st.points
         E = reference.diffuse_irradiance(st.bits, pts.normals, cube, env).astype(np.float64)
         if lamps:
-            E += core_bounce.lamp_irradiance(lamps, pts.positions, pts.normals, occluded)
+            E += core_bounce.lamp_irradiance(lamps, pts.positions, pts.normals,
+                                             leaving(st))
         if extra is not None:
             E += extra
         out.append(E)
@@ -97,7 +107,7 @@ def corner_radiance(state: FrameState, eye, view_dir) -> list:
     cube = directions.cubemap(state.resolution)
     full = keys.environment_cubemap(state.full_world, state.resolution)
     rest = keys.environment_cubemap(state.world, state.resolution)
-    lamps, occluded = _lamp_light(state)
+    lamps, leaving = _lamp_light(state)
     out = []
     for st, rad in zip(state.objects, frame):
         pts = st.points
@@ -106,7 +116,8 @@ def corner_radiance(state: FrameState, eye, view_dir) -> list:
              - reference.diffuse_irradiance(st.bits, pts.normals, cube, rest, pairs=pairs)
              ).astype(np.float64)
         if lamps:
-            E += core_bounce.lamp_irradiance(lamps, pts.positions, pts.normals, occluded)
+            E += core_bounce.lamp_irradiance(lamps, pts.positions, pts.normals,
+                                             leaving(st))
         views = reference.point_views(pts.positions, eye, view_dir)
         lit = np.zeros((pts.count, 3))
         for m in np.unique(pts.materials):

@@ -156,7 +156,7 @@ def _textured_mean(st) -> np.ndarray:
 class ObjectState:
     __slots__ = ("name", "arrays", "points", "materials", "_bits", "_stored", "_pose", "status",
                  "data", "fingerprint", "closed_side", "textures", "inputs", "normals", "slot_of",
-                 "dynamic", "bounce", "matrix", "shape", "near", "source")
+                 "dynamic", "bounce", "matrix", "shape", "near", "source", "local_source")
 
     def __init__(self, name, arrays, points, materials, bits, status, fingerprint=""):
         self.name = name
@@ -203,8 +203,9 @@ class ObjectState:
         self.bounce = None
         #: its world matrix (4x4; an instance's placed by its instancer)
         self.matrix = np.eye(4)
-        #: an instance's source as the lights pass shares it (surfaces.SharedArrays.source)
-        self.source = None
+        #: an instance's source as the lights pass shares it, and whatever its sides
+        #: (surfaces.SharedArrays.source, .local_source: the bounce's shadow rays)
+        self.source = self.local_source = None
 
     @property
     def bits(self):
@@ -375,7 +376,7 @@ class FrameState:
             st = ObjectState(surface.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
             st.matrix = surface.matrix
-            st.source = shared.source(surface, arrays)
+            st.source, st.local_source = shared.source(surface, arrays), shared.local_source(surface)
             st.normals = _per_corner(texture_export.slot_normals(ob, self.warnings,
                                                                  surface.matrix), corners)
             if status == "ok" and moving is None:

@@ -4,7 +4,7 @@ import bpy
 
 from ..frame import sources
 from .. import methods
-from ..blender import storage
+from ..blender import scene_export, storage
 from .operators import RUNNING
 from ..frame.state import LAST_MESSAGES
 
@@ -30,6 +30,8 @@ def draw_settings(layout, context):
     if any(o.prt.dynamic for o in scene.objects if o.type in ("MESH", "EMPTY")):
         col.prop(prt, "field_detail")
     col.prop(prt, "ray_offset")
+    if scene_export.light_bounces(scene) > 0:
+        col.prop(prt, "bounce_rows_budget")
     row = col.row()
     row.prop(prt, "write_attributes")
     sub = row.row()

@@ -5,6 +5,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty,
                        PointerProperty, StringProperty)
 
 from ...core.shading import pixel_filter
+from ...core.transport import transfer
 from .. import methods
 from ..gpu.drawing import redraw_viewports
 from ..methods import catalog  # noqa: F401  (registers every method before the enum is built)
@@ -50,6 +51,12 @@ class PRTSceneSettings(bpy.types.PropertyGroup):
                                    subtype="FACTOR",
                                    description="A source must carry this share of the "
                                                "World's energy", update=redraw_viewports)
+    bounce_rows_budget: IntProperty(
+        name="Bounce Rows Budget", default=transfer.ROW_BUDGET_MIB, min=0, max=65536,
+        description="MiB the precompute may give the bounced light's rows (each point's "
+                    "share of every surface cluster it sees: 32 entries, 268 bytes a point "
+                    "while gathered); past it rows keep fewer entries, the bounce's amount "
+                    "kept and its colours from fewer clusters (a large scatter of instances)")
     field_detail: EnumProperty(
         name="Field Detail", default="HIGH",
         items=[("LOW", "Low", "8 shells of 6×8² samples, 16² maps: fastest, coarse shadows"),

@@ -88,6 +88,9 @@ class PrecomputeJob:
     #: diffuse bounces of the scene's light paths: > 0 stores each static object's bounce
     #: transfer (core.transport), traced from the same rays as the visibility
     bounces: int = 0
+    #: MiB the receivers' bounce rows may take; past it rows keep fewer entries
+    #: (core.transport.transfer.row_width)
+    bounce_rows_mib: float = transfer.ROW_BUDGET_MIB
     #: bytes of the instanced sources' object-space arrays, shared by their instances
     #: (each instance holds transformed copies of the positions and normals only)
     shared_bytes: int = 0
@@ -195,35 +198,40 @@ class PrecomputeJob:
         count = sum(o.points.count for o in static)
         if count == 0:
             return None
-        patches = transfer.Patches.of_meshes([o.arrays for o in static])
+        width, note = transfer.row_width(count, self.bounce_rows_mib)
+        if note:
+            self.warnings.append(note)
+        meshes = [o.arrays for o in static]
+        patches = transfer.Patches.of_meshes(meshes)
         cluster_of, k, cell = clusters.cluster_patches(
             patches.centroids, patches.normals, patches.areas,
             max(1, count // clusters.POINTS_PER_CLUSTER))
-        hits = transfer.HitMap.of_meshes([o.arrays for o in static], patches, cluster_of)
-        inner = np.concatenate([core_mesh.point_interiors(o.arrays, o.points) for o in static])
-        rows = transfer.TransferRows(count, k, hits, cube, inner=inner)
-        rows.patches, rows.cluster_of, rows.cell = patches, cluster_of, cell
+        patch, owner, weight = clusters.sample_sets(cluster_of, patches.centroids,
+                                                    patches.areas, k, cell)
+        samples = (patch, owner, weight, patches.centroids[patch], patches.normals[patch])
+        # the sides' own arrays end here: tens of millions of them for a scatter of instances
+        patches = patches.offsets_only()
+        hits = transfer.HitMap.of_meshes(meshes, patches, cluster_of)
+        inner = np.concatenate([core_mesh.point_interiors(o.arrays, o.points).astype(np.float32)
+                                for o in static])
+        rows = transfer.TransferRows(count, k, hits, cube, width=width, inner=inner,
+                                     keep_sum=False)
+        rows.patches, rows.cluster_of, rows.picked = patches, cluster_of, samples
         return rows
 
     def _trace_samples(self, scene, rows, threads):
         """The clusters' samples (:func:`..transport.clusters.sample_sets`): their
         visibility at the sample cubemap (the frame's direct light there) and each
         cluster's row, the weighted mean of its samples' (further bounces)."""
-        p = rows.patches
-        patch, owner, weight = clusters.sample_sets(rows.cluster_of, p.centroids, p.areas,
-                                                    rows.clusters, rows.cell)
+        patch, owner, weight, pos, nrm = rows.picked
         cube = directions.cubemap(layouts.BOUNCE_SAMPLE_RESOLUTION)
         own = transfer.TransferRows(len(patch), rows.clusters, rows.hits, cube)
-        pos, nrm = p.centroids[patch], p.normals[patch]
         bits = visibility.trace_visibility(
             scene, pos, nrm, cube, self.offset, threads=threads,
             cancel=lambda: self.cancel_requested,
             hits=lambda a, b, blocked, prim: own.add(a, b, nrm[a:b], blocked, prim))
-        w = (own.weights * weight[:, None]).reshape(-1)
-        keep = w > 0.0
-        k_cols, k_w = transfer.sparse_top(np.repeat(owner, own.width)[keep],
-                                          own.columns.reshape(-1)[keep].astype(np.int64),
-                                          w[keep], rows.clusters, transfer.CLUSTER_ROW_WIDTH)
+        k_cols, k_w = transfer.cluster_rows(owner, weight, own.columns, own.weights,
+                                            rows.clusters)
         rows.samples = (patch, owner, weight, pos, nrm, bits, k_cols, k_w)
 
     def _store_transfer(self, rows, starts):
@@ -244,7 +252,7 @@ class PrecomputeJob:
             mine = (patch >= lo) & (patch < hi)
             held = np.nonzero((first >= lo) & (first < hi))[0]
             o.extra[layouts.BOUNCE] = layouts.bounce_blob(
-                rows.columns[a:b], rows.weights[a:b], cluster_of[front],
+                rows.columns[a:b], rows.weights[a:b], rows.rest[a:b], cluster_of[front],
                 None if back is None else cluster_of[back],
                 dict(cluster=owner[mine], weight=weight[mine], position=pos[mine],
                      normal=nrm[mine], bits=bits[mine]),

@@ -39,16 +39,19 @@ def visibility_of_blob(blob: bytes) -> np.ndarray:
 BOUNCE_SAMPLE_RESOLUTION = 16
 
 
-def bounce_blob(columns, weights, front, back, samples: dict, cluster_rows: dict,
+def bounce_blob(columns, weights, rest, front, back, samples: dict, cluster_rows: dict,
                 clusters: int) -> bytes:
     """The blob of a static object's bounce transfer (core.transport): each of its points'
-    row over the gather clusters (P, W) as cluster ids and float16 weights; the cluster of
-    each of its triangles' front side (T,) and back side (T,) when it is two-sided; the
+    row over the gather clusters (P, W) as cluster ids and float16 weights, and the sum of
+    the entries past its W largest (P,) float16 (core.transport.transfer.row_width); the
+    cluster of each of its triangles' front side (T,) and back side (T,) when it is
+    two-sided; the
     cluster samples lying on it (``samples``: cluster, weight, position, normal,
     bit-packed visibility at 6 x BOUNCE_SAMPLE_RESOLUTION^2); the rows of the clusters
     it holds (``cluster_rows``: ids, columns, weights).  ``clusters``: the scene's count."""
     arrays = {"columns": np.asarray(columns, np.int32),
               "weights": np.asarray(weights, np.float16),
+              "rest": np.asarray(rest, np.float16),
               "front": np.asarray(front, np.int32),
               "sample_cluster": np.asarray(samples["cluster"], np.int32),
               "sample_weight": np.asarray(samples["weight"], np.float32),
@@ -69,6 +72,9 @@ def bounce_arrays(arrays: dict, meta: dict) -> dict:
     ``sample_resolution``."""
     out = dict(arrays)
     out["weights"] = arrays["weights"].astype(np.float32)
+    # rows stored before the rest was kept had it scaled into their entries
+    out["rest"] = arrays["rest"].astype(np.float32) if "rest" in arrays \
+        else np.zeros(len(arrays["weights"]), np.float32)
     out["cluster_weights"] = arrays["cluster_weights"].astype(np.float32)
     out["clusters"] = int(meta["clusters"])
     out["sample_resolution"] = int(meta["sample_resolution"])

@@ -41,6 +41,8 @@ _GL_VIEWS = np.linspace(0.02, 1.0, 12)
 #: lobes narrower than the quadrature resolves are integrated at this roughness: a
 #: microfacet lobe's albedo changes by under 2 % between it and a mirror's
 GLOSSY_QUADRATURE_ROUGHNESS = 0.3
+#: rows gathered at once by :func:`bounce` and :func:`receive`
+GATHER_BLOCK = 32768
 #: the glossy albedo per material (its repr): a small table, computed in ~10 ms
 _GLOSSY_TABLES = Cache(256)
 
@@ -112,8 +114,8 @@ def lamp_irradiance(lamps, positions, normals, occluded=None) -> np.ndarray:
     """(S, 3) direct irradiance of Blender's lamps at points, as Cycles lights them, each
     lamp taken as a point (a sphere's or a disc's light from its centre: the bounce it
     drives is smooth) and an area lamp as :data:`AREA_SAMPLES` points on its surface;
-    ``occluded(origins, directions, distances)`` -> (N,) bool tests the shadow rays
-    (None: unshadowed)."""
+    ``occluded(origins, directions, distances, rows)`` -> (N,) bool tests the shadow
+    rays of the points ``rows`` (None: unshadowed)."""
     x = np.asarray(positions, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     out = np.zeros((len(x), 3))
@@ -181,7 +183,7 @@ def _visible(occluded, x, n, to, dist, weight) -> np.ndarray:
     if occluded is None or not vis.any():
         return vis
     sel = np.nonzero(vis)[0]
-    blocked = occluded(x[sel], to[sel], dist[sel])
+    blocked = occluded(x[sel], to[sel], dist[sel], sel)
     vis[sel[blocked]] = 0.0
     return vis
 
@@ -194,14 +196,53 @@ def bounce(direct: np.ndarray, albedo: np.ndarray, columns: np.ndarray, weights:
     rho = np.asarray(albedo, np.float64) / math.pi
     L = rho * np.asarray(direct, np.float64)
     total = L.copy()
-    w = np.asarray(weights, np.float64)
     for _ in range(max(int(bounces), 1) - 1):
-        L = rho * np.einsum("kw,kwc->kc", w, L[columns])
+        L = rho * _gather(columns, weights, L, np.float64)
         total += L
     return total
 
 
-def receive(columns: np.ndarray, weights: np.ndarray, radiance: np.ndarray) -> np.ndarray:
-    """(P, 3) bounced irradiance of each receiver: its row over the clusters' radiance."""
-    return np.einsum("pw,pwc->pc", np.asarray(weights, np.float32),
-                     np.asarray(radiance, np.float32)[columns])
+def receive(columns: np.ndarray, weights: np.ndarray, radiance: np.ndarray,
+            rest: np.ndarray | None = None, rest_light: np.ndarray | None = None) -> np.ndarray:
+    """(P, 3) bounced irradiance of each receiver: its row over the clusters' radiance, plus
+    its row's ``rest`` (P,) times the radiance it is read at (``rest_light`` (P, 3),
+    :func:`rest_radiance`)."""
+    out = _gather(columns, weights, np.asarray(radiance, np.float32), np.float32)
+    if rest is not None:
+        out += (np.asarray(rest, np.float64)[:, None] * rest_light).astype(np.float32)
+    return out
+
+
+def _gather(columns, weights, values, dtype) -> np.ndarray:
+    """(N, 3) ``sum_w weights[n, w] values[columns[n, w]]`` in ``dtype``, a block of rows at
+    a time (a block's ``values[columns]`` is its rows x width x 3: a thousand instances'
+    clusters at once would be hundreds of MB)."""
+    out = np.empty((len(columns), 3), dtype)
+    for a in range(0, len(columns), GATHER_BLOCK):
+        b = a + GATHER_BLOCK
+        out[a:b] = np.einsum("kw,kwc->kc", np.asarray(weights[a:b], dtype), values[columns[a:b]])
+    return out
+
+
+def seen_radiance(columns: np.ndarray, weights: np.ndarray, radiance: np.ndarray) -> np.ndarray:
+    """(K, 3) the mean radiance each cluster sees: its row's gather over its row's sum (the
+    cosine-weighted share of its hemisphere that sees the scene); 0 where it sees none."""
+    total = np.asarray(weights, np.float64).sum(axis=1)
+    got = _gather(columns, weights, np.asarray(radiance, np.float64), np.float64)
+    return got / np.where(total > 0.0, total, np.inf)[:, None]
+
+
+def rest_radiance(seen: np.ndarray, cluster_of_triangle: np.ndarray, tri_points: np.ndarray,
+                  areas: np.ndarray, points: int) -> np.ndarray:
+    """(P, 3) the radiance a receiver's row's rest (the entries past its width) is read at:
+    the mean radiance the clusters of its own triangles see (``seen``, :func:`seen_radiance`),
+    weighted by the triangles' areas (``tri_points`` (T, 3) the point of each corner,
+    ``cluster_of_triangle`` (T,) the cluster of each triangle's side)."""
+    tp = np.asarray(tri_points, np.int64).reshape(-1, 3)
+    a = np.maximum(np.asarray(areas, np.float64), 0.0)
+    e = np.asarray(seen, np.float64)[np.asarray(cluster_of_triangle, np.int64)] * a[:, None]
+    idx = tp.reshape(-1)
+    total = np.bincount(idx, weights=np.repeat(a, 3), minlength=points)
+    out = np.stack([np.bincount(idx, weights=np.repeat(e[:, c], 3), minlength=points)
+                    for c in range(3)], axis=1)
+    return out / np.maximum(total, 1e-300)[:, None]

@@ -35,40 +35,71 @@ CLUSTER_ROW_WIDTH = 64
 #: at most this many (receiver, cluster) cells are accumulated densely per chunk of rays
 #: (beyond it the chunk's entries are sorted instead)
 DENSE_CELLS = 4_000_000
+#: bytes a receiver takes while the precompute gathers its row: per entry a cluster id
+#: (int32) and a weight (float32), and once a point inside its surface (float32 x 3) and
+#: its row's rest (float32)
+ENTRY_BYTES, INNER_BYTES = 8, 16
+#: default budget of the receivers' rows (MiB): past it, rows keep fewer entries
+#: (:func:`row_width`)
+ROW_BUDGET_MIB = 256
+
+
+def row_width(points: int, budget_mib: float) -> tuple[int, str]:
+    """``(entries per receiver row, note)``: :data:`ROW_WIDTH`, or as many as ``points``
+    rows fit in ``budget_mib`` (at least one).  A receiver's row keeps its largest entries
+    and the sum of the rest (``TransferRows.rest``), which the frame reads through the
+    clusters of the receiver's own triangles (the mean radiance they see:
+    ``core.transport.bounce.rest_radiance``).  The note says when rows are cut."""
+    per_point = budget_mib * 2 ** 20 / max(int(points), 1)
+    width = int(min(ROW_WIDTH, max(1, (per_point - INNER_BYTES) // ENTRY_BYTES)))
+    if width == ROW_WIDTH:
+        return width, ""
+    need = points * (ROW_WIDTH * ENTRY_BYTES + INNER_BYTES) / 2 ** 20
+    return width, (f"Bounced light: rows of {width} entries per point (of {ROW_WIDTH}): "
+                   f"{points} points' full rows would take {need:.0f} MiB, past the "
+                   f"{budget_mib:.0f} MiB Bounce Rows Budget")
 
 
 @dataclass
 class Patches:
     """The sides of the static meshes' triangles, mesh after mesh: each mesh's triangles'
     front sides, then (a two-sided mesh) their back sides -- centroid, the side's normal
-    (its corners' shading normals averaged; flipped for a back side), area and material
-    slot.  ``offsets[i]`` is where mesh ``i``'s sides start."""
+    (its corners' shading normals averaged; flipped for a back side) and area.
+    ``offsets[i]`` is where mesh ``i``'s sides start.  Single precision: a
+    thousand instances have tens of millions of sides (a cluster's grid cell and sample
+    need no more)."""
 
-    centroids: np.ndarray        # (N, 3)
-    normals: np.ndarray          # (N, 3)
-    areas: np.ndarray            # (N,)
-    slots: np.ndarray            # (N,) material slot of the side's triangle
+    centroids: np.ndarray        # (N, 3) float32
+    normals: np.ndarray          # (N, 3) float32
+    areas: np.ndarray            # (N,) float32
     offsets: np.ndarray          # (meshes + 1,)
 
     @classmethod
     def of_meshes(cls, meshes):
         from ..scene.mesh import triangle_areas
-        cen, nrm, area, slot, offsets = [], [], [], [], [0]
+        cen, nrm, area, offsets = [], [], [], [0]
         for arrays in meshes:
             tri = arrays.triangles[:arrays.front_triangles]
             tp = arrays.positions[arrays.corner_verts[tri]]
             n = arrays.corner_normals[tri].sum(axis=1)
             n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+            n = n.astype(np.float32)
             sides = [n, -n] if arrays.two_sided else [n]
+            c, a = tp.mean(axis=1).astype(np.float32), triangle_areas(tp).astype(np.float32)
             for side in sides:
-                cen.append(tp.mean(axis=1))
+                cen.append(c)
                 nrm.append(side)
-                area.append(triangle_areas(tp))
-                slot.append(arrays.corner_materials[tri[:, 0]])
+                area.append(a)
             offsets.append(offsets[-1] + len(tri) * len(sides))
-        cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape))
-        return cls(cat(cen, (0, 3)), cat(nrm, (0, 3)), cat(area, (0,)),
-                   cat(slot, (0,)).astype(np.int64), np.asarray(offsets, np.int64))
+        cat = (lambda xs, shape, dtype: np.concatenate(xs) if xs else np.zeros(shape, dtype))
+        return cls(cat(cen, (0, 3), np.float32), cat(nrm, (0, 3), np.float32),
+                   cat(area, (0,), np.float32), np.asarray(offsets, np.int64))
+
+    def offsets_only(self) -> "Patches":
+        """The same sides' places (:meth:`of_mesh`) without their arrays: what the hit map
+        and the stored blobs need once the clusters and samples are made."""
+        empty = np.zeros((0, 3), np.float32)
+        return Patches(empty, empty, np.zeros(0, np.float32), self.offsets)
 
     def of_mesh(self, i: int, arrays):
         """``(front (T,), back (T,) or None)``: where mesh ``i``'s triangles' sides are."""
@@ -84,10 +115,10 @@ class HitMap:
     a closed mesh's inside, an open surface's back that nothing faces), and the
     triangle's geometric normal turned to its front (the side its shading normals face)."""
 
-    front: np.ndarray            # (T,) int64
-    back: np.ndarray             # (T,) int64
+    front: np.ndarray            # (T,) int32
+    back: np.ndarray             # (T,) int32
     normal: np.ndarray           # (T, 3) float32
-    #: (T, 3) a corner of each triangle (a point of its plane)
+    #: (T, 3) float32 a corner of each triangle (a point of its plane)
     corner: np.ndarray = None
 
     @classmethod
@@ -97,12 +128,12 @@ class HitMap:
         patch of ``patches``."""
         from ..scene.mesh import occluder_index
         front, back, normal, corner = [], [], [], []
-        cl = np.asarray(cluster_of_patch, np.int64)
+        cl = np.asarray(cluster_of_patch, np.int32)
         for i, arrays in enumerate(meshes):
             t = occluder_index(arrays)
             f, b = patches.of_mesh(i, arrays)
             front.append(cl[f[t]])
-            back.append(cl[b[t]] if b is not None else np.full(len(t), -1, np.int64))
+            back.append(cl[b[t]] if b is not None else np.full(len(t), -1, np.int32))
             tri = arrays.triangles[t]
             tp = arrays.positions[arrays.corner_verts[tri]]
             g = np.cross(tp[:, 1] - tp[:, 0], tp[:, 2] - tp[:, 0])
@@ -110,34 +141,43 @@ class HitMap:
             turn = np.einsum("ij,ij->i", g, arrays.corner_normals[tri].sum(axis=1)) < 0.0
             g[turn] *= -1.0
             normal.append(g.astype(np.float32))
-            corner.append(tp[:, 0])
+            corner.append(tp[:, 0].astype(np.float32))
         cat = (lambda xs, shape, dtype: np.concatenate(xs) if xs else np.zeros(shape, dtype))
-        return cls(cat(front, (0,), np.int64), cat(back, (0,), np.int64),
-                   cat(normal, (0, 3), np.float32), cat(corner, (0, 3), np.float64))
+        return cls(cat(front, (0,), np.int32), cat(back, (0,), np.int32),
+                   cat(normal, (0, 3), np.float32), cat(corner, (0, 3), np.float32))
 
 
-def top_entries(acc: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(columns (N, width) int32, weights (N, width) float32)``: each row's ``width``
-    largest entries of the dense ``acc`` (N, K), scaled to keep the row's sum."""
+def top_entries(acc: np.ndarray, width: int, keep_sum: bool = True):
+    """``(columns (N, width) int32, weights (N, width) float32, rest (N,))``: each row's
+    ``width`` largest entries of the dense ``acc`` (N, K), scaled to keep the row's sum
+    (``rest`` 0), or as they are with the rest of the row's sum in ``rest``."""
     n, k = acc.shape
     width = min(width, k)
     if width == 0:
-        return np.zeros((n, 0), np.int32), np.zeros((n, 0), np.float32)
+        return (np.zeros((n, 0), np.int32), np.zeros((n, 0), np.float32),
+                acc.sum(axis=1) * (not keep_sum))
     cols = np.argpartition(-acc, width - 1, axis=1)[:, :width] if width < k else \
         np.broadcast_to(np.arange(k), (n, k)).copy()
     kept = np.take_along_axis(acc, cols, axis=1)
-    total = acc.sum(axis=1)
-    scale = np.where(kept.sum(axis=1) > 0.0, total / np.maximum(kept.sum(axis=1), 1e-300), 0.0)
-    return cols.astype(np.int32), (kept * scale[:, None]).astype(np.float32)
+    return (cols.astype(np.int32),) + _kept(kept, kept.sum(axis=1), acc.sum(axis=1), keep_sum)
 
 
-def sparse_top(rows: np.ndarray, cols: np.ndarray, weights: np.ndarray, n: int, width: int):
+def _kept(kept, kept_sum, total, keep_sum):
+    """``(weights, rest)`` of rows' kept entries (N, W) with their sums and the rows'."""
+    if not keep_sum:
+        return kept.astype(np.float32), np.maximum(total - kept_sum, 0.0)
+    scale = np.where(kept_sum > 0.0, total / np.maximum(kept_sum, 1e-300), 0.0)
+    return (kept * scale[:, None]).astype(np.float32), np.zeros(len(total))
+
+
+def sparse_top(rows: np.ndarray, cols: np.ndarray, weights: np.ndarray, n: int, width: int,
+               keep_sum: bool = True):
     """:func:`top_entries` of the sparse matrix with entries ``(rows, cols, weights)``
     (duplicates summed) and ``n`` rows."""
     out_c = np.zeros((n, width), np.int32)
-    out_w = np.zeros((n, width), np.float32)
+    out_w = np.zeros((n, width), np.float64)
     if len(rows) == 0:
-        return out_c, out_w
+        return out_c, out_w.astype(np.float32), np.zeros(n)
     key = rows.astype(np.int64) * (int(cols.max()) + 1) + cols
     uniq, inverse = np.unique(key, return_inverse=True)
     sums = np.bincount(inverse, weights=weights)
@@ -149,9 +189,36 @@ def sparse_top(rows: np.ndarray, cols: np.ndarray, weights: np.ndarray, n: int, 
     total = np.bincount(r, weights=s, minlength=n)
     keep = rank < width
     kept = np.bincount(r[keep], weights=s[keep], minlength=n)
-    scale = np.where(kept > 0.0, total / np.maximum(kept, 1e-300), 0.0)
     out_c[r[keep], rank[keep]] = c[keep]
-    out_w[r[keep], rank[keep]] = s[keep] * scale[r[keep]]
+    out_w[r[keep], rank[keep]] = s[keep]
+    return (out_c,) + _kept(out_w, kept, total, keep_sum)
+
+
+def cluster_rows(owner: np.ndarray, weight: np.ndarray, columns: np.ndarray,
+                 weights: np.ndarray, clusters: int, width: int = CLUSTER_ROW_WIDTH,
+                 block: int = DENSE_CELLS):
+    """``(columns (K, width) int32, weights (K, width) float32)``: each cluster's row, the
+    ``weight``-weighted sum of its samples' rows (``columns``/``weights`` (S, W), samples
+    in cluster order, ``owner`` (S,) their cluster), its ``width`` largest entries kept
+    (:func:`sparse_top`).  About ``block`` entries at a time, cut where the cluster
+    changes: a scatter's samples' entries at once were the precompute's peak."""
+    owner = np.asarray(owner, np.int64)
+    out_c = np.zeros((clusters, width), np.int32)
+    out_w = np.zeros((clusters, width), np.float32)
+    step = max(1, int(block) // max(columns.shape[1], 1))
+    a = 0
+    while a < len(owner):
+        b = min(len(owner), a + step)
+        if b < len(owner):              # back to the start of owner[b]'s cluster
+            b = max(int(np.searchsorted(owner, owner[b], "left")), a + 1)
+            b = int(np.searchsorted(owner, owner[b - 1], "right"))
+        lo, hi = int(owner[a]), int(owner[b - 1]) + 1
+        w = (weights[a:b] * np.asarray(weight[a:b])[:, None]).reshape(-1)
+        keep = w > 0.0
+        out_c[lo:hi], out_w[lo:hi], _ = sparse_top(
+            np.repeat(owner[a:b] - lo, columns.shape[1])[keep],
+            columns[a:b].reshape(-1)[keep].astype(np.int64), w[keep], hi - lo, width)
+        a = b
     return out_c, out_w
 
 
@@ -160,7 +227,8 @@ class TransferRows:
     each chunk writes its own rows)."""
 
     def __init__(self, count: int, clusters: int, hits: HitMap, cube,
-                 width: int = ROW_WIDTH, inner: np.ndarray | None = None):
+                 width: int = ROW_WIDTH, inner: np.ndarray | None = None,
+                 keep_sum: bool = True):
         self.clusters = int(clusters)
         self.hits = hits
         self.dirs = np.asarray(cube.directions, np.float64)
@@ -174,6 +242,10 @@ class TransferRows:
         self.inner = inner
         self.columns = np.zeros((count, self.width), np.int32)
         self.weights = np.zeros((count, self.width), np.float32)
+        #: a row's entries past its ``width`` largest: scaled into them (``keep_sum``), or
+        #: their sum kept in ``rest`` (the receivers': :func:`row_width`)
+        self.keep_sum = bool(keep_sum)
+        self.rest = np.zeros(count if not keep_sum else 0, np.float32)
 
     def add(self, start: int, stop: int, normals: np.ndarray, blocked: np.ndarray,
             prim: np.ndarray):
@@ -197,6 +269,8 @@ class TransferRows:
         if len(i) == 0 or self.clusters == 0:
             self.columns[start:stop] = 0
             self.weights[start:stop] = 0.0
+            if not self.keep_sum:
+                self.rest[start:stop] = 0.0
             return
         t = prim[i, k].astype(np.int64)
         touching = t <= -3
@@ -213,10 +287,12 @@ class TransferRows:
         if n * self.clusters <= DENSE_CELLS:
             acc = np.bincount(i * self.clusters + m, weights=w,
                               minlength=n * self.clusters).reshape(n, self.clusters)
-            cols, wts = top_entries(acc, self.width)
+            cols, wts, rest = top_entries(acc, self.width, self.keep_sum)
             self.columns[start:stop, :cols.shape[1]] = cols
             self.weights[start:stop, :wts.shape[1]] = wts
         else:
-            cols, wts = sparse_top(i, m, w, n, self.width)
+            cols, wts, rest = sparse_top(i, m, w, n, self.width, self.keep_sum)
             self.columns[start:stop] = cols
             self.weights[start:stop] = wts
+        if not self.keep_sum:
+            self.rest[start:stop] = rest

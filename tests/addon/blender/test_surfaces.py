@@ -234,6 +234,51 @@ def test_instances_carry_their_bounce_rows():
         assert st.bounce is not None and float(np.max(bounced[name])) > 0.0, name
 
 
+def test_a_scatter_past_the_rows_budget_keeps_rows_of_fewer_entries():
+    """Past the Bounce Rows Budget each receiver's row keeps its largest entry and the sum
+    of the rest (read at what its own clusters see): stored so, drawn finite and lit."""
+    _small_herd(count=2)
+    scenes.light_paths(4)
+    bpy.context.scene.prt.bounce_rows_budget = 0
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    arrays, _ = storage.get(storage.owner("Herd 0#0"), storage.BOUNCE)
+    assert arrays["columns"].shape[1] == 1 and float(arrays["rest"].max()) > 0.0
+    state = _sync()
+    bounced = dict(zip((st.name for st in state.objects), state.bounce.irradiance(state)))
+    for name in ("Herd 0#0", "Herd 1#0"):
+        assert np.isfinite(bounced[name]).all() and float(np.max(bounced[name])) > 0.0, name
+
+
+def test_lamp_shadow_rays_of_the_bounce_see_instances_through_their_source():
+    """The bounce's shadow rays test an instance in its source's frame (no triangle of it
+    placed): they answer as one Embree scene of every placed triangle does."""
+    from prt_relight.addon.frame import bounce
+    from prt_relight.core.scene import visibility
+    _small_herd(count=3)
+    scenes.light_paths(4)
+    assert bpy.ops.prt.precompute() == {"FINISHED"}
+    state = _sync()
+    objs = [st for st in state.objects if st.status == "ok"]
+    assert all(st.local_source is not None for st in objs if "#" in st.name)
+    test = bounce.occlusion_test(objs)
+    flat = visibility.build_occluder_scene(np.concatenate(
+        [core_mesh.occluder_triangles(st.arrays)[0] for st in objs]))
+    rng = np.random.default_rng(5)
+    lo, hi = core_mesh.bounds([st.arrays for st in objs])
+    o = rng.uniform(lo, hi, (4000, 3))
+    d = rng.normal(size=(4000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    dist = np.where(rng.uniform(size=4000) < 0.5, np.inf, rng.uniform(0.05, 3.0, 4000))
+    diag = core_mesh.bounding_diagonal(core_mesh.bounds([st.arrays for st in objs]))
+    step = 1e-4 * diag
+    truth = flat.run((o + step * d).astype(np.float32), d.astype(np.float32),
+                     dists=np.minimum(dist - 2 * step, 1e30).astype(np.float32),
+                     query="OCCLUDED") != -1
+    got = test(o, d, dist)
+    assert 0.05 < truth.mean() < 0.95
+    assert (got != truth).sum() <= 4, (got != truth).sum()
+
+
 def test_an_instancer_hidden_from_renders_hides_its_instances_from_the_trace():
     """Hidden from renders (the instancer's flag): not traced, casting nothing; the
     viewport still draws its instances, unshadowed."""

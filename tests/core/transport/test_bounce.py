@@ -35,7 +35,7 @@ def test_point_and_sun_lamps_light_as_cycles_does():
     np.testing.assert_allclose(E[:, 0], 100.0 / (4 * math.pi * d2) * cos, rtol=1e-9)
     sun = Lamp("SUN", color=(3.0, 3.0, 3.0), direction=(0.0, -0.6, -0.8), angle=0.0)
     np.testing.assert_allclose(bounce.lamp_irradiance([sun], x, n)[:, 0], 2.4, rtol=1e-9)
-    blocked = bounce.lamp_irradiance([sun], x, n, occluded=lambda o, d, t: np.ones(len(o), bool))
+    blocked = bounce.lamp_irradiance([sun], x, n, occluded=lambda o, d, t, rows: np.ones(len(o), bool))
     assert not blocked.any()
 
 
@@ -135,7 +135,7 @@ def test_a_compact_source_lights_as_the_disc_it_is():
     expected = [L * float((np.maximum(d @ nn, 0.0) * dw).sum()) for nn in n]
     np.testing.assert_allclose(got, expected, rtol=1e-3)
     blocked = bounce.lamp_irradiance([lamp], np.zeros((2, 3)), n,
-                                     lambda o, dd, dist: np.ones(len(o), bool))
+                                     lambda o, dd, dist, rows: np.ones(len(o), bool))
     np.testing.assert_array_equal(blocked, 0.0)
     point = bounce.distant_source(axis, L, 0.0, point_like=True)
     np.testing.assert_allclose(bounce.lamp_irradiance([point], np.zeros((1, 3)), n[:1]),

@@ -34,3 +34,22 @@ def test_cluster_means_are_area_weighted():
     v = np.array([[1.0], [3.0], [5.0]])
     a = np.array([1.0, 3.0, 2.0])
     np.testing.assert_allclose(clusters.cluster_means(c, v, a, 2), [[2.5], [5.0]])
+
+
+def test_clusters_are_numbered_by_cell_then_facing():
+    """One packed key per patch numbers the clusters as (cell x, y, z, facing) sorted."""
+    rng = np.random.default_rng(2)
+    c = rng.uniform(-3.0, 5.0, (2000, 3)).astype(np.float32)
+    n = rng.normal(size=(2000, 3)).astype(np.float32)
+    a = rng.uniform(0.01, 0.1, 2000).astype(np.float32)
+    cluster_of, k, h = clusters.cluster_patches(c, n, a, 40)
+    cell = np.floor((c - c.min(axis=0)) / h).astype(np.int64)
+    key = np.column_stack([cell, clusters.normal_bucket(n)])
+    _, expect = np.unique(key, axis=0, return_inverse=True)
+    np.testing.assert_array_equal(cluster_of, expect.reshape(-1))
+    assert k == len(np.unique(key, axis=0))
+    # the samples of each half-cell, in cluster order
+    patch, owner, _ = clusters.sample_sets(cluster_of, c, a, k, h)
+    assert np.all(np.diff(owner) >= 0) and np.all(cluster_of[patch] == owner)
+    half = np.floor((c - c.min(axis=0)) / (0.5 * h)).astype(np.int64)
+    assert len(patch) == len(np.unique(np.column_stack([cluster_of, half]), axis=0))

@@ -129,11 +129,90 @@ def test_sparse_and_dense_top_entries_agree():
     w = rng.random(400)
     dense = np.zeros((5, 30))
     np.add.at(dense, (rows, cols), w)
-    c1, w1 = transfer.top_entries(dense, 6)
-    c2, w2 = transfer.sparse_top(rows, cols, w, 5, 6)
+    c1, w1, _ = transfer.top_entries(dense, 6)
+    c2, w2, _ = transfer.sparse_top(rows, cols, w, 5, 6)
     for r in range(5):
         a = dict(zip(c1[r].tolist(), w1[r].tolist()))
         b = dict(zip(c2[r].tolist(), w2[r].tolist()))
         assert a.keys() == b.keys()
         assert all(abs(a[x] - b[x]) < 1e-5 for x in a)
     np.testing.assert_allclose(w1.sum(1), dense.sum(1), rtol=1e-6)
+    # unscaled: the largest entries as they are, the rest of the row's sum beside them
+    for c, kw, rest in (transfer.top_entries(dense, 6, keep_sum=False),
+                        transfer.sparse_top(rows, cols, w, 5, 6, keep_sum=False)):
+        np.testing.assert_allclose(kw, np.take_along_axis(dense, c, 1), rtol=1e-6)
+        np.testing.assert_allclose(kw.sum(1) + rest, dense.sum(1), rtol=1e-6)
+
+
+
+@pytest.mark.parametrize("width, bound", [(3, 0.04), (1, 0.04)])     # measured 2.5, 2.0 %
+def test_rows_cut_to_the_budget_stay_near_the_quadrature(width, bound):
+    """A row cut to its largest entries keeps the sum of the rest, read at the mean
+    radiance its own triangles' clusters see (their rows' gather over their rows' sum)."""
+    cube = cubemap(8)
+    objs = floor_and_wall(16)
+    pts = [mesh.shading_points(o) for o in objs]
+    P = np.concatenate([p.positions for p in pts])
+    N = np.concatenate([p.normals for p in pts])
+    scene = visibility.build_occluder_scene(
+        np.concatenate([mesh.occluder_triangles(o)[0] for o in objs]))
+    patches = transfer.Patches.of_meshes(objs)
+    cluster_of, k, cell = clusters.cluster_patches(patches.centroids, patches.normals,
+                                                   patches.areas, len(P) // 24)
+    hits = transfer.HitMap.of_meshes(objs, patches, cluster_of)
+    rows = transfer.TransferRows(len(P), k, hits, cube, width, keep_sum=False)
+    visibility.trace_visibility(
+        scene, P, N, cube, OFFSET,
+        hits=lambda a, b, blocked, prim: rows.add(a, b, N[a:b], blocked, prim))
+    patch, owner, weight = clusters.sample_sets(cluster_of, patches.centroids,
+                                                patches.areas, k, cell)
+    scube = cubemap(16)
+    own = transfer.TransferRows(len(patch), k, hits, scube)
+    sp, sn = patches.centroids[patch], patches.normals[patch]
+    sb = visibility.trace_visibility(
+        scene, sp, sn, scube, OFFSET,
+        hits=lambda a, b, blocked, prim: own.add(a, b, sn[a:b], blocked, prim))
+    E = reference.diffuse_irradiance(sb, sn, scube, _sky(scube))
+    direct = np.stack([np.bincount(owner, weights=weight * E[:, c], minlength=k)
+                       for c in range(3)], axis=1)
+    L = bounce.bounce(direct, np.full((k, 3), RHO), np.zeros((k, 1), np.int32),
+                      np.zeros((k, 1), np.float32), 1)
+    k_cols, k_w = transfer.cluster_rows(owner, weight, own.columns, own.weights, k)
+    seen = bounce.seen_radiance(k_cols, k_w, L)
+    light = []
+    for i, (o, pt) in enumerate(zip(objs, pts)):
+        tri = o.triangles[:o.front_triangles]
+        light.append(bounce.rest_radiance(seen, cluster_of[patches.of_mesh(i, o)[0]],
+                                          pt.point_of_corner[tri],
+                                          mesh.triangle_areas(o.positions[o.corner_verts[tri]]),
+                                          pt.count))
+    got = bounce.receive(rows.columns, rows.weights, L, rows.rest, np.concatenate(light))
+    idx = np.random.default_rng(1).choice(len(P), 60, replace=False)
+    truth = np.array([_brute(i, P, N, scene, hits, cube, _sky(cube)) for i in idx])
+    err = np.linalg.norm(got[idx] - truth) / np.linalg.norm(truth)
+    assert err < bound, err
+
+
+def test_row_width_fits_the_budget_and_says_so():
+    full = transfer.ROW_WIDTH * transfer.ENTRY_BYTES + transfer.INNER_BYTES
+    assert transfer.row_width(1000, 1000 * full / 2 ** 20) == (transfer.ROW_WIDTH, "")
+    width, note = transfer.row_width(5_000_000, 256)
+    assert width == int((256 * 2 ** 20 / 5e6 - transfer.INNER_BYTES) // transfer.ENTRY_BYTES)
+    assert 1 <= width < transfer.ROW_WIDTH
+    assert f"{width} entries" in note and "256 MiB" in note
+    assert transfer.row_width(10 ** 9, 0)[0] == 1            # never no row at all
+
+
+def test_cluster_rows_made_a_block_at_a_time_are_the_rows_made_at_once():
+    rng = np.random.default_rng(3)
+    owner = np.sort(rng.integers(0, 50, 400))
+    weight = rng.uniform(0.1, 1.0, 400)
+    cols = rng.integers(0, 50, (400, 8)).astype(np.int32)
+    w = rng.uniform(0.0, 1.0, (400, 8)).astype(np.float32)
+    one = transfer.cluster_rows(owner, weight, cols, w, 50, width=6, block=10 ** 9)
+    few = transfer.cluster_rows(owner, weight, cols, w, 50, width=6, block=40)
+    ref = transfer.sparse_top(np.repeat(owner, 8), cols.reshape(-1).astype(np.int64),
+                              (w * weight[:, None]).reshape(-1), 50, 6)[:2]
+    for got in (one, few):
+        np.testing.assert_allclose(got[1], ref[1], rtol=1e-6)
+        np.testing.assert_array_equal(got[0][got[1] > 0], ref[0][ref[1] > 0])
