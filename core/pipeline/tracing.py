@@ -211,7 +211,7 @@ class PrecomputeJob:
         samples = (patch, owner, weight, patches.centroids[patch], patches.normals[patch])
         # the sides' own arrays end here: tens of millions of them for a scatter of instances
         patches = patches.offsets_only()
-        hits = transfer.HitMap.of_meshes(meshes, patches, cluster_of)
+        hits = transfer.HitMap.of_meshes(meshes, patches, cluster_of, self.occluders)
         inner = np.concatenate([core_mesh.point_interiors(o.arrays, o.points).astype(np.float32)
                                 for o in static])
         rows = transfer.TransferRows(count, k, hits, cube, width=width, inner=inner,

@@ -113,21 +113,27 @@ class HitMap:
     """What a ray hitting occluder triangle ``t`` (in the occluder scene's order) reads:
     the gather cluster of its front side and of its back side (-1: no back side traced --
     a closed mesh's inside, an open surface's back that nothing faces), and the
-    triangle's geometric normal turned to its front (the side its shading normals face)."""
+    triangle's geometric normal turned to its front (the side its shading normals face),
+    made from the occluders' own corners when read (a thousand instances' normals and
+    corners held were 24 B a triangle more)."""
 
     front: np.ndarray            # (T,) int32
     back: np.ndarray             # (T,) int32
-    normal: np.ndarray           # (T, 3) float32
-    #: (T, 3) float32 a corner of each triangle (a point of its plane)
-    corner: np.ndarray = None
+    #: (T,) bool: the triangle's winding normal points to its back
+    turn: np.ndarray
+    #: the occluders' corners (V, 3) float32 and triangles (T, 3) into them
+    vertices: np.ndarray
+    triangles: np.ndarray
 
     @classmethod
-    def of_meshes(cls, meshes, patches: Patches, cluster_of_patch: np.ndarray):
+    def of_meshes(cls, meshes, patches: Patches, cluster_of_patch: np.ndarray,
+                  occluders=None):
         """The map of several meshes' occluder triangles, concatenated in order
         (``core.scene.mesh.occluder_index`` of each), their sides' clusters given per
-        patch of ``patches``."""
-        from ..scene.mesh import occluder_index
-        front, back, normal, corner = [], [], [], []
+        patch of ``patches``; ``occluders`` the same triangles as the trace holds them
+        (core.scene.mesh.Occluders or (T, 3, 3) corners; None: made here)."""
+        from ..scene.mesh import Occluders, occluder_index, occluder_mesh
+        front, back, turn = [], [], []
         cl = np.asarray(cluster_of_patch, np.int32)
         for i, arrays in enumerate(meshes):
             t = occluder_index(arrays)
@@ -137,14 +143,32 @@ class HitMap:
             tri = arrays.triangles[t]
             tp = arrays.positions[arrays.corner_verts[tri]]
             g = np.cross(tp[:, 1] - tp[:, 0], tp[:, 2] - tp[:, 0])
-            g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-            turn = np.einsum("ij,ij->i", g, arrays.corner_normals[tri].sum(axis=1)) < 0.0
-            g[turn] *= -1.0
-            normal.append(g.astype(np.float32))
-            corner.append(tp[:, 0].astype(np.float32))
-        cat = (lambda xs, shape, dtype: np.concatenate(xs) if xs else np.zeros(shape, dtype))
-        return cls(cat(front, (0,), np.int32), cat(back, (0,), np.int32),
-                   cat(normal, (0, 3), np.float32), cat(corner, (0, 3), np.float32))
+            turn.append(np.einsum("ij,ij->i", g, arrays.corner_normals[tri].sum(axis=1)) < 0.0)
+        if occluders is None:
+            occluders = Occluders.join([occluder_mesh(a)[0] for a in meshes])
+        if isinstance(occluders, Occluders):
+            vertices, triangles = occluders.vertices, occluders.triangles
+        else:
+            vertices = np.asarray(occluders, np.float32).reshape(-1, 3)
+            triangles = np.arange(len(vertices), dtype=np.int32).reshape(-1, 3)
+        cat = (lambda xs, dtype: np.concatenate(xs) if xs else np.zeros(0, dtype))
+        out = cls(cat(front, np.int32), cat(back, np.int32), cat(turn, bool), vertices,
+                  triangles)
+        if len(out.front) != len(triangles):
+            raise ValueError("the hit map's meshes are not the occluders' triangles")
+        return out
+
+    def normal(self, t: np.ndarray) -> np.ndarray:
+        """(n, 3) the geometric normals of triangles ``t``, turned to their front."""
+        p = self.vertices[self.triangles[t]].astype(np.float64)
+        g = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
+        g[self.turn[t]] *= -1.0
+        return g
+
+    def corner(self, t: np.ndarray) -> np.ndarray:
+        """(n, 3) a corner of each of triangles ``t`` (a point of its plane)."""
+        return self.vertices[self.triangles[t, 0]].astype(np.float64)
 
 
 def top_entries(acc: np.ndarray, width: int, keep_sum: bool = True):
@@ -275,12 +299,13 @@ class TransferRows:
         t = prim[i, k].astype(np.int64)
         touching = t <= -3
         t = np.where(touching, -3 - t, t)
-        front = np.einsum("ij,ij->i", self.dirs[k], self.hits.normal[t]) < 0.0
+        g = self.hits.normal(t)
+        front = np.einsum("ij,ij->i", self.dirs[k], g) < 0.0
         if touching.any() and self.inner is not None:
             # a touching surface's side is the one the receiver's own surface lies on
             j = np.nonzero(touching)[0]
-            front[j] = np.einsum("ij,ij->i", self.inner[start + i[j]] - self.hits.corner[t[j]],
-                                 self.hits.normal[t[j]]) > 0.0
+            front[j] = np.einsum("ij,ij->i", self.inner[start + i[j]] - self.hits.corner(t[j]),
+                                 g[j]) > 0.0
         m = np.where(front, self.hits.front[t], self.hits.back[t])
         ok = m >= 0
         i, m, w = i[ok], m[ok], (cosw[i, k].astype(np.float64) * scale[i])[ok]

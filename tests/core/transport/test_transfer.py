@@ -52,7 +52,7 @@ def _brute(i, P, N, scene, hits, cube, sky):
     if not hit.any():
         return np.zeros(3)
     hp = o[hit] + r["tfar"][hit][:, None] * dirs[hit]
-    ng = hits.normal[r["primID"][hit]].astype(float)
+    ng = hits.normal(r["primID"][hit])
     front = np.einsum("ij,ij->i", dirs[hit], ng) < 0.0
     hn = np.where(front[:, None], ng, -ng)
     E = reference.diffuse_irradiance(visibility.trace_visibility(scene, hp, hn, cube, OFFSET),
