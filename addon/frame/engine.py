@@ -91,9 +91,8 @@ def _plain_batch(st, radiance, shared):
 def _bounce_draws(state: FrameState, eye, view_dir):
     """A per-pixel method's bounced light, per corner, added onto its frame (a per-vertex
     method's is in its radiance already: ``FrameState.shade``)."""
-    plain, white, glossy = state.bounced_radiance(eye, view_dir)
     draws = []
-    for st, rad, unit, spec in zip(state.objects, plain, white, glossy):
+    for st, (rad, unit, spec) in zip(state.objects, state.bounced_radiance(eye, view_dir)):
         if rad is None:
             continue
         positions = st.arrays.positions[st.arrays.corner_verts]
@@ -334,9 +333,8 @@ def light_passes(state, frame) -> dict:
                          True, s, filter_width=filter_width)
     bounced = glossy_bounced = np.zeros_like(colour)
     if state.bounce is not None:
-        plain, white, glossy_part = state.bounced_radiance(*_eye(view, persp))
         diffuse, shiny = [], []
-        for st, b, w, g in zip(state.objects, plain, white, glossy_part):
+        for st, (b, w, g) in zip(state.objects, state.bounced_radiance(*_eye(view, persp))):
             if b is None:
                 b = w = g = np.zeros((len(st.arrays.corner_verts), 3), np.float32)
             d = np.asarray(b) - np.asarray(g)           # the diffuse base's, coloured
