@@ -28,7 +28,8 @@ then a table over the sizes and the growth per 100k vertices (least-squares slop
 each column over the vertex counts).  Writes ``out/bench/scale.txt`` and ``.json``.
 
 Instances (issue 31, ``--instances``): N collection instances of one Suzanne of
-``--instance-vertices`` vertices on a ground, each traced in place (addon/blender/surfaces.py),
+``--instance-vertices`` vertices on a ground (``--instance-bounces``: the Light Paths'
+diffuse bounces, 0 by default), each traced in place (addon/blender/surfaces.py),
 one process per count: the precompute's seconds and peak, REFERENCE's F12 and its peak, and
 per instance the seconds, the stored bytes, the copies it holds (its occluders)
 against the source's shared arrays; the same table, and the
