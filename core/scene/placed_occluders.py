@@ -83,7 +83,8 @@ class PlacedOccluders:
             blocked[sel] = self._test(o[sel], d[sel], far[sel], s[sel])
         # walk the box faces along each free ray's line (module docstring)
         t0 = np.zeros(len(o), np.float32)
-        last = np.full(len(o), -1, np.int64) if start is None else np.asarray(start, np.int64)
+        last = np.full(len(o), -1, np.int64) if start is None \
+            else np.array(start, np.int64).reshape(-1)
         seen = {}                     # (ray, instance) pairs past the end already judged
         stop = (far.astype(np.float64) + self.reach + 2.0 * self.eps).astype(np.float32)
         active = np.nonzero(~blocked)[0]

@@ -23,7 +23,7 @@ def _sky(cube):
                          * np.ones(3)).astype(np.float32), d.copy())
 
 
-def _transfer(objs, cube, width=transfer.ROW_WIDTH):
+def _transfer(objs, cube, width=transfer.ROW_WIDTH, keep_sum=True):
     pts = [mesh.shading_points(o) for o in objs]
     P = np.concatenate([p.positions for p in pts])
     N = np.concatenate([p.normals for p in pts])
@@ -33,7 +33,7 @@ def _transfer(objs, cube, width=transfer.ROW_WIDTH):
     cluster_of, k, cell = clusters.cluster_patches(patches.centroids, patches.normals,
                                                    patches.areas, len(P) // 24)
     hits = transfer.HitMap.of_meshes(objs, patches, cluster_of)
-    rows = transfer.TransferRows(len(P), k, hits, cube, width)
+    rows = transfer.TransferRows(len(P), k, hits, cube, width, keep_sum=keep_sum)
     bits = visibility.trace_visibility(
         scene, P, N, cube, OFFSET,
         hits=lambda a, b, blocked, prim: rows.add(a, b, N[a:b], blocked, prim))
@@ -152,18 +152,8 @@ def test_rows_cut_to_the_budget_stay_near_the_quadrature(width, bound):
     cube = cubemap(8)
     objs = floor_and_wall(16)
     pts = [mesh.shading_points(o) for o in objs]
-    P = np.concatenate([p.positions for p in pts])
-    N = np.concatenate([p.normals for p in pts])
-    scene = visibility.build_occluder_scene(
-        np.concatenate([mesh.occluder_triangles(o)[0] for o in objs]))
-    patches = transfer.Patches.of_meshes(objs)
-    cluster_of, k, cell = clusters.cluster_patches(patches.centroids, patches.normals,
-                                                   patches.areas, len(P) // 24)
-    hits = transfer.HitMap.of_meshes(objs, patches, cluster_of)
-    rows = transfer.TransferRows(len(P), k, hits, cube, width, keep_sum=False)
-    visibility.trace_visibility(
-        scene, P, N, cube, OFFSET,
-        hits=lambda a, b, blocked, prim: rows.add(a, b, N[a:b], blocked, prim))
+    P, N, bits, scene, patches, cluster_of, k, cell, hits, rows = _transfer(
+        objs, cube, width, keep_sum=False)
     patch, owner, weight = clusters.sample_sets(cluster_of, patches.centroids,
                                                 patches.areas, k, cell)
     scube = cubemap(16)
