@@ -137,8 +137,8 @@ class FrameBounce:
     def _samples(self):
         """The clusters' samples and rows gathered from every object, one blob decoded at
         a time: (sample cluster, weight, position, normal, the receiver it lies on,
-        cluster rows' columns (K, W) and weights (K, W) float16); their visibility stays in the blobs
-        (:meth:`_world`)."""
+        cluster rows' columns (K, W) and weights (K, W) float16); their visibility stays
+        in the blobs (:meth:`_world`)."""
         parts, owner = [], []
         k_cols = np.zeros((self.clusters, 0), np.int32)
         k_w = np.zeros((self.clusters, 0), np.float16)

@@ -204,8 +204,7 @@ class ObjectState:
         #: its world matrix (4x4; an instance's placed by its instancer)
         self.matrix = np.eye(4)
         #: an instance's source as the lights pass shares it, and whatever its sides
-        #: (surfaces.SharedArrays.source, .local_source: the bounce's shadow rays)
-        self.source = self.local_source = None
+        self.source = self.local_source = None       # (SharedArrays.source, .local_source)
 
     @property
     def bits(self):
@@ -376,7 +375,8 @@ class FrameState:
             st = ObjectState(surface.name, arrays, points, mats, bits, status, fingerprint)
             st.textures = textured
             st.matrix = surface.matrix
-            st.source, st.local_source = shared.source(surface, arrays), shared.local_source(surface)
+            st.source = shared.source(surface, arrays)
+            st.local_source = shared.local_source(surface)
             st.normals = _per_corner(texture_export.slot_normals(ob, self.warnings,
                                                                  surface.matrix), corners)
             if status == "ok" and moving is None:

@@ -35,7 +35,8 @@ def test_point_and_sun_lamps_light_as_cycles_does():
     np.testing.assert_allclose(E[:, 0], 100.0 / (4 * math.pi * d2) * cos, rtol=1e-9)
     sun = Lamp("SUN", color=(3.0, 3.0, 3.0), direction=(0.0, -0.6, -0.8), angle=0.0)
     np.testing.assert_allclose(bounce.lamp_irradiance([sun], x, n)[:, 0], 2.4, rtol=1e-9)
-    blocked = bounce.lamp_irradiance([sun], x, n, occluded=lambda o, d, t, rows: np.ones(len(o), bool))
+    blocked = bounce.lamp_irradiance([sun], x, n,
+                                     occluded=lambda o, d, t, rows: np.ones(len(o), bool))
     assert not blocked.any()
 
 
