@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .mesh import Occluders
 from .visibility import build_occluder_scene
 
 #: the 12 triangles of a box over its 8 corners (bit 0: x max, bit 1: y max, bit 2: z max),
@@ -37,6 +38,22 @@ class PlacedOccluders:
     ``instances``: ``(source index, 4x4 matrix)`` per instance."""
 
     def __init__(self, world, sources, instances):
+        # an instance flattened to no volume (a scale of 0) has no inverse: placed instead
+        flat = [i for i, (_, mat) in enumerate(instances) if not _invertible(mat)]
+        if flat:
+            placed = [Occluders((np.asarray(sources[instances[i][0]].vertices, np.float64)
+                                 @ np.asarray(instances[i][1], np.float64)[:3, :3].T
+                                 + np.asarray(instances[i][1], np.float64)[:3, 3]
+                                 ).astype(np.float32), sources[instances[i][0]].triangles)
+                      for i in flat]
+            world = Occluders.join([world] + placed) if isinstance(world, Occluders) else \
+                np.concatenate([np.asarray(world, np.float32).reshape(-1, 3, 3)]
+                               + [o.positions.astype(np.float32) for o in placed])
+        #: each given instance's index here (-1: placed with the world; the last: none)
+        self.slot = np.full(len(instances) + 1, -1, np.int64)
+        kept = [i for i in range(len(instances)) if i not in set(flat)]
+        self.slot[kept] = np.arange(len(kept))
+        instances = [instances[i] for i in kept]
         self.world = build_occluder_scene(world) if len(world) else None
         self.sources = [build_occluder_scene(s) for s in sources]
         self.source_of = np.array([s for s, _ in instances], np.int64)
@@ -78,7 +95,8 @@ class PlacedOccluders:
         if self.boxes is None:
             return blocked
         if start is not None:
-            s = np.asarray(start, np.int64).reshape(-1)
+            start = self.slot[np.asarray(start, np.int64).reshape(-1)]
+            s = start
             sel = np.nonzero(~blocked & (s >= 0))[0]
             blocked[sel] = self._test(o[sel], d[sel], far[sel], s[sel])
         # walk the box faces along each free ray's line (module docstring)
@@ -128,3 +146,12 @@ class PlacedOccluders:
                                            np.ascontiguousarray(ld, np.float32),
                                            dists=far[sel], query="OCCLUDED") != -1
         return out
+
+
+def _invertible(matrix) -> bool:
+    """Whether a 4x4 placement has a finite inverse (its 3x3 part of full rank)."""
+    m = np.asarray(matrix, np.float64)[:3, :3]
+    if not np.isfinite(matrix).all():
+        return False
+    scale = float(np.abs(m).max())
+    return scale > 0.0 and abs(float(np.linalg.det(m))) > 1e-9 * scale ** 3
