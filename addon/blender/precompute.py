@@ -16,7 +16,7 @@ import uuid
 
 import numpy as np
 
-from ...core.scene import mesh as core_mesh, sides, visibility
+from ...core.scene import mesh as core_mesh, rigid, sides, visibility
 from ..frame import dynamic
 from .. import methods
 from . import attributes, scene_export, storage, surfaces
@@ -65,7 +65,7 @@ def gather(depsgraph, settings) -> PrecomputeJob:
                         group=group)
         if s.owner.prt.dynamic:
             # its shadow field follows the motion M_now M_then^-1: a scale of 0 has no inverse
-            if np.linalg.matrix_rank(s.matrix[:3, :3]) < 3:
+            if not rigid.invertible(s.matrix):
                 raise scene_export.ExportError(
                     f"Object '{s.name}' is marked Dynamic but scaled to 0 along an axis: its "
                     "shadow field needs a transform that can be inverted (give it a non-zero "

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .mesh import Occluders
+from .rigid import invertible
 from .visibility import build_occluder_scene
 
 #: the 12 triangles of a box over its 8 corners (bit 0: x max, bit 1: y max, bit 2: z max),
@@ -39,7 +40,7 @@ class PlacedOccluders:
 
     def __init__(self, world, sources, instances):
         # an instance flattened to no volume (a scale of 0) has no inverse: placed instead
-        flat = [i for i, (_, mat) in enumerate(instances) if not _invertible(mat)]
+        flat = [i for i, (_, mat) in enumerate(instances) if not invertible(mat)]
         if flat:
             placed = [Occluders((np.asarray(sources[instances[i][0]].vertices, np.float64)
                                  @ np.asarray(instances[i][1], np.float64)[:3, :3].T
@@ -147,11 +148,3 @@ class PlacedOccluders:
                                            dists=far[sel], query="OCCLUDED") != -1
         return out
 
-
-def _invertible(matrix) -> bool:
-    """Whether a 4x4 placement has a finite inverse (its 3x3 part of full rank)."""
-    m = np.asarray(matrix, np.float64)[:3, :3]
-    if not np.isfinite(matrix).all():
-        return False
-    scale = float(np.abs(m).max())
-    return scale > 0.0 and abs(float(np.linalg.det(m))) > 1e-9 * scale ** 3

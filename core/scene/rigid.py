@@ -22,6 +22,13 @@ PROBE_VERTICES = 64
 PROBE_TOLERANCE = 1e-4
 
 
+def invertible(matrix) -> bool:
+    """Whether a 4x4 placement has an inverse: finite, its 3x3 part of full rank (a scale
+    of 0 along an axis flattens it: no shadow field follows it, no ray is carried into it)."""
+    m = np.asarray(matrix, np.float64)
+    return bool(np.isfinite(m).all()) and int(np.linalg.matrix_rank(m[:3, :3])) == 3
+
+
 def rotation_part(matrix) -> np.ndarray:
     """The rotation nearest to the linear part of a 4x4 (or 3x3) matrix (polar
     decomposition; a matrix with a reflection gives the rotation nearest to it)."""
