@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Occluders
+from .mesh import Occluders, bounding_box
 from .rigid import invertible
 from .visibility import build_occluder_scene
 
@@ -52,7 +52,7 @@ class PlacedOccluders:
                                + [o.positions.astype(np.float32) for o in placed])
         #: each given instance's index here (-1: placed with the world; the last: none)
         self.slot = np.full(len(instances) + 1, -1, np.int64)
-        kept = [i for i in range(len(instances)) if i not in set(flat)]
+        kept = sorted(set(range(len(instances))) - set(flat))
         self.slot[kept] = np.arange(len(kept))
         instances = [instances[i] for i in kept]
         self.world = build_occluder_scene(world) if len(world) else None
@@ -61,18 +61,15 @@ class PlacedOccluders:
         m = np.array([np.asarray(mat, np.float64) for _, mat in instances]).reshape(-1, 4, 4)
         self.inverse = np.linalg.inv(m) if len(m) else m
         corners = []
+        # once per source (a source with no finite corner: a point at the origin)
+        boxes = [b if len(b) else np.zeros((2, 3))
+                 for b in (bounding_box(src.vertices) for src in sources)]
         for s, mat in instances:
-            v = np.asarray(sources[s].vertices if hasattr(sources[s], "vertices")
-                           else sources[s], np.float64).reshape(-1, 3)
-            lo, hi = v.min(axis=0), v.max(axis=0)
-            box = np.array([[(hi if b >> k & 1 else lo)[k] for k in range(3)]
-                            for b in range(8)])
-            w = box @ np.asarray(mat, np.float64)[:3, :3].T + np.asarray(mat)[:3, 3]
+            w = _corners(*boxes[s]) @ np.asarray(mat, np.float64)[:3, :3].T \
+                + np.asarray(mat, np.float64)[:3, 3]
             wlo, whi = w.min(axis=0), w.max(axis=0)
             pad = 1e-4 * max(float(np.max(whi - wlo)), 1e-9)
-            wlo, whi = wlo - pad, whi + pad
-            corners.append([[(whi if b >> k & 1 else wlo)[k] for k in range(3)]
-                            for b in range(8)])
+            corners.append(_corners(wlo - pad, whi + pad))
         corners = np.asarray(corners, np.float32).reshape(-1, 8, 3)
         #: how far past a box face a ray goes on (its parameter: the scene's scale)
         self.eps = 1e-6 * float(np.ptp(corners.reshape(-1, 3), axis=0).max()) \
@@ -148,3 +145,8 @@ class PlacedOccluders:
                                            dists=far[sel], query="OCCLUDED") != -1
         return out
 
+
+def _corners(lo, hi) -> np.ndarray:
+    """(8, 3) the corners of the box ``lo``..``hi`` (corner ``b``: bit ``k`` takes axis
+    ``k`` from ``hi``)."""
+    return np.array([[(hi if b >> k & 1 else lo)[k] for k in range(3)] for b in range(8)])
